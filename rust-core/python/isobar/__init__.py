@@ -1,0 +1,78 @@
+"""isobar: exact isosurfaces of SPH particle data.
+
+A thin ctypes layer over the isobar core (libisobar.so, Rust) with numpy arrays in and
+out; numpy is the only dependency (``isobar.pyvista`` adapts to pyvista when it is
+installed)::
+
+    import isobar
+    particles = isobar.Particles.read("frame.vtk")            # or Particles.from_arrays(xyz, h=h)
+    surface = isobar.extract(particles, 0.6, h=0.05, grid_factor=0.375)
+    surface.points, surface.normals, surface.triangles, surface.attributes, surface.stats
+    surface.write("surface.vtp")
+
+Errors raise :class:`isobar.Error` subclasses carrying the core's message and status.
+"""
+
+from ._version import __version__
+from ._lib import ABI_VERSION
+from ._lib import lib as _lib_handle
+from ._lib import path as library_path
+from .errors import (
+    Cancelled,
+    Error,
+    FormatError,
+    InternalError,
+    InvalidArgumentError,
+    InvalidInputError,
+    IoError,
+    OverBudgetError,
+    Status,
+)
+from .particles import Particles
+from .sph import default_params, extract
+from .surface import Surface
+
+#: Kernel names accepted by :func:`extract`.
+KERNELS = ("cubic", "wendland", "quintic", "quadratic")
+
+
+def core_version() -> str:
+    """Version of the loaded core library (``isobar_version()``), e.g. "0.1.0"."""
+    return _lib_handle.isobar_version().decode()
+
+
+def abi_version() -> int:
+    """C ABI version of the loaded core library (equals :data:`ABI_VERSION`)."""
+    return int(_lib_handle.isobar_abi_version())
+
+
+__all__ = [
+    "__version__",
+    "ABI_VERSION",
+    "KERNELS",
+    "Cancelled",
+    "Error",
+    "FormatError",
+    "InternalError",
+    "InvalidArgumentError",
+    "InvalidInputError",
+    "IoError",
+    "OverBudgetError",
+    "Particles",
+    "Status",
+    "Surface",
+    "abi_version",
+    "core_version",
+    "default_params",
+    "extract",
+    "library_path",
+]
+
+
+def __getattr__(name):
+    """Imports the optional ``isobar.pyvista`` adaptor on first access."""
+    if name == "pyvista":
+        import importlib
+
+        return importlib.import_module(".pyvista", __name__)
+    raise AttributeError(f"module 'isobar' has no attribute '{name}'")

@@ -1,0 +1,121 @@
+"""pyvista adaptor: point clouds in, triangle meshes out.
+
+pyvista is imported only when one of these functions runs, so ``import isobar`` never
+needs it (``pip install pyvista`` for this module)::
+
+    import pyvista as pv, isobar.pyvista
+    cloud = pv.PolyData(xyz); cloud.point_data["pressure"] = p
+    mesh = isobar.pyvista.surface_from_polydata(cloud, 0.6, h=0.05)
+    mesh.plot()
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Optional
+
+import numpy as np
+
+from .particles import Particles
+from .sph import DEFAULT_H_ARRAYS, extract, is_sum_of_weights
+from .surface import Surface
+
+
+def _pyvista():
+    try:
+        import pyvista
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("isobar.pyvista needs pyvista: pip install pyvista") from e
+    return pyvista
+
+
+def _field_arrays(field: Optional[str]) -> list:
+    """Array names a field expression may refer to ("p", "v:mag", "v:0", "|v|")."""
+    if is_sum_of_weights(field):
+        return []
+    names = [field]
+    if field.startswith("|") and field.endswith("|") and len(field) > 1:
+        names.append(field[1:-1])
+    if ":" in field:
+        names.append(field.rsplit(":", 1)[0])
+    return names
+
+
+def particles_from_dataset(dataset, arrays: Optional[Iterable[str]] = None) -> Particles:
+    """A :class:`isobar.Particles` from a pyvista (or VTK-backed) dataset's points and
+    point data.
+
+    Args:
+        dataset: ``pv.PolyData`` point cloud or any ``pv.DataSet``; float32/float64
+            points go to the core without a Python-side copy.
+        arrays: point-data array names to pass on (default: every numeric point array).
+            Names absent from the point data are ignored.
+    """
+    pv = _pyvista()
+    if not isinstance(dataset, pv.DataSet):
+        dataset = pv.wrap(dataset)
+    positions = np.asarray(dataset.points)
+    particles = Particles.from_arrays(positions)
+    wanted = None if arrays is None else set(arrays)
+    n = positions.shape[0]
+    for name in dataset.point_data.keys():
+        if wanted is not None and name not in wanted:
+            continue
+        values = np.asarray(dataset.point_data[name])
+        if values.dtype.kind not in "fiub" or values.ndim == 0 or values.shape[0] != n:
+            continue  # strings, objects, or not one value per point
+        particles.add_array(name, values)
+    return particles
+
+
+def to_pyvista(surface: Surface):
+    """A ``pv.PolyData`` triangle mesh of an :class:`isobar.Surface`: float64 points,
+    ``Normals`` (active normals) and every attribute as point data."""
+    pv = _pyvista()
+    if surface.n_points == 0:
+        mesh = pv.PolyData()
+    else:
+        mesh = pv.PolyData.from_regular_faces(surface.points, surface.triangles.astype(np.int64))
+    if surface.normals is not None and surface.n_points:
+        mesh.point_data["Normals"] = surface.normals
+        mesh.point_data.active_normals_name = "Normals"
+    for name, values in surface.attributes.items():
+        if surface.n_points:
+            mesh.point_data[name] = values
+    return mesh
+
+
+def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[float] = None, **kw):
+    """Extracts an isosurface of a point cloud's SPH field and returns a ``pv.PolyData``.
+
+    Args:
+        cloud: ``pv.PolyData`` (or other ``pv.DataSet``) whose points are the particles and
+            whose point data holds the per-particle arrays.
+        iso: isovalue or sequence of isovalues.
+        field: point-data array to contour (``"NAME"``, ``"NAME:mag"``, ``"NAME:K"``), or
+            None for the free surface (SumOfWeights).
+        h: constant smoothing length; else ``h_array=NAME`` in `kw`, or a point array
+            named ``h``, ``smoothing_length`` or ``hsml``.
+        **kw: any other argument of :func:`isobar.extract` (kernel, grid_factor, trim,
+            attributes, volume_array, progress ...).
+
+    Returns:
+        ``pv.PolyData`` triangles with ``Normals`` and the surface attributes as point data.
+    """
+    needed = set(_field_arrays(field))
+    for key in ("h_array", "volume_array", "density_array", "mass_array"):
+        if kw.get(key):
+            needed.add(kw[key])
+    attributes = kw.get("attributes", ())
+    needed.update([attributes] if isinstance(attributes, str) else attributes)
+    if h is None and not kw.get("h_array"):
+        needed.update(DEFAULT_H_ARRAYS)
+    particles = particles_from_dataset(cloud, arrays=needed)
+    try:
+        surface = extract(particles, iso, field=field, h=h, **kw)
+    finally:
+        particles.close()
+    surface.release()
+    return to_pyvista(surface)
+
+
+__all__ = ["surface_from_polydata", "to_pyvista", "particles_from_dataset"]

@@ -1,0 +1,457 @@
+//! The `isobar` command line: SPH isosurfaces from particle files, and the demo.
+
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use isobar::correctors::{self, Extraction, Params, Stats, Trim};
+use isobar::field::kernel::Kernel;
+use isobar::field::particles::ParticleData;
+use isobar::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
+use isobar::field::DEFAULT_MEMORY_BUDGET;
+use isobar::progress::Progress;
+use isobar::{baseline, io, Error, Result};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// The demo frame: a SPlisHSPlasH dam break (see rust-core/data/README.md).
+const DEMO_FRAME: &[u8] = include_bytes!("../../data/demo_dam_break.npz");
+
+#[derive(Parser)]
+#[command(
+    name = "isobar",
+    version,
+    about = "Exact isosurfaces of SPH particle data"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Extract isosurfaces of an SPH field by Marching Correctors.
+    Sph(Box<SphArgs>),
+    /// Extract the free surface and a pressure isosurface of the embedded dam-break frame.
+    Demo {
+        /// Where to write the surface (.ply, .obj or .vtp).
+        #[arg(short, long, default_value = "isobar_demo.ply")]
+        output: PathBuf,
+        /// Print no progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// List the particles and arrays of a file.
+    Info { input: PathBuf },
+}
+
+#[derive(Args)]
+#[command(allow_negative_numbers = true)]
+struct SphArgs {
+    /// Particle file (.vtk .vtp .vtu .ply .bgeo .csv .xyz .npy .npz) or a numbered sequence
+    /// ('frame_####.vtk', or one file of it).
+    input: String,
+    /// Field: an array name, 'NAME:mag' for a vector's magnitude, 'NAME:K' for component K,
+    /// or SumOfWeights for the free surface.
+    #[arg(long, default_value = "SumOfWeights")]
+    field: String,
+    /// Isovalue(s), comma separated.
+    #[arg(long, value_delimiter = ',', required = true)]
+    iso: Vec<f64>,
+    /// Kernel: cubic, wendland, quintic, quadratic.
+    #[arg(long, default_value = "cubic")]
+    kernel: Kernel,
+    /// Constant smoothing length h.
+    #[arg(long)]
+    h: Option<f64>,
+    /// Per-particle smoothing length array (default: 'h', 'smoothing_length' or 'hsml' if present).
+    #[arg(long)]
+    h_array: Option<String>,
+    /// Multiplies every smoothing length (previews: 0.75, 0.5).
+    #[arg(long, default_value_t = 1.0)]
+    h_scale: f64,
+    /// Virtual cell size in units of the smallest h.
+    #[arg(long, default_value_t = 0.5)]
+    grid_factor: f64,
+    /// Preview: linear interpolation, no correction, face normals.
+    #[arg(long)]
+    preview: bool,
+    /// Relative tolerance of the correction.
+    #[arg(long, default_value_t = 1e-6)]
+    tolerance: f64,
+    /// Trimming thresholds on the sum of weights: NODE,VERTEX (default 0.1,0.5; off for
+    /// the SumOfWeights field).
+    #[arg(long, value_delimiter = ',', num_args = 2)]
+    trim: Option<Vec<f64>>,
+    /// No trimming at free surfaces.
+    #[arg(long, conflicts_with = "trim")]
+    no_trim: bool,
+    /// Per-particle volume array (m/ρ).
+    #[arg(long)]
+    volume_array: Option<String>,
+    /// Density array; volumes = mass / density (needs --mass or --mass-array).
+    #[arg(long)]
+    density_array: Option<String>,
+    /// Constant particle mass.
+    #[arg(long)]
+    mass: Option<f64>,
+    /// Per-particle mass array.
+    #[arg(long)]
+    mass_array: Option<String>,
+    /// Normalise the field by the sum of weights (Shepard).
+    #[arg(long)]
+    shepard: bool,
+    /// Particle arrays to interpolate onto the surface, comma separated.
+    #[arg(long, value_delimiter = ',')]
+    attributes: Vec<String>,
+    /// No vertex normals.
+    #[arg(long)]
+    no_normals: bool,
+    /// Resample onto the full grid and run plain marching cubes (the baseline).
+    #[arg(long)]
+    full_grid: bool,
+    /// Memory budget in GiB for extent-sized structures.
+    #[arg(long, default_value_t = (DEFAULT_MEMORY_BUDGET >> 30) as f64)]
+    memory_budget: f64,
+    /// Write the statistics as JSON here.
+    #[arg(long)]
+    stats_json: Option<PathBuf>,
+    /// Print no progress bar and no table.
+    #[arg(long)]
+    quiet: bool,
+    /// Output mesh (.ply .obj .vtp); for sequences a pattern with '#' for the frame number.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Sph(args) => run_sph(&args),
+        Command::Demo { output, quiet } => run_demo(&output, quiet),
+        Command::Info { input } => run_info(&input),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("isobar: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn settings_from(args: &SphArgs, data: &ParticleData) -> Result<SphSettings> {
+    let smoothing_length = match (args.h, &args.h_array) {
+        (Some(h), None) => SmoothingLength::Constant(h),
+        (None, Some(name)) => SmoothingLength::Array(name.clone()),
+        (Some(_), Some(_)) => {
+            return Err(Error::InvalidParameter {
+                name: "h",
+                message: "give either --h or --h-array, not both".into(),
+            })
+        }
+        (None, None) => ["h", "smoothing_length", "hsml"]
+            .iter()
+            .find(|n| data.attribute(n).is_some())
+            .map(|n| SmoothingLength::Array(n.to_string()))
+            .ok_or_else(|| Error::InvalidParameter {
+                name: "h",
+                message: format!(
+                    "the data has no smoothing-length array (arrays: {}); pass --h VALUE or --h-array NAME",
+                    data.attribute_names()
+                ),
+            })?,
+    };
+    let mass = match (args.mass, &args.mass_array) {
+        (Some(m), _) => Some(Mass::Constant(m)),
+        (None, Some(name)) => Some(Mass::Array(name.clone())),
+        (None, None) => None,
+    };
+    let volumes = match (&args.volume_array, &args.density_array) {
+        (Some(v), _) => Volumes::Array(v.clone()),
+        (None, Some(rho)) => Volumes::MassDensity {
+            mass: mass.ok_or_else(|| Error::InvalidParameter {
+                name: "density-array",
+                message: "volumes from density need a mass: pass --mass VALUE or --mass-array NAME"
+                    .into(),
+            })?,
+            density: rho.clone(),
+        },
+        (None, None) => Volumes::Computed { mass },
+    };
+    if args.memory_budget.is_nan() || args.memory_budget <= 0.0 {
+        return Err(Error::InvalidParameter {
+            name: "memory-budget",
+            message: format!("must be positive, got {}", args.memory_budget),
+        });
+    }
+    Ok(SphSettings {
+        kernel: args.kernel,
+        smoothing_length,
+        h_scale: args.h_scale,
+        volumes,
+        quantity: Quantity::parse(&args.field),
+        shepard: args.shepard,
+        memory_budget: (args.memory_budget * (1u64 << 30) as f64) as u64,
+    })
+}
+
+fn params_from(args: &SphArgs, quantity: &Quantity) -> Params {
+    let trim = if args.no_trim {
+        None
+    } else if let Some(t) = &args.trim {
+        Some(Trim {
+            node: t[0],
+            vertex: t[1],
+        })
+    } else if *quantity == Quantity::SumOfWeights {
+        // Trimming a free surface against its own field would cut it away.
+        None
+    } else {
+        Some(Trim::default())
+    };
+    Params {
+        isovalues: args.iso.clone(),
+        grid_factor: args.grid_factor,
+        correct: !args.preview,
+        tolerance: args.tolerance,
+        trim,
+        normals: !args.no_normals,
+        attributes: args.attributes.clone(),
+    }
+}
+
+fn run_sph(args: &SphArgs) -> Result<()> {
+    let frames = io::expand_sequence(&args.input)?;
+    let sequence = frames.len() > 1;
+    let out_text = args.output.to_string_lossy().to_string();
+    if sequence && !out_text.contains('#') {
+        return Err(Error::InvalidParameter {
+            name: "output",
+            message: format!(
+                "{} frames match '{}'; give an output pattern with '#' for the frame number, e.g. surface_####.ply",
+                frames.len(),
+                args.input
+            ),
+        });
+    }
+    for path in &frames {
+        let output = if sequence {
+            PathBuf::from(fill_frame(&out_text, io::frame_number(path).unwrap_or(0)))
+        } else {
+            args.output.clone()
+        };
+        let t = Instant::now();
+        let data = io::read_particles(path)?;
+        let read_s = t.elapsed().as_secs_f64();
+        let settings = settings_from(args, &data)?;
+        let params = params_from(args, &settings.quantity);
+        let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)?;
+        io::write_mesh(&output, &extraction.mesh)?;
+        if !args.quiet {
+            print_stats(path, &data, &extraction.stats, read_s, build_s);
+            println!("surface written to {}", output.display());
+        }
+        if let Some(json) = &args.stats_json {
+            let json = if sequence {
+                PathBuf::from(fill_frame(
+                    &json.to_string_lossy(),
+                    io::frame_number(path).unwrap_or(0),
+                ))
+            } else {
+                json.clone()
+            };
+            write_stats_json(&json, &data, &extraction.stats, read_s, build_s)?;
+        }
+    }
+    Ok(())
+}
+
+fn run_demo(output: &Path, quiet: bool) -> Result<()> {
+    let data = io::read_particles_from_bytes(DEMO_FRAME, "npz", "embedded demo frame")?;
+    let settings = SphSettings {
+        smoothing_length: SmoothingLength::Array("h".into()),
+        ..SphSettings::default()
+    };
+    let params = Params {
+        isovalues: vec![0.6],
+        grid_factor: 0.375,
+        trim: None,
+        attributes: demo_attributes(&data),
+        ..Params::default()
+    };
+    let (extraction, build_s) = extract(&data, &settings, &params, false, quiet)?;
+    io::write_mesh(output, &extraction.mesh)?;
+    if !quiet {
+        print_stats(
+            Path::new("embedded dam-break frame"),
+            &data,
+            &extraction.stats,
+            0.0,
+            build_s,
+        );
+    }
+    let abs = std::fs::canonicalize(output).unwrap_or_else(|_| output.to_path_buf());
+    println!(
+        "free surface of {} particles: {} triangles written to {}",
+        data.len(),
+        extraction.mesh.triangles.len(),
+        abs.display()
+    );
+    Ok(())
+}
+
+fn demo_attributes(data: &ParticleData) -> Vec<String> {
+    ["velocity", "pressure", "density"]
+        .iter()
+        .filter(|n| data.attribute(n).is_some())
+        .map(|n| n.to_string())
+        .collect()
+}
+
+fn run_info(input: &Path) -> Result<()> {
+    let data = io::read_particles(input)?;
+    let (lo, hi) = isobar::field::neighbours::bounds(&data.positions);
+    println!("{}: {} particles", input.display(), data.len());
+    println!("bounds: {:?} .. {:?}", lo.to_array(), hi.to_array());
+    for a in &data.attributes {
+        let (mn, mx) = a
+            .data
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        println!(
+            "  {:<24} {} component(s), range {mn} .. {mx}",
+            a.name, a.components
+        );
+    }
+    Ok(())
+}
+
+/// Builds the field and extracts, with a terminal progress bar.
+fn extract(
+    data: &ParticleData,
+    settings: &SphSettings,
+    params: &Params,
+    full_grid: bool,
+    quiet: bool,
+) -> Result<(Extraction, f64)> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(1000)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {percent:>3}% {msg}").expect("valid template"),
+    );
+    let mut report = |f: f64, phase: &str| {
+        bar.set_position((f * 1000.0) as u64);
+        bar.set_message(phase.to_string());
+        true
+    };
+    let mut progress = Progress::new(&mut report);
+    progress.window(0.0, 0.1);
+    let t = Instant::now();
+    let field = SphField::build(data, settings, &mut progress);
+    let build_s = t.elapsed().as_secs_f64();
+    let field = match field {
+        Ok(f) => f,
+        Err(e) => {
+            bar.finish_and_clear();
+            return Err(e);
+        }
+    };
+    progress.window(0.1, 1.0);
+    let result = if full_grid {
+        baseline::extract(&field, data, params, settings.memory_budget, &mut progress)
+    } else {
+        correctors::extract(&field, data, params, &mut progress)
+    };
+    bar.finish_and_clear();
+    Ok((result?, build_s))
+}
+
+fn fill_frame(pattern: &str, frame: u64) -> String {
+    let start = pattern.find('#').unwrap_or(pattern.len());
+    let width = pattern[start..].chars().take_while(|&c| c == '#').count();
+    format!(
+        "{}{:0width$}{}",
+        &pattern[..start],
+        frame,
+        &pattern[start + width..]
+    )
+}
+
+fn stats_rows(
+    data: &ParticleData,
+    s: &Stats,
+    read_s: f64,
+    build_s: f64,
+) -> Vec<(&'static str, String)> {
+    vec![
+        ("particles", data.len().to_string()),
+        ("virtual cells", s.virtual_cells.to_string()),
+        ("seed cells", s.seed_cells.to_string()),
+        ("non-intersected seeds", s.non_intersected_seeds.to_string()),
+        (
+            "discarded cells (node threshold)",
+            s.discarded_cells.to_string(),
+        ),
+        ("cells used", s.cells_used.to_string()),
+        ("vertices", s.vertices.to_string()),
+        ("triangles", s.triangles.to_string()),
+        ("field evaluations", s.field_evaluations.to_string()),
+        ("node evaluations", s.node_evaluations.to_string()),
+        ("cache hit ratio", format!("{:.4}", s.cache_hit_ratio)),
+        ("correction mean", format!("{:.3e}", s.correction_mean)),
+        ("correction max", format!("{:.3e}", s.correction_max)),
+        ("correction stdev", format!("{:.3e}", s.correction_stdev)),
+        ("unconverged vertices", s.unconverged_vertices.to_string()),
+        ("trim cut points", s.trim_cut_points.to_string()),
+        ("time: read (s)", format!("{read_s:.3}")),
+        ("time: field build (s)", format!("{build_s:.3}")),
+        ("time: seed cells (s)", format!("{:.3}", s.timings.seeds)),
+        ("time: tracking (s)", format!("{:.3}", s.timings.tracking)),
+        ("time: vertices (s)", format!("{:.3}", s.timings.vertices)),
+        ("time: trimming (s)", format!("{:.3}", s.timings.trimming)),
+        (
+            "time: attributes (s)",
+            format!("{:.3}", s.timings.attributes),
+        ),
+        (
+            "time: extraction total (s)",
+            format!("{:.3}", s.timings.total),
+        ),
+    ]
+}
+
+fn print_stats(source: &Path, data: &ParticleData, s: &Stats, read_s: f64, build_s: f64) {
+    println!("{}", source.display());
+    for (k, v) in stats_rows(data, s, read_s, build_s) {
+        println!("  {k:<34} {v:>14}");
+    }
+}
+
+fn write_stats_json(
+    path: &Path,
+    data: &ParticleData,
+    s: &Stats,
+    read_s: f64,
+    build_s: f64,
+) -> Result<()> {
+    let body: Vec<String> = stats_rows(data, s, read_s, build_s)
+        .into_iter()
+        .map(|(k, v)| {
+            let key = k.replace([' ', ':', '(', ')'], "_").replace("__", "_");
+            let key = key.trim_matches('_').to_string();
+            let value = if v.parse::<f64>().is_ok() {
+                v
+            } else {
+                format!("\"{v}\"")
+            };
+            format!("  \"{key}\": {value}")
+        })
+        .collect();
+    let text = format!("{{\n{}\n}}\n", body.join(",\n"));
+    std::fs::write(path, text).map_err(|e| Error::io(path, e))
+}

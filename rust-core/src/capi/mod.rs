@@ -1,0 +1,164 @@
+//! The C ABI: a thin layer over the Rust API. Opaque handles, core-owned result arrays
+//! with explicit free functions, a status code on every fallible call and a thread-local
+//! message for the last error. No panic crosses it: every entry runs under
+//! `catch_unwind` and a panic becomes `ISOBAR_ERR_INTERNAL`.
+//!
+//! Threads: a particle handle may be read (extracted from) by several threads at once;
+//! freeing it while another thread uses it is the caller's error. Surfaces are immutable.
+
+// These functions are called from C, where every pointer argument is the caller's promise;
+// marking them `unsafe fn` would change nothing for C and only hide the checks below.
+#![allow(clippy::not_unsafe_ptr_arg_deref)]
+
+mod particles;
+mod sph;
+mod surface;
+
+pub use particles::*;
+pub use sph::*;
+pub use surface::*;
+
+use crate::error::Error;
+use std::cell::RefCell;
+use std::ffi::{c_char, CStr, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// Bumped whenever a function's signature or a struct's prefix changes incompatibly.
+pub const ISOBAR_ABI_VERSION: u32 = 1;
+
+/// Status of a fallible call.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IsobarStatus {
+    Ok = 0,
+    /// A null pointer, a bad length, a non-UTF-8 string or a parameter out of range.
+    ErrInvalidArgument = 1,
+    /// Data that cannot form a field (NaN positions, h <= 0, empty, missing array ...).
+    ErrInvalidInput = 2,
+    /// A file could not be read or written.
+    ErrIo = 3,
+    /// A file is not in the format its name says (truncated, corrupt ...).
+    ErrFormat = 4,
+    /// The work would exceed the memory budget; nothing was allocated.
+    ErrOverBudget = 5,
+    /// The progress callback asked to stop.
+    Cancelled = 6,
+    /// A bug in isobar (a caught panic); the message says where.
+    ErrInternal = 7,
+}
+
+thread_local! {
+    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
+}
+
+fn set_last_error(message: &str) {
+    let c = CString::new(message.replace('\0', " ")).unwrap_or_default();
+    LAST_ERROR.with(|e| *e.borrow_mut() = c);
+}
+
+fn status_of(e: &Error) -> IsobarStatus {
+    match e {
+        Error::Io { .. } => IsobarStatus::ErrIo,
+        Error::Format { .. } => IsobarStatus::ErrFormat,
+        Error::MissingArray { .. } | Error::InvalidInput(_) => IsobarStatus::ErrInvalidInput,
+        Error::InvalidParameter { .. } => IsobarStatus::ErrInvalidArgument,
+        Error::OverBudget { .. } => IsobarStatus::ErrOverBudget,
+        Error::Cancelled => IsobarStatus::Cancelled,
+    }
+}
+
+/// Runs `body`, turning errors and panics into a status and the last-error message.
+pub(crate) fn guard(body: impl FnOnce() -> Result<(), Error>) -> IsobarStatus {
+    match catch_unwind(AssertUnwindSafe(body)) {
+        Ok(Ok(())) => {
+            set_last_error("");
+            IsobarStatus::Ok
+        }
+        Ok(Err(e)) => {
+            set_last_error(&e.to_string());
+            status_of(&e)
+        }
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            set_last_error(&format!("internal error in isobar: {what}"));
+            IsobarStatus::ErrInternal
+        }
+    }
+}
+
+/// An invalid-argument error naming the argument.
+pub(crate) fn invalid(name: &'static str, message: impl Into<String>) -> Error {
+    Error::InvalidParameter {
+        name,
+        message: message.into(),
+    }
+}
+
+/// A required non-null pointer.
+pub(crate) fn non_null<'a, T>(p: *const T, name: &'static str) -> Result<&'a T, Error> {
+    // SAFETY: the caller promises `p` is null or points to a live T.
+    unsafe { p.as_ref() }.ok_or_else(|| invalid(name, "must not be NULL"))
+}
+
+/// A UTF-8 C string, or None for NULL.
+pub(crate) fn opt_str(p: *const c_char, name: &'static str) -> Result<Option<String>, Error> {
+    if p.is_null() {
+        return Ok(None);
+    }
+    // SAFETY: the caller promises a NUL-terminated string.
+    let s = unsafe { CStr::from_ptr(p) };
+    s.to_str()
+        .map(|s| Some(s.to_string()))
+        .map_err(|_| invalid(name, "is not valid UTF-8"))
+}
+
+/// A slice of `len` items at `p`; NULL is allowed only when `len` is 0.
+pub(crate) fn slice<'a, T>(p: *const T, len: usize, name: &'static str) -> Result<&'a [T], Error> {
+    if len == 0 {
+        return Ok(&[]);
+    }
+    if p.is_null() {
+        return Err(invalid(name, format!("is NULL but its length is {len}")));
+    }
+    if len
+        .checked_mul(std::mem::size_of::<T>())
+        .is_none_or(|b| b > isize::MAX as usize)
+    {
+        return Err(invalid(name, format!("length {len} is too large")));
+    }
+    // SAFETY: non-null, the caller promises `len` readable items.
+    Ok(unsafe { std::slice::from_raw_parts(p, len) })
+}
+
+/// Writes `value` through an out-pointer.
+pub(crate) fn put<T>(out: *mut T, value: T, name: &'static str) -> Result<(), Error> {
+    if out.is_null() {
+        return Err(invalid(name, "output pointer must not be NULL"));
+    }
+    // SAFETY: non-null, the caller promises it points to writable storage for a T.
+    unsafe { out.write(value) };
+    Ok(())
+}
+
+/// The message of the last failed call on this thread ("" after a success). Valid until
+/// the next isobar call on the same thread.
+#[no_mangle]
+pub extern "C" fn isobar_last_error_message() -> *const c_char {
+    LAST_ERROR.with(|e| e.borrow().as_ptr())
+}
+
+/// The ABI version (`ISOBAR_ABI_VERSION` of the library actually loaded).
+#[no_mangle]
+pub extern "C" fn isobar_abi_version() -> u32 {
+    ISOBAR_ABI_VERSION
+}
+
+/// The library version, e.g. "0.1.0". Static storage.
+#[no_mangle]
+pub extern "C" fn isobar_version() -> *const c_char {
+    concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast()
+}

@@ -1,0 +1,281 @@
+//! SPH extraction through the C ABI: a versioned parameter struct and one entry point.
+
+use super::particles::IsobarParticles;
+use super::surface::IsobarSurface;
+use super::{guard, invalid, non_null, opt_str, put, slice, IsobarStatus};
+use crate::correctors::{self, Params, Trim};
+use crate::field::kernel::Kernel;
+use crate::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
+use crate::field::DEFAULT_MEMORY_BUDGET;
+use crate::progress::Progress;
+use std::ffi::{c_char, c_void, CString};
+
+/// Kernel: Monaghan's cubic spline (support 2h).
+pub const ISOBAR_KERNEL_CUBIC: u32 = 0;
+/// Kernel: Wendland C2 (support 2h).
+pub const ISOBAR_KERNEL_WENDLAND: u32 = 1;
+/// Kernel: Morris' quintic spline (support 3h).
+pub const ISOBAR_KERNEL_QUINTIC: u32 = 2;
+/// Kernel: Johnson's quadratic kernel (support 2h).
+pub const ISOBAR_KERNEL_QUADRATIC: u32 = 3;
+
+/// Parameters of `isobar_sph_extract`. Fill with `isobar_sph_params_default`, which sets
+/// `struct_size`; later library versions only append fields, so old callers keep working.
+/// Strings are NUL-terminated UTF-8, NULL meaning "not given".
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct IsobarSphParams {
+    /// sizeof(IsobarSphParams) as the caller compiled it.
+    pub struct_size: u32,
+    /// One of the ISOBAR_KERNEL_* values.
+    pub kernel: u32,
+    /// Constant smoothing length, used when `h_array` is NULL.
+    pub h: f64,
+    /// Per-particle smoothing length array.
+    pub h_array: *const c_char,
+    /// Multiplies every smoothing length (1, 0.75, 0.5 ...).
+    pub h_scale: f64,
+    /// Field: array name, "NAME:mag", "NAME:K", or NULL / "SumOfWeights" for the free surface.
+    pub field: *const c_char,
+    /// Per-particle volume array (m/ρ); wins over density.
+    pub volume_array: *const c_char,
+    /// Density array; volumes = mass / density.
+    pub density_array: *const c_char,
+    /// Per-particle mass array.
+    pub mass_array: *const c_char,
+    /// Constant mass when > 0 and `mass_array` is NULL.
+    pub mass: f64,
+    /// Non-zero: divide by the sum of weights.
+    pub shepard: i32,
+    /// Non-zero: correct vertices onto the level set; zero: preview.
+    pub correct: i32,
+    /// Isovalues (at least one).
+    pub isovalues: *const f64,
+    pub isovalue_count: usize,
+    /// Virtual cell size in units of the smallest h.
+    pub grid_factor: f64,
+    /// Relative tolerance of the correction.
+    pub tolerance: f64,
+    /// Non-zero: trim at free surfaces with the thresholds below.
+    pub trim: i32,
+    pub trim_node: f64,
+    pub trim_vertex: f64,
+    /// Non-zero: compute vertex normals.
+    pub normals: i32,
+    /// Names of particle arrays to interpolate onto the surface.
+    pub attributes: *const *const c_char,
+    pub attribute_count: usize,
+    /// Bytes that extent-sized structures may use.
+    pub memory_budget: u64,
+    /// Non-zero: the full-grid resampling baseline instead of Marching Correctors.
+    pub full_grid: i32,
+}
+
+/// Size of the ABI-1 parameter struct: the smallest `struct_size` ever accepted. Fields
+/// added later go after it and keep their defaults for callers that predate them.
+const SPH_PARAMS_V1_SIZE: usize = 176;
+
+/// Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
+pub type IsobarProgressFn =
+    Option<extern "C" fn(user: *mut c_void, fraction: f64, phase: *const c_char) -> i32>;
+
+impl Default for IsobarSphParams {
+    fn default() -> Self {
+        let p = Params::default();
+        let t = Trim::default();
+        IsobarSphParams {
+            struct_size: std::mem::size_of::<IsobarSphParams>() as u32,
+            kernel: ISOBAR_KERNEL_CUBIC,
+            h: 0.0,
+            h_array: std::ptr::null(),
+            h_scale: 1.0,
+            field: std::ptr::null(),
+            volume_array: std::ptr::null(),
+            density_array: std::ptr::null(),
+            mass_array: std::ptr::null(),
+            mass: 0.0,
+            shepard: 0,
+            correct: 1,
+            isovalues: std::ptr::null(),
+            isovalue_count: 0,
+            grid_factor: p.grid_factor,
+            tolerance: p.tolerance,
+            trim: 1,
+            trim_node: t.node,
+            trim_vertex: t.vertex,
+            normals: 1,
+            attributes: std::ptr::null(),
+            attribute_count: 0,
+            memory_budget: DEFAULT_MEMORY_BUDGET,
+            full_grid: 0,
+        }
+    }
+}
+
+/// Writes the default parameters (with `struct_size` set) to `out`.
+#[no_mangle]
+pub extern "C" fn isobar_sph_params_default(out: *mut IsobarSphParams) -> IsobarStatus {
+    guard(|| put(out, IsobarSphParams::default(), "out"))
+}
+
+/// The caller's struct over the defaults: fields beyond its `struct_size` keep defaults.
+fn read_params(params: *const IsobarSphParams) -> Result<IsobarSphParams, crate::Error> {
+    let given = non_null(params, "params")?;
+    let size = given.struct_size as usize;
+    let ours = std::mem::size_of::<IsobarSphParams>();
+    if !(SPH_PARAMS_V1_SIZE..=ours).contains(&size) {
+        return Err(invalid(
+            "params.struct_size",
+            format!(
+                "is {size}; this library accepts {SPH_PARAMS_V1_SIZE} (ABI 1) to {ours} bytes: fill the struct with isobar_sph_params_default"
+            ),
+        ));
+    }
+    let mut out = IsobarSphParams::default();
+    // SAFETY: both point to at least `size` bytes of IsobarSphParams layout.
+    unsafe {
+        std::ptr::copy_nonoverlapping(
+            (given as *const IsobarSphParams).cast::<u8>(),
+            (&mut out as *mut IsobarSphParams).cast::<u8>(),
+            size,
+        )
+    };
+    out.struct_size = ours as u32;
+    Ok(out)
+}
+
+fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), crate::Error> {
+    let kernel = match p.kernel {
+        ISOBAR_KERNEL_CUBIC => Kernel::CubicSpline,
+        ISOBAR_KERNEL_WENDLAND => Kernel::WendlandC2,
+        ISOBAR_KERNEL_QUINTIC => Kernel::QuinticSpline,
+        ISOBAR_KERNEL_QUADRATIC => Kernel::Quadratic,
+        k => {
+            return Err(invalid(
+                "params.kernel",
+                format!("{k} is not an ISOBAR_KERNEL_* value"),
+            ))
+        }
+    };
+    let smoothing_length = match opt_str(p.h_array, "params.h_array")? {
+        Some(name) => SmoothingLength::Array(name),
+        None => SmoothingLength::Constant(p.h),
+    };
+    let mass = match opt_str(p.mass_array, "params.mass_array")? {
+        Some(name) => Some(Mass::Array(name)),
+        None if p.mass == 0.0 => None,
+        None if p.mass > 0.0 && p.mass.is_finite() => Some(Mass::Constant(p.mass)),
+        None => {
+            return Err(invalid(
+                "params.mass",
+                format!("must be positive (or 0 for none), got {}", p.mass),
+            ))
+        }
+    };
+    let volumes = match (
+        opt_str(p.volume_array, "params.volume_array")?,
+        opt_str(p.density_array, "params.density_array")?,
+    ) {
+        (Some(v), _) => Volumes::Array(v),
+        (None, Some(rho)) => Volumes::MassDensity {
+            mass: mass.ok_or_else(|| {
+                invalid(
+                    "params.mass",
+                    "volumes from a density array need a mass (mass or mass_array)",
+                )
+            })?,
+            density: rho,
+        },
+        (None, None) => Volumes::Computed { mass },
+    };
+    let quantity = match opt_str(p.field, "params.field")? {
+        Some(f) if !f.is_empty() => Quantity::parse(&f),
+        _ => Quantity::SumOfWeights,
+    };
+    let names = slice(p.attributes, p.attribute_count, "params.attributes")?;
+    let attributes = names
+        .iter()
+        .map(|&n| {
+            opt_str(n, "params.attributes")?
+                .ok_or_else(|| invalid("params.attributes", "contains NULL"))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let sph = SphSettings {
+        kernel,
+        smoothing_length,
+        h_scale: p.h_scale,
+        volumes,
+        quantity,
+        shepard: p.shepard != 0,
+        memory_budget: p.memory_budget,
+    };
+    let params = Params {
+        isovalues: slice(p.isovalues, p.isovalue_count, "params.isovalues")?.to_vec(),
+        grid_factor: p.grid_factor,
+        correct: p.correct != 0,
+        tolerance: p.tolerance,
+        trim: (p.trim != 0).then_some(Trim {
+            node: p.trim_node,
+            vertex: p.trim_vertex,
+        }),
+        normals: p.normals != 0,
+        attributes,
+    };
+    Ok((sph, params))
+}
+
+/// Extracts isosurfaces of the particles' SPH field. `progress` may be NULL; it is called
+/// on the calling thread only. On success `*out` owns a surface to free with
+/// `isobar_surface_free`; on failure `*out` is left untouched.
+#[no_mangle]
+pub extern "C" fn isobar_sph_extract(
+    particles: *const IsobarParticles,
+    params: *const IsobarSphParams,
+    progress: IsobarProgressFn,
+    user: *mut c_void,
+    out: *mut *mut IsobarSurface,
+) -> IsobarStatus {
+    guard(|| {
+        let particles = non_null(particles, "particles")?;
+        if out.is_null() {
+            return Err(invalid("out", "output pointer must not be NULL"));
+        }
+        let p = read_params(params)?;
+        let (sph, params) = settings(&p)?;
+        let data = &particles.data;
+        let mut report = |fraction: f64, phase: &str| match progress {
+            Some(f) => {
+                let phase = CString::new(phase).unwrap_or_default();
+                f(user, fraction, phase.as_ptr()) == 0
+            }
+            None => true,
+        };
+        let mut sink = Progress::new(&mut report);
+        sink.window(0.0, 0.1);
+        let field = SphField::build(data, &sph, &mut sink)?;
+        sink.window(0.1, 1.0);
+        let extraction = if p.full_grid != 0 {
+            crate::baseline::extract(&field, data, &params, sph.memory_budget, &mut sink)?
+        } else {
+            correctors::extract(&field, data, &params, &mut sink)?
+        };
+        put(out, Box::into_raw(IsobarSurface::new(extraction)), "out")
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn abi_1_struct_size_is_frozen() {
+        // Every ABI-1 field lies inside the ABI-1 size; later fields may only follow it.
+        let end_of_v1_fields = std::mem::offset_of!(IsobarSphParams, full_grid) + 4;
+        assert!(end_of_v1_fields <= SPH_PARAMS_V1_SIZE);
+        assert!(SPH_PARAMS_V1_SIZE <= std::mem::size_of::<IsobarSphParams>());
+        assert_eq!(
+            SPH_PARAMS_V1_SIZE % std::mem::align_of::<IsobarSphParams>(),
+            0
+        );
+    }
+}

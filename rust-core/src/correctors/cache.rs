@@ -1,0 +1,78 @@
+//! Node cache: each virtual-grid node is evaluated once per extraction, whatever the
+//! number of cells and isovalues that touch it. It holds only nodes of cells that were
+//! visited, so its size follows the surface, not the grid.
+
+use crate::field::sph::SphField;
+use crate::mc::VirtualGrid;
+use rayon::prelude::*;
+use rustc_hash::FxHashMap;
+
+/// (field value, sum of weights) at a node.
+pub type NodeSample = (f64, f64);
+
+/// Anything that knows the field at grid nodes: the sparse cache here, or the dense
+/// full grid of the baseline.
+pub trait NodeValues: Sync {
+    /// The sample at `node`; the node must have been evaluated.
+    fn node(&self, node: u64) -> NodeSample;
+}
+
+/// Sparse cache of evaluated nodes.
+#[derive(Default)]
+pub struct NodeCache {
+    map: FxHashMap<u64, NodeSample>,
+    /// Node reads by cells.
+    pub lookups: u64,
+    /// Nodes evaluated (misses).
+    pub evaluations: u64,
+}
+
+impl NodeCache {
+    /// Makes sure the eight corners of every cell in `cells` are evaluated.
+    pub fn ensure_corners(&mut self, field: &SphField, grid: &VirtualGrid, cells: &[u64]) {
+        let mut missing: Vec<u64> = cells
+            .par_iter()
+            .flat_map_iter(|&c| (0..8).map(move |k| VirtualGrid::corner(c, k)))
+            .filter(|n| !self.map.contains_key(n))
+            .collect();
+        missing.par_sort_unstable();
+        missing.dedup();
+        let samples: Vec<NodeSample> = missing
+            .par_iter()
+            .map(|&n| field.value_and_weight(grid.node_position(n)))
+            .collect();
+        self.lookups += 8 * cells.len() as u64;
+        self.evaluations += missing.len() as u64;
+        self.map.extend(missing.into_iter().zip(samples));
+    }
+
+    /// The eight corner samples of `cell`.
+    pub fn corners(&self, cell: u64) -> [NodeSample; 8] {
+        std::array::from_fn(|k| self.node(VirtualGrid::corner(cell, k)))
+    }
+
+    /// Number of cached nodes.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// True when nothing is cached.
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+
+    /// Fraction of node reads served without evaluating.
+    pub fn hit_ratio(&self) -> f64 {
+        if self.lookups == 0 {
+            0.0
+        } else {
+            1.0 - self.evaluations as f64 / self.lookups as f64
+        }
+    }
+}
+
+impl NodeValues for NodeCache {
+    fn node(&self, node: u64) -> NodeSample {
+        self.map[&node]
+    }
+}

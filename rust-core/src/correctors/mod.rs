@@ -1,0 +1,270 @@
+//! Marching Correctors (Rosswog-style SPH isosurfaces after the paper in
+//! `shared/papers/marching-correctors-sph-isosurfaces.txt`): a virtual grid that is never
+//! stored, seed cells from particle pairs, surface tracking from cell to cell, vertices
+//! corrected onto the SPH level set, free-surface trimming with the sum of weights.
+
+pub mod cache;
+pub mod seeds;
+pub mod surface;
+pub mod tracking;
+pub mod trimming;
+pub mod vertices;
+
+use crate::error::{Error, Result};
+use crate::field::particles::ParticleData;
+use crate::field::sph::SphField;
+use crate::mc::VirtualGrid;
+use crate::mesh::Mesh;
+use crate::progress::Progress;
+use cache::NodeCache;
+use std::time::Instant;
+use vertices::Placement;
+
+/// Free-surface trimming thresholds on the sum of weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trim {
+    /// Cells with a corner below this are discarded (paper: 0.1).
+    pub node: f64,
+    /// Triangles are clipped where the sum of weights crosses this (paper: 0.5).
+    pub vertex: f64,
+}
+
+impl Default for Trim {
+    fn default() -> Self {
+        Trim {
+            node: 0.1,
+            vertex: 0.5,
+        }
+    }
+}
+
+/// Parameters of an extraction.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Params {
+    /// One surface per value, all in one mesh (with an `Isovalue` array when several).
+    pub isovalues: Vec<f64>,
+    /// Virtual cell size as a multiple of the smallest smoothing length (paper: c = 0.5).
+    pub grid_factor: f64,
+    /// Correct vertices onto the level set (quality mode); false = preview.
+    pub correct: bool,
+    /// Relative tolerance on |F − iso|: absolute = tolerance × |iso| (× the largest |raw
+    /// value| when iso = 0).
+    pub tolerance: f64,
+    /// Trimming at free surfaces; None keeps the whole surface.
+    pub trim: Option<Trim>,
+    /// Vertex normals (from the SPH gradient in quality mode, from faces in preview).
+    pub normals: bool,
+    /// Particle arrays to interpolate onto the surface vertices.
+    pub attributes: Vec<String>,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            isovalues: vec![],
+            grid_factor: 0.5,
+            correct: true,
+            tolerance: 1e-6,
+            trim: Some(Trim::default()),
+            normals: true,
+            attributes: vec![],
+        }
+    }
+}
+
+impl Params {
+    /// Checks every parameter, naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |name, message: String| Err(Error::InvalidParameter { name, message });
+        if self.isovalues.is_empty() {
+            return bad("isovalues", "at least one isovalue is needed".into());
+        }
+        if let Some(v) = self.isovalues.iter().find(|v| !v.is_finite()) {
+            return bad("isovalues", format!("{v} is not a finite number"));
+        }
+        if !(self.grid_factor > 0.0 && self.grid_factor.is_finite()) {
+            return bad(
+                "grid_factor",
+                format!("must be positive, got {}", self.grid_factor),
+            );
+        }
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return bad(
+                "tolerance",
+                format!("must lie in (0, 1), got {}", self.tolerance),
+            );
+        }
+        if let Some(t) = self.trim {
+            if !(t.node >= 0.0 && t.vertex >= 0.0 && t.node.is_finite() && t.vertex.is_finite()) {
+                return bad(
+                    "trim",
+                    format!(
+                        "thresholds must be non-negative and finite, got node {} and vertex {}",
+                        t.node, t.vertex
+                    ),
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Time spent per phase, in seconds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Timings {
+    pub seeds: f64,
+    pub tracking: f64,
+    pub vertices: f64,
+    pub trimming: f64,
+    pub attributes: f64,
+    pub total: f64,
+}
+
+/// The figures of the paper's Tables I–V, summed over isovalues.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Stats {
+    pub virtual_cells: u64,
+    pub seed_cells: u64,
+    pub non_intersected_seeds: u64,
+    pub discarded_cells: u64,
+    /// Cells the surface passes through (after discarding).
+    pub cells_used: u64,
+    pub vertices: u64,
+    pub triangles: u64,
+    /// Every SPH evaluation: grid nodes, corrections, cut points, attributes.
+    pub field_evaluations: u64,
+    pub node_lookups: u64,
+    pub node_evaluations: u64,
+    pub cache_hit_ratio: f64,
+    /// Largest number of nodes the cache held.
+    pub cached_nodes: u64,
+    pub corrected_vertices: u64,
+    pub correction_mean: f64,
+    pub correction_max: f64,
+    pub correction_stdev: f64,
+    /// Vertices whose correction did not reach the tolerance (kept at their best point).
+    pub unconverged_vertices: u64,
+    pub trim_cut_points: u64,
+    pub timings: Timings,
+}
+
+/// A surface and how it was made.
+#[derive(Clone, Debug)]
+pub struct Extraction {
+    pub mesh: Mesh,
+    pub stats: Stats,
+}
+
+/// The virtual grid for `field`: cells of `grid_factor` × the smallest smoothing length,
+/// covering every point where some particle's kernel is non-zero.
+pub fn virtual_grid(field: &SphField, grid_factor: f64) -> Result<VirtualGrid> {
+    let cell = grid_factor * field.min_h();
+    let (lo, hi) = field.bounds();
+    let pad = field.max_support() + cell;
+    VirtualGrid::covering(lo - pad, hi + pad, cell)
+}
+
+/// Absolute tolerance on |F − iso| for relative tolerance `rel`.
+pub fn absolute_tolerance(field: &SphField, iso: f64, rel: f64) -> f64 {
+    let scale = if iso != 0.0 {
+        iso.abs()
+    } else {
+        (0..field.len())
+            .map(|i| field.raw_value(i).abs())
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE)
+    };
+    rel * scale
+}
+
+/// Extracts the isosurfaces of `field` by Marching Correctors. `data` supplies the arrays
+/// named in `params.attributes`.
+pub fn extract(
+    field: &SphField,
+    data: &ParticleData,
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Extraction> {
+    params.validate()?;
+    let start = Instant::now();
+    let grid = virtual_grid(field, params.grid_factor)?;
+    let attributes = surface::AttributeSource::new(field, data, &params.attributes)?;
+    let mut stats = Stats {
+        virtual_cells: grid.cell_count(),
+        ..Stats::default()
+    };
+    let mut cache = NodeCache::default();
+    let mut mesh = Mesh::default();
+    let n = params.isovalues.len() as f64;
+    progress.phase("seed cells", 0.0, 0.0)?;
+    let t = Instant::now();
+    let smoothed = seeds::smoothed_at_particles(field);
+    stats.field_evaluations += smoothed.len() as u64;
+    stats.timings.seeds += t.elapsed().as_secs_f64();
+    for (k, &iso) in params.isovalues.iter().enumerate() {
+        let at = |f: f64| (k as f64 + f) / n;
+        progress.phase("seed cells", at(0.0), at(0.1))?;
+        let t = Instant::now();
+        let seeds = seeds::seed_cells(field, &grid, iso, &smoothed)?;
+        stats.seed_cells += seeds.len() as u64;
+        stats.timings.seeds += t.elapsed().as_secs_f64();
+
+        progress.phase("surface tracking", at(0.1), at(0.5))?;
+        let t = Instant::now();
+        let node_threshold = params.trim.map(|t| t.node);
+        let tracked = tracking::track(
+            field,
+            &grid,
+            seeds,
+            iso,
+            node_threshold,
+            &mut cache,
+            progress,
+        )?;
+        stats.non_intersected_seeds += tracked.non_intersected_seeds;
+        stats.discarded_cells += tracked.discarded;
+        stats.cells_used += tracked.active.len() as u64;
+        stats.cached_nodes = stats.cached_nodes.max(cache.len() as u64);
+        stats.timings.tracking += t.elapsed().as_secs_f64();
+
+        let placement = if params.correct {
+            Placement::Corrected {
+                field,
+                tolerance: absolute_tolerance(field, iso, params.tolerance),
+            }
+        } else {
+            Placement::Linear
+        };
+        let mut part = surface::build(
+            field,
+            &grid,
+            &cache,
+            &tracked.active,
+            iso,
+            params,
+            placement,
+            &attributes,
+            progress,
+            (at(0.5), at(1.0)),
+            &mut stats,
+        )?;
+        if params.isovalues.len() > 1 {
+            let nv = part.vertex_count();
+            part.attributes
+                .push(crate::field::particles::Attribute::scalar(
+                    "Isovalue",
+                    vec![iso; nv],
+                ));
+        }
+        mesh.append(part);
+    }
+    stats.node_lookups = cache.lookups;
+    stats.node_evaluations = cache.evaluations;
+    stats.cache_hit_ratio = cache.hit_ratio();
+    stats.field_evaluations += cache.evaluations;
+    stats.vertices = mesh.vertex_count() as u64;
+    stats.triangles = mesh.triangles.len() as u64;
+    stats.timings.total = start.elapsed().as_secs_f64();
+    progress.phase("done", 1.0, 1.0)?;
+    Ok(Extraction { mesh, stats })
+}

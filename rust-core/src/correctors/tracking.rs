@@ -1,0 +1,102 @@
+//! Surface tracking (paper §III-D1): from the seed cells, follow the surface cell to cell
+//! through the faces it crosses; each cell is visited once.
+//!
+//! The paper walks a queue one cell at a time. Here the queue advances a whole wavefront at
+//! a time: all corners a wavefront needs are evaluated in parallel, its cells are
+//! classified in parallel, and the next wavefront is the sorted set of unvisited face
+//! neighbours. The set of cells reached is the closure of the seeds either way, so the
+//! result does not depend on the order or on the thread count.
+
+use super::cache::NodeCache;
+use crate::error::Result;
+use crate::field::sph::SphField;
+use crate::mc::{case_index, case_table, ActiveCell, VirtualGrid};
+use crate::progress::Progress;
+use rayon::prelude::*;
+use rustc_hash::FxHashSet;
+
+/// Cells the surface passes through, and what the walk saw on the way.
+#[derive(Debug, Default)]
+pub struct Tracked {
+    /// Sorted by key.
+    pub active: Vec<ActiveCell>,
+    /// Seed cells the surface does not pass through.
+    pub non_intersected_seeds: u64,
+    /// Cells dropped because a corner's sum of weights is below the node threshold.
+    pub discarded: u64,
+    /// Cells visited in all.
+    pub visited: u64,
+}
+
+enum Visit {
+    Active(ActiveCell),
+    Empty,
+    Discarded,
+}
+
+/// Walks the surface `iso` from `seeds` (sorted, unique).
+pub fn track(
+    field: &SphField,
+    grid: &VirtualGrid,
+    seeds: Vec<u64>,
+    iso: f64,
+    node_threshold: Option<f64>,
+    cache: &mut NodeCache,
+    progress: &mut Progress,
+) -> Result<Tracked> {
+    let table = case_table();
+    let mut out = Tracked::default();
+    let mut visited: FxHashSet<u64> = seeds.iter().copied().collect();
+    let mut frontier = seeds;
+    let mut is_seed_wave = true;
+    while !frontier.is_empty() {
+        cache.ensure_corners(field, grid, &frontier);
+        let cache_ref = &*cache;
+        let visits: Vec<Visit> = frontier
+            .par_iter()
+            .map(|&cell| {
+                let corners = cache_ref.corners(cell);
+                if let Some(t) = node_threshold {
+                    if corners.iter().any(|&(_, w)| w < t) {
+                        return Visit::Discarded;
+                    }
+                }
+                let case = case_index(&corners.map(|(v, _)| v), iso);
+                if case == 0 || case == 255 {
+                    Visit::Empty
+                } else {
+                    Visit::Active(ActiveCell { key: cell, case })
+                }
+            })
+            .collect();
+        out.visited += frontier.len() as u64;
+        let mut next = Vec::new();
+        for v in visits {
+            match v {
+                Visit::Active(cell) => {
+                    let faces = table.faces_crossed[cell.case as usize];
+                    for f in 0..6 {
+                        if faces >> f & 1 == 1 {
+                            if let Some(n) = grid.face_neighbour(cell.key, f / 2, f % 2) {
+                                if visited.insert(n) {
+                                    next.push(n);
+                                }
+                            }
+                        }
+                    }
+                    out.active.push(cell);
+                }
+                Visit::Empty if is_seed_wave => out.non_intersected_seeds += 1,
+                Visit::Empty => {}
+                Visit::Discarded => out.discarded += 1,
+            }
+        }
+        next.par_sort_unstable();
+        frontier = next;
+        is_seed_wave = false;
+        let seen = out.visited as f64;
+        progress.report(seen / (seen + frontier.len() as f64 * 4.0))?;
+    }
+    out.active.par_sort_unstable();
+    Ok(out)
+}

@@ -1,0 +1,61 @@
+//! The one error type every fallible core call returns. Each variant names what is wrong
+//! (file, field, index) so a host can show it to the user as it is.
+
+use std::path::PathBuf;
+
+/// Result alias used throughout the crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong in the core, worded for the person who supplied the input.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An operating-system error while reading or writing a file.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file whose contents do not follow its format (truncated, corrupt, unsupported).
+    #[error("{path}: {message}")]
+    Format { path: PathBuf, message: String },
+    /// A named array the caller asked for is not in the data.
+    #[error("no array named '{name}' in the particle data (available: {available})")]
+    MissingArray { name: String, available: String },
+    /// Input data that cannot describe a valid field (NaN coordinates, h <= 0, empty set ...).
+    #[error("{0}")]
+    InvalidInput(String),
+    /// A parameter outside its meaningful range.
+    #[error("parameter '{name}': {message}")]
+    InvalidParameter { name: &'static str, message: String },
+    /// The work would need more memory than the budget allows; refused before allocating.
+    #[error(
+        "{what} would need {needed_bytes} bytes, over the memory budget of {budget_bytes} bytes"
+    )]
+    OverBudget {
+        what: String,
+        needed_bytes: u64,
+        budget_bytes: u64,
+    },
+    /// The progress callback asked to stop.
+    #[error("cancelled")]
+    Cancelled,
+}
+
+impl Error {
+    /// Shorthand for a format error about `path`.
+    pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Error::Format {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+
+    /// Shorthand for an I/O error about `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

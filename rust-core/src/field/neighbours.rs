@@ -1,0 +1,187 @@
+//! Uniform neighbour grid: particles bucketed by counting sort into cubic cells, so any
+//! point's neighbours within `reach` cells lie in the (2·reach+1)³ block around it. Cells
+//! are ordered x fastest, so each row of a query block is one contiguous slice of the
+//! sorted particles: (2·reach+1)² range look-ups per query.
+
+use crate::error::{Error, Result};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Particles bucketed into a dense grid of cubic cells.
+#[derive(Clone, Debug)]
+pub struct NeighbourGrid {
+    origin: DVec3,
+    inv_cell: f64,
+    dims: [usize; 3],
+    /// `offsets[c]..offsets[c+1]` are the sorted slots of cell c.
+    offsets: Vec<u32>,
+    /// Original particle index of each sorted slot; within a cell, ascending.
+    order: Vec<u32>,
+}
+
+impl NeighbourGrid {
+    /// Buckets `positions` into cells of edge `cell_size`. Refuses, before allocating, a
+    /// grid whose offset table would exceed `memory_budget` bytes.
+    pub fn build(positions: &[DVec3], cell_size: f64, memory_budget: u64) -> Result<Self> {
+        if !(cell_size > 0.0 && cell_size.is_finite()) {
+            return Err(Error::InvalidParameter {
+                name: "neighbour cell size",
+                message: format!("must be positive and finite, got {cell_size}"),
+            });
+        }
+        if positions.len() >= u32::MAX as usize {
+            return Err(Error::InvalidInput(format!(
+                "{} particles is more than this build supports (2^32 - 1)",
+                positions.len()
+            )));
+        }
+        let (lo, hi) = bounds(positions);
+        let mut dims = [0usize; 3];
+        let mut ncells: u128 = 1;
+        for a in 0..3 {
+            let n = ((hi[a] - lo[a]) / cell_size).floor() + 1.0;
+            dims[a] = n.min(1e15) as usize;
+            ncells *= dims[a] as u128;
+        }
+        let needed = (ncells + 1) * 4 + positions.len() as u128 * 8;
+        if needed > memory_budget as u128 || ncells >= u32::MAX as u128 {
+            return Err(Error::OverBudget {
+                what: format!(
+                    "a neighbour grid of {}×{}×{} cells (particles spread over {:?}..{:?} with support {cell_size})",
+                    dims[0], dims[1], dims[2], lo.to_array(), hi.to_array()
+                ),
+                needed_bytes: needed.min(u64::MAX as u128) as u64,
+                budget_bytes: memory_budget,
+            });
+        }
+        let mut grid = NeighbourGrid {
+            origin: lo,
+            inv_cell: 1.0 / cell_size,
+            dims,
+            offsets: Vec::new(),
+            order: Vec::new(),
+        };
+        let cell_of: Vec<u32> = positions
+            .par_iter()
+            .map(|&p| {
+                let c = grid.cell_coords(p);
+                grid.linear(c[0] as usize, c[1] as usize, c[2] as usize) as u32
+            })
+            .collect();
+        // Counting sort; the scatter runs in particle order so each cell lists its
+        // particles ascending, which keeps every later sum in the same order.
+        let mut offsets = vec![0u32; ncells as usize + 1];
+        for &c in &cell_of {
+            offsets[c as usize + 1] += 1;
+        }
+        for i in 1..offsets.len() {
+            offsets[i] += offsets[i - 1];
+        }
+        let mut cursor = offsets.clone();
+        let mut order = vec![0u32; positions.len()];
+        for (i, &c) in cell_of.iter().enumerate() {
+            order[cursor[c as usize] as usize] = i as u32;
+            cursor[c as usize] += 1;
+        }
+        grid.offsets = offsets;
+        grid.order = order;
+        Ok(grid)
+    }
+
+    /// Original particle index of each sorted slot.
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
+
+    fn linear(&self, x: usize, y: usize, z: usize) -> usize {
+        x + self.dims[0] * (y + self.dims[1] * z)
+    }
+
+    /// Integer cell coordinates of `p` (may lie outside the grid for query points).
+    fn cell_coords(&self, p: DVec3) -> [i64; 3] {
+        let c = (p - self.origin) * self.inv_cell;
+        [c.x.floor() as i64, c.y.floor() as i64, c.z.floor() as i64]
+    }
+
+    /// Calls `f` with each sorted-slot range that may hold a particle within `reach` cell
+    /// sizes of `p`: at most (2·reach+1)² contiguous ranges.
+    #[inline]
+    pub fn for_each_candidate_range(&self, p: DVec3, reach: i64, mut f: impl FnMut(Range<usize>)) {
+        let c = self.cell_coords(p);
+        let mut lo = [0usize; 3];
+        let mut hi = [0usize; 3];
+        for a in 0..3 {
+            let d = self.dims[a] as i64;
+            let (l, h) = ((c[a] - reach).max(0), (c[a] + reach).min(d - 1));
+            if l > h {
+                return;
+            }
+            lo[a] = l as usize;
+            hi[a] = h as usize;
+        }
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                let start = self.offsets[self.linear(lo[0], y, z)] as usize;
+                let end = self.offsets[self.linear(hi[0], y, z) + 1] as usize;
+                if start < end {
+                    f(start..end);
+                }
+            }
+        }
+    }
+}
+
+/// Axis-aligned bounds of a non-empty point set.
+pub fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn candidates_cover_every_point_within_one_cell() {
+        let mut s = 12345u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let pts: Vec<DVec3> = (0..3000)
+            .map(|_| DVec3::new(rnd(), rnd() * 0.5, rnd() * 2.0))
+            .collect();
+        let r = 0.13;
+        for (cell, reach) in [(r, 1), (r / 2.0, 2), (r / 3.0, 3)] {
+            let grid = NeighbourGrid::build(&pts, cell, 1 << 30).unwrap();
+            for q in 0..200 {
+                let p = DVec3::new(rnd() * 1.2 - 0.1, rnd() * 0.7 - 0.1, rnd() * 2.2 - 0.1);
+                let mut found = Vec::new();
+                grid.for_each_candidate_range(p, reach, |range| {
+                    for slot in range {
+                        let i = grid.order()[slot] as usize;
+                        if pts[i].distance(p) < r {
+                            found.push(i);
+                        }
+                    }
+                });
+                found.sort_unstable();
+                let brute: Vec<usize> =
+                    (0..pts.len()).filter(|&i| pts[i].distance(p) < r).collect();
+                assert_eq!(found, brute, "query {q}");
+            }
+        }
+    }
+
+    #[test]
+    fn absurd_extent_is_refused_before_allocating() {
+        let pts = vec![DVec3::ZERO, DVec3::splat(1e9)];
+        let err = NeighbourGrid::build(&pts, 1e-3, 1 << 30).unwrap_err();
+        assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+    }
+}

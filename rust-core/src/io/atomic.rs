@@ -1,0 +1,102 @@
+//! Crash-safe file replacement: write a hidden temporary sibling, then rename it over the
+//! target. A reader (or a user re-running a job) sees either the old file or the complete
+//! new one, never a half-written mesh.
+
+use crate::error::{Error, Result};
+use std::fs::{self, File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Distinguishes temporary files of concurrent writes from the same process (e.g. frames
+/// written in parallel into one folder).
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `path` through `write`, which receives a buffered writer on a temporary file in
+/// the same directory (a rename across file systems would not be atomic). On any error the
+/// temporary file is removed and the previous `path`, if any, is left untouched.
+pub(crate) fn write_atomically<F>(path: &Path, write: F) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| Error::InvalidInput(format!("{}: not a file path", path.display())))?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let (tmp, file) =
+        create_temporary(&dir, &file_name.to_string_lossy()).map_err(|e| Error::io(path, e))?;
+
+    let mut writer = BufWriter::new(file);
+    let written = write(&mut writer)
+        .and_then(|_| writer.flush())
+        .and_then(|_| writer.get_ref().sync_all());
+    drop(writer);
+    let finished = written.and_then(|_| fs::rename(&tmp, path));
+    if let Err(e) = finished {
+        // Best effort: the write already failed, and a leftover hidden file is harmless.
+        let _ = fs::remove_file(&tmp);
+        return Err(Error::io(path, e));
+    }
+    Ok(())
+}
+
+/// Creates `.name.tmpPID-N` exclusively (never clobbering another writer's temporary).
+fn create_temporary(dir: &Path, name: &str) -> std::io::Result<(PathBuf, File)> {
+    loop {
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let tmp = dir.join(format!(".{name}.tmp{}-{n}", std::process::id()));
+        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+            Ok(file) => return Ok((tmp, file)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn leftovers(dir: &Path) -> Vec<String> {
+        fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp"))
+            .collect()
+    }
+
+    #[test]
+    fn failed_write_keeps_the_old_file_and_leaves_no_temporary() {
+        let dir = std::env::temp_dir().join(format!("isobar-atomic-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("mesh.ply");
+        write_atomically(&path, |w| w.write_all(b"old contents")).unwrap();
+        assert!(leftovers(&dir).is_empty());
+
+        let err = write_atomically(&path, |w| {
+            w.write_all(b"half of the new")?;
+            Err(std::io::Error::other("disk full (simulated)"))
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("mesh.ply"), "{err}");
+        assert!(err.to_string().contains("disk full"), "{err}");
+        assert_eq!(fs::read(&path).unwrap(), b"old contents");
+        assert!(leftovers(&dir).is_empty());
+
+        write_atomically(&path, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"new");
+        assert!(leftovers(&dir).is_empty());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn missing_directory_is_an_io_error_naming_the_file() {
+        let path = Path::new("/nonexistent-isobar-dir/out.vtp");
+        let err = write_atomically(path, |_| Ok(())).unwrap_err();
+        assert!(matches!(err, Error::Io { .. }));
+        assert!(err.to_string().contains("out.vtp"));
+    }
+}

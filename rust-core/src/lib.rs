@@ -1,0 +1,16 @@
+//! isobar: exact isosurfaces of SPH (meshless) data.
+//!
+//! Data flows one way: file or host arrays -> [`field`] -> extractor ([`correctors`],
+//! [`baseline`]) -> [`mesh::Mesh`] -> writer or host. See ARCHITECTURE.md.
+
+pub mod baseline;
+pub mod capi;
+pub mod correctors;
+pub mod error;
+pub mod field;
+pub mod io;
+pub mod mc;
+pub mod mesh;
+pub mod progress;
+
+pub use error::{Error, Result};

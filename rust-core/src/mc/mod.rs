@@ -1,0 +1,214 @@
+//! What every grid-based extractor shares: the case table, the (virtual) grid's node,
+//! cell and edge keys, and the assembly of triangles from active cells. An extractor only
+//! decides which cells are active and where on each cut edge its vertex goes.
+
+pub mod table;
+
+pub use table::{case_table, corner_offset, edge_corner_axis, CaseTable};
+
+use crate::error::{Error, Result};
+use glam::DVec3;
+use rayon::prelude::*;
+
+const AXIS_BITS: u32 = 20;
+const AXIS_MASK: u64 = (1 << AXIS_BITS) - 1;
+/// Most nodes a grid may have along one axis (keys pack three 20-bit coordinates).
+pub const MAX_NODES_PER_AXIS: u64 = 1 << AXIS_BITS;
+
+/// A uniform grid of cubic cells described by origin, cell size and cell counts; never
+/// stored. Nodes and cells are named by keys packing (x, y, z) with x in the low bits, so
+/// sorting keys orders them z-slice by z-slice, the order the paper's cache relies on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VirtualGrid {
+    pub origin: DVec3,
+    pub cell_size: f64,
+    /// Cells per axis (nodes per axis = cells + 1).
+    pub cells: [u32; 3],
+}
+
+impl VirtualGrid {
+    /// The grid of cell size `cell_size` whose cells cover the box `lo..hi`.
+    pub fn covering(lo: DVec3, hi: DVec3, cell_size: f64) -> Result<Self> {
+        if !(cell_size > 0.0 && cell_size.is_finite()) {
+            return Err(Error::InvalidParameter {
+                name: "grid cell size",
+                message: format!("must be positive and finite, got {cell_size}"),
+            });
+        }
+        let mut cells = [0u32; 3];
+        for a in 0..3 {
+            let n = ((hi[a] - lo[a]) / cell_size).ceil().max(1.0);
+            if n + 1.0 > MAX_NODES_PER_AXIS as f64 {
+                return Err(Error::InvalidParameter {
+                    name: "grid_factor",
+                    message: format!(
+                        "the virtual grid would need {n:.0} cells along axis {a} (the data spans {:.6} with cells of {cell_size:.3e}); at most {} are supported — raise the grid factor",
+                        hi[a] - lo[a],
+                        MAX_NODES_PER_AXIS - 1
+                    ),
+                });
+            }
+            cells[a] = n as u32;
+        }
+        Ok(VirtualGrid {
+            origin: lo,
+            cell_size,
+            cells,
+        })
+    }
+
+    /// Total number of cells.
+    pub fn cell_count(&self) -> u64 {
+        self.cells.iter().map(|&c| c as u64).product()
+    }
+
+    /// Key of node or cell (x, y, z).
+    #[inline]
+    pub fn key(x: u32, y: u32, z: u32) -> u64 {
+        x as u64 | (y as u64) << AXIS_BITS | (z as u64) << (2 * AXIS_BITS)
+    }
+
+    /// Coordinates of a node or cell key.
+    #[inline]
+    pub fn coords(key: u64) -> [u32; 3] {
+        [
+            (key & AXIS_MASK) as u32,
+            (key >> AXIS_BITS & AXIS_MASK) as u32,
+            (key >> (2 * AXIS_BITS)) as u32,
+        ]
+    }
+
+    /// Position of a node.
+    #[inline]
+    pub fn node_position(&self, node: u64) -> DVec3 {
+        let [x, y, z] = Self::coords(node);
+        self.origin + DVec3::new(x as f64, y as f64, z as f64) * self.cell_size
+    }
+
+    /// Key of corner `corner` of cell `cell`.
+    #[inline]
+    pub fn corner(cell: u64, corner: usize) -> u64 {
+        let [dx, dy, dz] = corner_offset(corner);
+        cell + Self::key(dx, dy, dz)
+    }
+
+    /// The cell across face (axis, side) of `cell`, if inside the grid.
+    #[inline]
+    pub fn face_neighbour(&self, cell: u64, axis: usize, side: usize) -> Option<u64> {
+        let mut c = Self::coords(cell);
+        if side == 1 {
+            if c[axis] + 1 >= self.cells[axis] {
+                return None;
+            }
+            c[axis] += 1;
+        } else {
+            if c[axis] == 0 {
+                return None;
+            }
+            c[axis] -= 1;
+        }
+        Some(Self::key(c[0], c[1], c[2]))
+    }
+
+    /// The cell containing `p`, if inside the grid.
+    pub fn cell_of(&self, p: DVec3) -> Option<[u32; 3]> {
+        let c = (p - self.origin) / self.cell_size;
+        let mut out = [0u32; 3];
+        for a in 0..3 {
+            let f = c[a].floor();
+            if !(f >= 0.0 && f < self.cells[a] as f64) {
+                return None;
+            }
+            out[a] = f as u32;
+        }
+        Some(out)
+    }
+}
+
+/// Key of the grid edge along `axis` from `node`.
+#[inline]
+pub fn edge_key(node: u64, axis: usize) -> u64 {
+    node << 2 | axis as u64
+}
+
+/// (lower node, axis) of an edge key.
+#[inline]
+pub fn edge_node_axis(edge: u64) -> (u64, usize) {
+    (edge >> 2, (edge & 3) as usize)
+}
+
+/// The upper node of an edge.
+#[inline]
+pub fn edge_upper_node(edge: u64) -> u64 {
+    let (node, axis) = edge_node_axis(edge);
+    node + (1u64 << (AXIS_BITS as usize * axis))
+}
+
+/// Case index: bit c set when corner c lies above the isovalue (strictly).
+#[inline]
+pub fn case_index(values: &[f64; 8], iso: f64) -> u8 {
+    let mut case = 0u8;
+    for (c, v) in values.iter().enumerate() {
+        if *v > iso {
+            case |= 1 << c;
+        }
+    }
+    case
+}
+
+/// A cell the surface passes through, with its case.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct ActiveCell {
+    pub key: u64,
+    pub case: u8,
+}
+
+/// Global keys of the edges cut in each active cell, sorted and unique: the index of an
+/// edge in this list is its vertex index, one vertex per crossed grid edge.
+pub fn cut_edges(cells: &[ActiveCell]) -> Vec<u64> {
+    let table = case_table();
+    let mut edges: Vec<u64> = cells
+        .par_iter()
+        .flat_map_iter(|cell| {
+            let cut = table.edges_cut[cell.case as usize];
+            (0..12).filter(move |e| cut >> e & 1 == 1).map(move |e| {
+                let (corner, axis) = edge_corner_axis(e);
+                edge_key(VirtualGrid::corner(cell.key, corner), axis)
+            })
+        })
+        .collect();
+    edges.par_sort_unstable();
+    edges.dedup();
+    edges
+}
+
+/// Triangles of the active cells, in cell order, indexing `edges` (from [`cut_edges`]).
+pub fn triangulate(cells: &[ActiveCell], edges: &[u64]) -> Vec<[u32; 3]> {
+    let table = case_table();
+    cells
+        .par_iter()
+        .flat_map_iter(|cell| {
+            table.triangles[cell.case as usize].iter().map(move |tri| {
+                tri.map(|e| {
+                    let (corner, axis) = edge_corner_axis(e as usize);
+                    let key = edge_key(VirtualGrid::corner(cell.key, corner), axis);
+                    edges
+                        .binary_search(&key)
+                        .expect("every cut edge of an active cell is listed")
+                        as u32
+                })
+            })
+        })
+        .collect()
+}
+
+/// Where the linear interpolant of (0, f0)–(1, f1) crosses `iso`, in [0, 1].
+#[inline]
+pub fn linear_crossing(f0: f64, f1: f64, iso: f64) -> f64 {
+    let d = f1 - f0;
+    if d == 0.0 {
+        0.5
+    } else {
+        ((iso - f0) / d).clamp(0.0, 1.0)
+    }
+}

@@ -1,0 +1,239 @@
+//! The marching-cubes case table, generated rather than transcribed.
+//!
+//! Corner `c` of a cell sits at offset (c&1, c>>1&1, c>>2&1). Edge `4a + k` runs along
+//! axis `a` from the corner whose bit `a` is clear (the other two bits are `k` spread over
+//! the remaining axes) to the corner with bit `a` set, so an edge is named by its lower
+//! corner and its axis, the same way the global grid names edges.
+//!
+//! Generation: on each of the six faces the cut edges are paired into segments; a face
+//! with two inside corners on a diagonal (the ambiguous face) pairs them so the inside
+//! corners are separated. That choice depends on the face's four corners only, so the
+//! two cells sharing a face always cut it the same way and meshes are watertight. The
+//! segments, oriented with the inside on their left as seen from outside the cube, chain
+//! into closed loops; each loop becomes a triangle fan. Triangles therefore wind
+//! counter-clockwise seen from the outside region (values below the isovalue), i.e.
+//! their normals point down the gradient, out of the region above the isovalue.
+
+use std::sync::OnceLock;
+
+/// Offset of corner `c` in cell units.
+pub const fn corner_offset(c: usize) -> [u32; 3] {
+    [(c & 1) as u32, ((c >> 1) & 1) as u32, ((c >> 2) & 1) as u32]
+}
+
+/// (lower corner, axis) of local edge `e`.
+pub const fn edge_corner_axis(e: usize) -> (usize, usize) {
+    let a = e / 4;
+    let k = e % 4;
+    let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+    ((k & 1) << b | ((k >> 1) & 1) << c, a)
+}
+
+/// The local edge that runs along `axis` from `corner` (whose bit `axis` must be clear).
+pub const fn edge_index(corner: usize, axis: usize) -> usize {
+    let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+    axis * 4 + ((corner >> b) & 1) + 2 * ((corner >> c) & 1)
+}
+
+/// Triangles and crossing information for every one of the 256 corner configurations.
+pub struct CaseTable {
+    /// Triangles as triples of local edges.
+    pub triangles: Vec<Vec<[u8; 3]>>,
+    /// Bit `2a + s` set when the surface crosses face (axis a, side s).
+    pub faces_crossed: [u8; 256],
+    /// Bit `e` set when local edge `e` is cut.
+    pub edges_cut: [u16; 256],
+}
+
+/// The table, generated on first use.
+pub fn case_table() -> &'static CaseTable {
+    static TABLE: OnceLock<CaseTable> = OnceLock::new();
+    TABLE.get_or_init(generate)
+}
+
+fn generate() -> CaseTable {
+    let mut triangles = Vec::with_capacity(256);
+    let mut faces_crossed = [0u8; 256];
+    let mut edges_cut = [0u16; 256];
+    for case in 0..256usize {
+        let inside = |c: usize| case >> c & 1 == 1;
+        for e in 0..12 {
+            let (c, a) = edge_corner_axis(e);
+            if inside(c) != inside(c | 1 << a) {
+                edges_cut[case] |= 1 << e;
+            }
+        }
+        // next[e] = the edge that follows e along its loop.
+        let mut next = [usize::MAX; 12];
+        for a in 0..3 {
+            for s in 0..2 {
+                let segs = face_segments(case, a, s);
+                if !segs.is_empty() {
+                    faces_crossed[case] |= 1 << (2 * a + s);
+                }
+                for (p, q) in segs {
+                    debug_assert_eq!(next[p], usize::MAX);
+                    next[p] = q;
+                }
+            }
+        }
+        let mut tris = Vec::new();
+        let mut seen = [false; 12];
+        for start in 0..12 {
+            if next[start] == usize::MAX || seen[start] {
+                continue;
+            }
+            let mut lp = Vec::new();
+            let mut e = start;
+            while !seen[e] {
+                seen[e] = true;
+                lp.push(e as u8);
+                e = next[e];
+            }
+            for i in 1..lp.len() - 1 {
+                tris.push([lp[0], lp[i], lp[i + 1]]);
+            }
+        }
+        triangles.push(tris);
+    }
+    CaseTable {
+        triangles,
+        faces_crossed,
+        edges_cut,
+    }
+}
+
+/// Oriented segments (from edge, to edge) cutting face (axis `a`, side `s`).
+fn face_segments(case: usize, a: usize, s: usize) -> Vec<(usize, usize)> {
+    let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+    let base = s << a;
+    // The face's corners in cyclic order.
+    let ring = [base, base | 1 << b, base | 1 << b | 1 << c, base | 1 << c];
+    let inside = |corner: usize| case >> corner & 1 == 1;
+    // Cut ring edges, each named by its position i (between ring[i] and ring[i+1]).
+    let cut: Vec<usize> = (0..4)
+        .filter(|&i| inside(ring[i]) != inside(ring[(i + 1) % 4]))
+        .collect();
+    let ring_edge = |i: usize| {
+        let (p, q) = (ring[i], ring[(i + 1) % 4]);
+        let lower = p & q;
+        let axis = (p ^ q).trailing_zeros() as usize;
+        edge_index(lower, axis)
+    };
+    let pairs: Vec<(usize, usize)> = match cut.len() {
+        0 => vec![],
+        2 => vec![(cut[0], cut[1])],
+        4 => {
+            // Pair the two cut ring edges on either side of each inside corner.
+            (0..4)
+                .filter(|&i| inside(ring[i]))
+                .map(|i| ((i + 3) % 4, i))
+                .collect()
+        }
+        _ => unreachable!("a 4-cycle has an even number of sign changes"),
+    };
+    let outward = {
+        let mut n = [0.0f64; 3];
+        n[a] = if s == 1 { 1.0 } else { -1.0 };
+        n
+    };
+    pairs
+        .into_iter()
+        .map(|(i, j)| {
+            let (ei, ej) = (ring_edge(i), ring_edge(j));
+            let (pi, pj) = (edge_midpoint(ei), edge_midpoint(ej));
+            // An inside corner adjacent to the segment: an endpoint of ring edge i.
+            let cin = if inside(ring[i]) {
+                ring[i]
+            } else {
+                ring[(i + 1) % 4]
+            };
+            let ci = corner_offset(cin).map(f64::from);
+            let d = sub(pj, pi);
+            if dot(cross(d, outward), sub(ci, pi)) > 0.0 {
+                (ei, ej)
+            } else {
+                (ej, ei)
+            }
+        })
+        .collect()
+}
+
+fn edge_midpoint(e: usize) -> [f64; 3] {
+    let (c, a) = edge_corner_axis(e);
+    let mut p = corner_offset(c).map(f64::from);
+    p[a] += 0.5;
+    p
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edges_are_named_consistently() {
+        for e in 0..12 {
+            let (c, a) = edge_corner_axis(e);
+            assert_eq!(c >> a & 1, 0);
+            assert_eq!(edge_index(c, a), e);
+        }
+    }
+
+    #[test]
+    fn every_case_uses_each_cut_edge_and_closes_its_loops() {
+        let t = case_table();
+        assert!(t.triangles[0].is_empty() && t.triangles[255].is_empty());
+        for case in 0..256 {
+            // Each cut edge is a vertex of the case's surface; no uncut edge is.
+            let mut used = 0u16;
+            for tri in &t.triangles[case] {
+                for &e in tri {
+                    used |= 1 << e;
+                }
+            }
+            assert_eq!(used, t.edges_cut[case], "case {case}");
+            // Within the cell, every interior triangle edge is shared by two triangles
+            // wound oppositely; the rest lie on the cell's faces.
+            let tris = &t.triangles[case];
+            assert!(tris.len() <= 12, "case {case}: {} triangles", tris.len());
+        }
+    }
+
+    #[test]
+    fn complementary_cases_cut_the_same_edges_and_faces() {
+        let t = case_table();
+        for case in 0..256 {
+            assert_eq!(t.edges_cut[case], t.edges_cut[255 - case]);
+            assert_eq!(t.faces_crossed[case], t.faces_crossed[255 - case]);
+        }
+    }
+
+    #[test]
+    fn single_corner_triangle_faces_away_from_the_corner() {
+        let t = case_table();
+        for c in 0..8 {
+            let tris = &t.triangles[1 << c];
+            assert_eq!(tris.len(), 1);
+            let p = tris[0].map(|e| edge_midpoint(e as usize));
+            let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+            let corner = corner_offset(c).map(f64::from);
+            assert!(dot(n, sub(p[0], corner)) > 0.0, "corner {c}");
+        }
+    }
+}

@@ -1,0 +1,205 @@
+//! The command line as a user runs it.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn isobar() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_isobar"))
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("isobar-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn shared(name: &str) -> String {
+    format!(
+        "{}/../../shared/data/splashsurf/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+#[test]
+fn demo_output_is_byte_identical_for_one_and_two_threads() {
+    let mut files = Vec::new();
+    for threads in ["1", "2"] {
+        let out = temp(&format!("demo_{threads}.vtp"));
+        let status = isobar()
+            .args(["demo", "--quiet", "-o"])
+            .arg(&out)
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        assert!(
+            status.status.success(),
+            "{}",
+            String::from_utf8_lossy(&status.stderr)
+        );
+        let text = String::from_utf8_lossy(&status.stdout);
+        assert!(text.contains("written to"), "{text}");
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert!(files[0].len() > 100_000);
+    assert!(
+        files[0] == files[1],
+        "outputs differ between 1 and 2 threads"
+    );
+}
+
+#[test]
+fn sph_command_writes_a_surface_and_stats() {
+    let out = temp("dam.ply");
+    let json = temp("dam.json");
+    let run = isobar()
+        .args([
+            "sph",
+            &shared("dam_break_frame_9_6859_particles.bgeo"),
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "--grid-factor",
+            "0.375",
+        ])
+        .arg("--stats-json")
+        .arg(&json)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    for row in [
+        "seed cells",
+        "cache hit ratio",
+        "correction max",
+        "triangles",
+    ] {
+        assert!(stdout.contains(row), "stats table lacks '{row}':\n{stdout}");
+    }
+    let mesh = isobar::io::read_mesh(&out).unwrap();
+    assert!(mesh.triangles.len() > 10_000);
+    assert!(mesh.topology().is_watertight_oriented());
+    let stats = std::fs::read_to_string(&json).unwrap();
+    assert!(
+        stats.contains(&format!("\"triangles\": {}", mesh.triangles.len())),
+        "{stats}"
+    );
+}
+
+fn fails_with(args: &[&str], expected: &[&str]) {
+    let run = isobar().args(args).output().unwrap();
+    assert!(!run.status.success(), "{args:?} should fail");
+    let err = String::from_utf8_lossy(&run.stderr);
+    for e in expected {
+        assert!(err.contains(e), "{args:?}: message lacks '{e}':\n{err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn bad_input_gets_a_clear_error_and_no_output() {
+    let out = temp("never.ply");
+    let o = out.to_str().unwrap();
+    fails_with(
+        &[
+            "sph",
+            "/nonexistent/frame.vtk",
+            "--iso",
+            "1",
+            "--h",
+            "0.1",
+            "-o",
+            o,
+        ],
+        &["/nonexistent/frame.vtk"],
+    );
+    let frame = shared("double_dam_break_frame_01_4732_particles.vtk");
+    fails_with(
+        &[
+            "sph",
+            &frame,
+            "--field",
+            "temperature",
+            "--iso",
+            "1",
+            "--h",
+            "0.05",
+            "-o",
+            o,
+        ],
+        &["temperature"],
+    );
+    fails_with(&["sph", &frame, "--iso", "0.6", "-o", o], &["--h"]);
+    fails_with(
+        &["sph", &frame, "--iso", "0.6", "--h", "-0.05", "-o", o],
+        &["smoothing length"],
+    );
+    fails_with(
+        &[
+            "sph",
+            &frame,
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "--grid-factor",
+            "1e-9",
+            "-o",
+            o,
+        ],
+        &["grid factor"],
+    );
+    let truncated = temp("truncated.vtk");
+    let bytes = std::fs::read(&frame).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    fails_with(
+        &[
+            "sph",
+            truncated.to_str().unwrap(),
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "-o",
+            o,
+        ],
+        &["truncated.vtk"],
+    );
+    let empty = temp("empty.csv");
+    std::fs::write(&empty, "x,y,z\n").unwrap();
+    fails_with(
+        &[
+            "sph",
+            empty.to_str().unwrap(),
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "-o",
+            o,
+        ],
+        &["empty"],
+    );
+    let nan = temp("nan.csv");
+    std::fs::write(&nan, "x,y,z\n0,0,0\n0.01,nan,0\n").unwrap();
+    fails_with(
+        &[
+            "sph",
+            nan.to_str().unwrap(),
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "-o",
+            o,
+        ],
+        &["particle 1"],
+    );
+    assert!(!out.exists(), "a failed run must not leave an output file");
+}

@@ -1,0 +1,475 @@
+//! Marching Correctors against properties that fail on a wrong surface.
+
+mod common;
+
+use common::{block, Brute, Lcg};
+use glam::DVec3;
+use isobar::baseline;
+use isobar::correctors::{self, Params, Trim};
+use isobar::field::kernel::Kernel;
+use isobar::field::particles::{Attribute, ParticleData};
+use isobar::field::sph::{Quantity, SmoothingLength, SphField, SphSettings, Volumes};
+use isobar::progress::Progress;
+use isobar::Error;
+
+fn settings(kernel: Kernel, h: f64, quantity: Quantity) -> SphSettings {
+    SphSettings {
+        kernel,
+        smoothing_length: SmoothingLength::Constant(h),
+        quantity,
+        ..SphSettings::default()
+    }
+}
+
+fn run(data: &ParticleData, s: &SphSettings, p: &Params) -> correctors::Extraction {
+    let field = SphField::new(data, s).unwrap();
+    correctors::extract(&field, data, p, &mut Progress::none()).unwrap()
+}
+
+/// Radius where a single particle's field a·V·W(r, h) equals iso, by bisection.
+fn sphere_radius(kernel: Kernel, h: f64, amplitude: f64, iso: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, kernel.support_factor() * h);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if amplitude * kernel.value(mid, h) > iso {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+#[test]
+fn one_particle_gives_the_kernel_sphere() {
+    for kernel in Kernel::ALL {
+        let h = 0.7;
+        let centre = DVec3::new(0.3, -1.2, 2.0);
+        let data = ParticleData {
+            positions: vec![centre],
+            attributes: vec![
+                Attribute::scalar("a", vec![5.0]),
+                Attribute::scalar("vol", vec![2.0]),
+            ],
+        };
+        let s = SphSettings {
+            volumes: Volumes::Array("vol".into()),
+            ..settings(kernel, h, Quantity::Scalar("a".into()))
+        };
+        let iso = 0.4 * 5.0 * 2.0 * kernel.value(0.0, h);
+        let r = sphere_radius(kernel, h, 10.0, iso);
+        let p = Params {
+            isovalues: vec![iso],
+            trim: None,
+            grid_factor: 0.1,
+            ..Params::default()
+        };
+        let out = run(&data, &s, &p);
+        let m = &out.mesh;
+        assert!(
+            m.triangles.len() > 100,
+            "{kernel:?}: {} triangles",
+            m.triangles.len()
+        );
+        let tol = 1e-6 * iso;
+        for (i, x) in m.positions.iter().enumerate() {
+            let d = DVec3::from(*x) - centre;
+            let f = 10.0 * kernel.value(d.length(), h);
+            assert!(
+                (f - iso).abs() <= tol,
+                "{kernel:?} vertex {i}: |F - iso| = {}",
+                (f - iso).abs()
+            );
+            assert!(
+                (d.length() - r).abs() < 1e-5 * r,
+                "{kernel:?}: radius {} vs {r}",
+                d.length()
+            );
+            let n = glam::Vec3::from(m.normals[i]).as_dvec3();
+            assert!(
+                n.dot(d.normalize()) > 0.99999,
+                "{kernel:?}: normal {n:?} not radial"
+            );
+        }
+        let topo = m.topology();
+        assert!(topo.is_watertight_oriented(), "{kernel:?}: {topo:?}");
+        let exact = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        let v = m.signed_volume();
+        // Vertices on the sphere: the polyhedron is inscribed, slightly smaller.
+        assert!(
+            v < exact && v > 0.98 * exact,
+            "{kernel:?}: volume {v} vs {exact}"
+        );
+        assert_eq!(m.duplicate_vertices(), 0);
+        assert_eq!(m.components(), 1);
+    }
+}
+
+#[test]
+fn corrected_vertices_lie_on_the_level_set_by_brute_force() {
+    let h = 0.1;
+    let data = block(DVec3::ZERO, DVec3::new(0.8, 0.5, 0.4), 0.05, 3);
+    let kernel = Kernel::CubicSpline;
+    let pressure = data.attribute("pressure").unwrap().data.clone();
+    let brute = Brute::new(kernel, h, &data.positions, pressure);
+    let s = settings(kernel, h, Quantity::Scalar("pressure".into()));
+    let iso = 1500.0;
+    let p = Params {
+        isovalues: vec![iso],
+        ..Params::default()
+    };
+    let out = run(&data, &s, &p);
+    assert!(
+        out.mesh.triangles.len() > 200,
+        "{} triangles",
+        out.mesh.triangles.len()
+    );
+    let tol = 1e-6 * iso;
+    let mut worst = 0.0f64;
+    for x in &out.mesh.positions {
+        worst = worst.max((brute.eval(DVec3::from(*x)).0 - iso).abs());
+    }
+    assert!(worst <= tol * 1.01, "max |F - iso| = {worst} > {tol}");
+    // Preview places vertices by linear interpolation: measurably off the level set.
+    let preview = run(
+        &data,
+        &s,
+        &Params {
+            correct: false,
+            ..p
+        },
+    );
+    let perr = preview
+        .mesh
+        .positions
+        .iter()
+        .map(|x| (brute.eval(DVec3::from(*x)).0 - iso).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        perr > 100.0 * tol,
+        "preview error {perr} should exceed the corrected tolerance"
+    );
+    eprintln!("max |F - iso|: corrected {worst:.3e}, preview {perr:.3e}");
+}
+
+#[test]
+fn free_surface_is_watertight_oriented_and_encloses_the_fluid() {
+    let h = 0.1;
+    let lo = DVec3::ZERO;
+    let hi = DVec3::new(0.6, 0.4, 0.3);
+    let data = block(lo, hi, 0.05, 11);
+    let s = settings(Kernel::CubicSpline, h, Quantity::SumOfWeights);
+    let p = Params {
+        isovalues: vec![0.6],
+        trim: None,
+        grid_factor: 0.375,
+        ..Params::default()
+    };
+    let out = run(&data, &s, &p);
+    let m = &out.mesh;
+    let topo = m.topology();
+    assert!(topo.is_watertight_oriented(), "{topo:?}");
+    assert_eq!(m.components(), 1);
+    assert_eq!(m.duplicate_vertices(), 0);
+    let box_volume = (hi - lo + 0.05).element_product();
+    let v = m.signed_volume();
+    assert!(
+        v > 0.7 * box_volume && v < 1.5 * box_volume,
+        "volume {v} vs block {box_volume}"
+    );
+    // Normals agree with the winding: they point the way the triangles face.
+    let mut agree = 0;
+    for t in &m.triangles {
+        let [a, b, c] = t.map(|i| DVec3::from(m.positions[i as usize]));
+        let f = (b - a).cross(c - a);
+        let n: DVec3 = t
+            .iter()
+            .map(|&i| glam::Vec3::from(m.normals[i as usize]).as_dvec3())
+            .sum();
+        if f.dot(n) > 0.0 {
+            agree += 1;
+        }
+    }
+    assert!(
+        agree as f64 > 0.999 * m.triangles.len() as f64,
+        "{agree}/{}",
+        m.triangles.len()
+    );
+}
+
+#[test]
+fn preview_equals_the_full_grid_baseline() {
+    let data = block(DVec3::ZERO, DVec3::new(0.5, 0.3, 0.3), 0.05, 5);
+    let s = settings(Kernel::WendlandC2, 0.1, Quantity::Scalar("pressure".into()));
+    let p = Params {
+        isovalues: vec![800.0, 1600.0],
+        correct: false,
+        trim: Some(Trim::default()),
+        ..Params::default()
+    };
+    let field = SphField::new(&data, &s).unwrap();
+    let mc = correctors::extract(&field, &data, &p, &mut Progress::none()).unwrap();
+    let full = baseline::extract(&field, &data, &p, 1 << 30, &mut Progress::none()).unwrap();
+    assert!(mc.mesh.triangles.len() > 100);
+    assert_eq!(mc.mesh.positions, full.mesh.positions);
+    assert_eq!(mc.mesh.triangles, full.mesh.triangles);
+    assert!(
+        mc.stats.node_evaluations < full.stats.node_evaluations / 2,
+        "virtual grid evaluated {} nodes, full grid {}",
+        mc.stats.node_evaluations,
+        full.stats.node_evaluations
+    );
+}
+
+#[test]
+fn trimming_keeps_no_vertex_below_the_vertex_threshold() {
+    let data = block(DVec3::ZERO, DVec3::new(0.6, 0.4, 0.4), 0.05, 8);
+    let s = settings(
+        Kernel::CubicSpline,
+        0.1,
+        Quantity::Scalar("pressure".into()),
+    );
+    let trim = Trim {
+        node: 0.1,
+        vertex: 0.5,
+    };
+    let iso = 1000.0;
+    let out = run(
+        &data,
+        &s,
+        &Params {
+            isovalues: vec![iso],
+            trim: Some(trim),
+            ..Params::default()
+        },
+    );
+    let untrimmed = run(
+        &data,
+        &s,
+        &Params {
+            isovalues: vec![iso],
+            trim: None,
+            ..Params::default()
+        },
+    );
+    let m = &out.mesh;
+    assert!(
+        out.stats.trim_cut_points > 0,
+        "the pressure surface meets the free surface"
+    );
+    assert!(m.triangles.len() < untrimmed.mesh.triangles.len());
+    let pressure = data.attribute("pressure").unwrap().data.clone();
+    let brute = Brute::new(Kernel::CubicSpline, 0.1, &data.positions, pressure);
+    for x in &m.positions {
+        let (f, w) = brute.eval(DVec3::from(*x));
+        assert!(
+            w >= trim.vertex * (1.0 - 1e-6),
+            "vertex with sum of weights {w}"
+        );
+        assert!(
+            (f - iso).abs() <= 1e-6 * iso * 1.01,
+            "trimmed vertex off the level set: {}",
+            (f - iso).abs()
+        );
+    }
+    let topo = m.topology();
+    assert_eq!(topo.nonmanifold_edges, 0);
+    assert_eq!(topo.misoriented_edges, 0);
+    assert!(
+        topo.boundary_edges > 0,
+        "trimming opens the surface where it meets the free surface"
+    );
+}
+
+#[test]
+fn every_separated_cluster_gives_a_component() {
+    let mut rng = Lcg(99);
+    let mut positions = Vec::new();
+    let clusters = 40;
+    for c in 0..clusters {
+        let centre = DVec3::new((c % 8) as f64, (c / 8) as f64, 0.5 * (c % 3) as f64) * 1.5;
+        let count = 1 + (rng.next() * 12.0) as usize;
+        for _ in 0..count {
+            positions.push(centre + (DVec3::new(rng.next(), rng.next(), rng.next()) - 0.5) * 0.15);
+        }
+    }
+    let data = common::with_fields(positions, 0.0);
+    let s = settings(Kernel::CubicSpline, 0.1, Quantity::SumOfWeights);
+    let out = run(
+        &data,
+        &s,
+        &Params {
+            isovalues: vec![0.5],
+            trim: None,
+            ..Params::default()
+        },
+    );
+    assert_eq!(out.mesh.components(), clusters);
+    assert!(out.mesh.topology().is_watertight_oriented());
+}
+
+#[test]
+fn output_does_not_depend_on_the_thread_count() {
+    let data = block(DVec3::ZERO, DVec3::new(0.6, 0.4, 0.4), 0.05, 21);
+    let s = settings(
+        Kernel::CubicSpline,
+        0.1,
+        Quantity::Scalar("pressure".into()),
+    );
+    let p = Params {
+        isovalues: vec![900.0],
+        attributes: vec!["velocity".into()],
+        ..Params::default()
+    };
+    let go = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| run(&data, &s, &p).mesh)
+    };
+    let (one, four) = (go(1), go(4));
+    let bits = |m: &isobar::mesh::Mesh| -> Vec<u64> {
+        m.positions
+            .iter()
+            .flatten()
+            .map(|v| v.to_bits())
+            .chain(
+                m.attributes
+                    .iter()
+                    .flat_map(|a| a.data.iter().map(|v| v.to_bits())),
+            )
+            .collect()
+    };
+    assert_eq!(one.triangles, four.triangles);
+    assert_eq!(bits(&one), bits(&four));
+    assert_eq!(one.normals, four.normals);
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let good = block(DVec3::ZERO, DVec3::splat(0.2), 0.05, 1);
+    let s = settings(
+        Kernel::CubicSpline,
+        0.1,
+        Quantity::Scalar("pressure".into()),
+    );
+    let msg =
+        |data: &ParticleData, s: &SphSettings| SphField::new(data, s).unwrap_err().to_string();
+
+    let mut nan = good.clone();
+    nan.positions[7].y = f64::NAN;
+    assert!(msg(&nan, &s).contains("particle 7"), "{}", msg(&nan, &s));
+    let mut inf = good.clone();
+    inf.positions[3].x = f64::INFINITY;
+    assert!(msg(&inf, &s).contains("particle 3"));
+
+    let empty = ParticleData::default();
+    assert!(msg(&empty, &s).contains("empty"));
+
+    let zero_h = SphSettings {
+        smoothing_length: SmoothingLength::Constant(0.0),
+        ..s.clone()
+    };
+    assert!(msg(&good, &zero_h).contains("smoothing length"));
+    let mut neg = good.clone();
+    let n = neg.len();
+    neg.attributes.push(Attribute::scalar(
+        "h",
+        (0..n).map(|i| if i == 5 { -1.0 } else { 0.1 }).collect(),
+    ));
+    let per_particle = SphSettings {
+        smoothing_length: SmoothingLength::Array("h".into()),
+        ..s.clone()
+    };
+    let m = msg(&neg, &per_particle);
+    assert!(
+        m.contains("particle 5") && m.contains("smoothing length"),
+        "{m}"
+    );
+
+    let missing = SphSettings {
+        quantity: Quantity::Scalar("temperature".into()),
+        ..s.clone()
+    };
+    let m = msg(&good, &missing);
+    assert!(m.contains("temperature") && m.contains("pressure"), "{m}");
+    let vector = SphSettings {
+        quantity: Quantity::Scalar("velocity".into()),
+        ..s.clone()
+    };
+    assert!(msg(&good, &vector).contains("velocity:mag"));
+
+    let field = SphField::new(&good, &s).unwrap();
+    let tiny = Params {
+        isovalues: vec![1.0],
+        grid_factor: 1e-9,
+        ..Params::default()
+    };
+    let err = correctors::extract(&field, &good, &tiny, &mut Progress::none()).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::InvalidParameter {
+                name: "grid_factor",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let err = baseline::extract(
+        &field,
+        &good,
+        &Params {
+            isovalues: vec![1.0],
+            grid_factor: 0.01,
+            ..Params::default()
+        },
+        1 << 20,
+        &mut Progress::none(),
+    )
+    .unwrap_err();
+    assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+    let none = Params::default();
+    assert!(
+        correctors::extract(&field, &good, &none, &mut Progress::none())
+            .unwrap_err()
+            .to_string()
+            .contains("isovalue")
+    );
+    let attr = Params {
+        isovalues: vec![1.0],
+        attributes: vec!["vorticity".into()],
+        ..Params::default()
+    };
+    assert!(
+        correctors::extract(&field, &good, &attr, &mut Progress::none())
+            .unwrap_err()
+            .to_string()
+            .contains("vorticity")
+    );
+}
+
+#[test]
+fn cancel_stops_the_extraction() {
+    let data = block(DVec3::ZERO, DVec3::splat(0.3), 0.05, 2);
+    let s = settings(Kernel::CubicSpline, 0.1, Quantity::SumOfWeights);
+    let field = SphField::new(&data, &s).unwrap();
+    let mut calls = 0;
+    let mut cb = |_f: f64, _phase: &str| {
+        calls += 1;
+        calls < 3
+    };
+    let mut progress = Progress::new(&mut cb);
+    let err = correctors::extract(
+        &field,
+        &data,
+        &Params {
+            isovalues: vec![0.5],
+            ..Params::default()
+        },
+        &mut progress,
+    )
+    .unwrap_err();
+    assert!(matches!(err, Error::Cancelled));
+}

@@ -1,0 +1,148 @@
+/* The C ABI as a C program uses it: compiled with -std=c11 -Wall -Wextra -Werror against
+ * include/isobar.h. One SPH particle's isosurface is a sphere of known radius; bad input
+ * and cancellation must come back as status codes with messages, never a crash. */
+#include "isobar.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+static int failures = 0;
+#define CHECK(cond, ...)                                                  \
+    do {                                                                  \
+        if (!(cond)) {                                                    \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__);          \
+            fprintf(stderr, __VA_ARGS__);                                 \
+            fprintf(stderr, " (last error: %s)\n", isobar_last_error_message()); \
+            failures++;                                                   \
+        }                                                                 \
+    } while (0)
+
+static const double PI = 3.14159265358979323846;
+
+/* Cubic spline W(r, h), written out here independently of the library. */
+static double cubic(double r, double h) {
+    double q = r / h, s = 1.0 / (PI * h * h * h);
+    if (q < 1.0) return s * (1.0 - 1.5 * q * q + 0.75 * q * q * q);
+    if (q < 2.0) return s * 0.25 * (2.0 - q) * (2.0 - q) * (2.0 - q);
+    return 0.0;
+}
+
+static int progress_calls = 0;
+static int32_t count_progress(void *user, double fraction, const char *phase) {
+    (void)user;
+    (void)phase;
+    if (fraction < 0.0 || fraction > 1.0) failures++;
+    progress_calls++;
+    return 0;
+}
+
+static int32_t cancel_at_once(void *user, double fraction, const char *phase) {
+    (void)fraction;
+    (void)phase;
+    *(int *)user += 1;
+    return 1;
+}
+
+int main(void) {
+    CHECK(isobar_abi_version() == ISOBAR_ABI_VERSION, "ABI %u", isobar_abi_version());
+    CHECK(strlen(isobar_version()) > 0, "version");
+
+    const double centre[3] = {0.5, -0.25, 1.0};
+    const double h = 0.4, value = 3.0, volume = 0.7;
+    IsobarParticles *particles = NULL;
+    CHECK(isobar_particles_create(centre, 1, &particles) == ISOBAR_STATUS_OK, "create");
+    CHECK(isobar_particles_add_array(particles, "a", &value, 1, 1) == ISOBAR_STATUS_OK, "add a");
+    CHECK(isobar_particles_add_array(particles, "vol", &volume, 1, 1) == ISOBAR_STATUS_OK, "add vol");
+    CHECK(isobar_particles_count(particles) == 1, "count");
+    CHECK(isobar_particles_array_count(particles) == 2, "array count");
+
+    IsobarSphParams params;
+    CHECK(isobar_sph_params_default(&params) == ISOBAR_STATUS_OK, "defaults");
+    CHECK(params.struct_size == sizeof(IsobarSphParams), "struct_size");
+    const double iso = 0.5 * value * volume * cubic(0.0, h);
+    params.h = h;
+    params.field = "a";
+    params.volume_array = "vol";
+    params.isovalues = &iso;
+    params.isovalue_count = 1;
+    params.trim = 0;
+    params.grid_factor = 0.1;
+
+    IsobarSurface *surface = NULL;
+    CHECK(isobar_sph_extract(particles, &params, count_progress, NULL, &surface) == ISOBAR_STATUS_OK, "extract");
+    CHECK(progress_calls > 3, "progress called %d times", progress_calls);
+    size_t nv = isobar_surface_vertex_count(surface), nt = isobar_surface_triangle_count(surface);
+    CHECK(nv > 100 && nt > 200, "%zu vertices, %zu triangles", nv, nt);
+    const double *xyz = isobar_surface_positions(surface);
+    const float *normals = isobar_surface_normals(surface);
+    const uint32_t *tris = isobar_surface_triangles(surface);
+    CHECK(xyz && normals && tris, "arrays");
+    double worst = 0.0;
+    for (size_t i = 0; i < nv; i++) {
+        double d[3] = {xyz[3 * i] - centre[0], xyz[3 * i + 1] - centre[1], xyz[3 * i + 2] - centre[2]};
+        double r = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        double f = value * volume * cubic(r, h);
+        if (fabs(f - iso) > worst) worst = fabs(f - iso);
+        double radial = (d[0] * normals[3 * i] + d[1] * normals[3 * i + 1] + d[2] * normals[3 * i + 2]) / r;
+        CHECK(radial > 0.9999, "normal %zu not radial (%f)", i, radial);
+    }
+    CHECK(worst <= 1e-6 * iso, "max |F - iso| = %g", worst);
+    for (size_t t = 0; t < 3 * nt; t++) CHECK(tris[t] < nv, "index %u out of range", tris[t]);
+
+    IsobarStats stats;
+    memset(&stats, 0, sizeof stats);
+    stats.struct_size = sizeof stats;
+    CHECK(isobar_surface_stats(surface, &stats) == ISOBAR_STATUS_OK, "stats");
+    CHECK(stats.triangles == nt && stats.vertices == nv, "stats counts");
+    CHECK(stats.seed_cells > 0 && stats.cache_hit_ratio > 0.0, "stats figures");
+
+    const char *name = NULL;
+    size_t components = 0;
+    const double *weights = NULL;
+    CHECK(isobar_surface_attribute(surface, 0, &name, &components, &weights) == ISOBAR_STATUS_OK, "attribute");
+    CHECK(name && strcmp(name, "SumOfWeights") == 0 && components == 1 && weights, "SumOfWeights");
+    CHECK(isobar_surface_attribute(surface, 99, &name, &components, &weights) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "index 99");
+    isobar_surface_free(surface);
+
+    /* Cancel: the callback's non-zero return stops the work with a distinct status. */
+    int cancels = 0;
+    surface = NULL;
+    CHECK(isobar_sph_extract(particles, &params, cancel_at_once, &cancels, &surface) == ISOBAR_STATUS_CANCELLED, "cancel");
+    CHECK(surface == NULL && cancels == 1, "cancelled run leaves no surface");
+
+    /* Bad input: each comes back as a status and a message naming the problem. */
+    params.h = -1.0;
+    CHECK(isobar_sph_extract(particles, &params, NULL, NULL, &surface) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "h < 0");
+    CHECK(strstr(isobar_last_error_message(), "smoothing length") != NULL, "message names h");
+    params.h = h;
+    params.field = "pressure";
+    CHECK(isobar_sph_extract(particles, &params, NULL, NULL, &surface) == ISOBAR_STATUS_ERR_INVALID_INPUT, "missing array");
+    CHECK(strstr(isobar_last_error_message(), "pressure") != NULL, "message names the array");
+    params.field = "a";
+    params.struct_size = 3;
+    CHECK(isobar_sph_extract(particles, &params, NULL, NULL, &surface) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "struct_size");
+    params.struct_size = sizeof params;
+    CHECK(isobar_sph_extract(NULL, &params, NULL, NULL, &surface) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "NULL particles");
+    CHECK(isobar_particles_add_array(particles, "short", &value, 5, 1) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "length mismatch");
+    CHECK(isobar_particles_create(NULL, 10, &particles) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "NULL positions");
+
+    const double nan_xyz[6] = {0, 0, 0, 0, NAN, 0};
+    IsobarParticles *bad = NULL;
+    CHECK(isobar_particles_create(nan_xyz, 2, &bad) == ISOBAR_STATUS_OK, "create nan");
+    params.field = NULL;
+    params.volume_array = NULL;
+    CHECK(isobar_sph_extract(bad, &params, NULL, NULL, &surface) == ISOBAR_STATUS_ERR_INVALID_INPUT, "NaN");
+    CHECK(strstr(isobar_last_error_message(), "particle 1") != NULL, "message names particle 1");
+    isobar_particles_free(bad);
+
+    IsobarParticles *missing = NULL;
+    CHECK(isobar_particles_read("/nonexistent/frame.vtk", &missing) == ISOBAR_STATUS_ERR_IO, "missing file");
+    CHECK(strstr(isobar_last_error_message(), "/nonexistent/frame.vtk") != NULL, "message names the file");
+
+    isobar_particles_free(particles);
+    isobar_particles_free(NULL);
+    isobar_surface_free(NULL);
+    if (failures == 0) printf("capi_test: all checks passed\n");
+    return failures == 0 ? 0 : 1;
+}
