@@ -101,3 +101,15 @@ fn triangle_counts_match_splashsurf_expectations() {
         assert_eq!(out.stats.unconverged_vertices, 0, "{file}");
     }
 }
+
+/// This frame has cells whose ambiguous faces once made both neighbours emit the same
+/// triangle (a table fault that broke manifoldness): every mode must give a closed mesh.
+#[test]
+fn splashing_frame_is_closed_in_every_mode() {
+    let data = io::read_particles(&shared("dam_break_frame_23_24389_particles.bgeo")).unwrap();
+    for correct in [true, false] {
+        let out = free_surface(&data, correct);
+        let topo = out.mesh.topology();
+        assert!(topo.is_watertight_oriented(), "correct={correct}: {topo:?}");
+    }
+}

@@ -308,11 +308,19 @@ fn demo_attributes(data: &ParticleData) -> Vec<String> {
         .collect()
 }
 
+/// Prints `text` to stdout; a closed pipe (`isobar info f | head`) is not an error.
+fn emit(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+}
+
 fn run_info(input: &Path) -> Result<()> {
+    use std::fmt::Write;
     let data = io::read_particles(input)?;
     let (lo, hi) = isobar::field::neighbours::bounds(&data.positions);
-    println!("{}: {} particles", input.display(), data.len());
-    println!("bounds: {:?} .. {:?}", lo.to_array(), hi.to_array());
+    let mut text = String::new();
+    let _ = writeln!(text, "{}: {} particles", input.display(), data.len());
+    let _ = writeln!(text, "bounds: {:?} .. {:?}", lo.to_array(), hi.to_array());
     for a in &data.attributes {
         let (mn, mx) = a
             .data
@@ -320,11 +328,13 @@ fn run_info(input: &Path) -> Result<()> {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
                 (l.min(v), h.max(v))
             });
-        println!(
+        let _ = writeln!(
+            text,
             "  {:<24} {} component(s), range {mn} .. {mx}",
             a.name, a.components
         );
     }
+    emit(&text);
     Ok(())
 }
 
@@ -426,10 +436,11 @@ fn stats_rows(
 }
 
 fn print_stats(source: &Path, data: &ParticleData, s: &Stats, read_s: f64, build_s: f64) {
-    println!("{}", source.display());
+    let mut text = format!("{}\n", source.display());
     for (k, v) in stats_rows(data, s, read_s, build_s) {
-        println!("  {k:<34} {v:>14}");
+        text += &format!("  {k:<34} {v:>14}\n");
     }
+    emit(&text);
 }
 
 fn write_stats_json(

@@ -10,7 +10,10 @@
 //! corners are separated. That choice depends on the face's four corners only, so the
 //! two cells sharing a face always cut it the same way and meshes are watertight. The
 //! segments, oriented with the inside on their left as seen from outside the cube, chain
-//! into closed loops; each loop becomes a triangle fan. Triangles therefore wind
+//! into closed loops. Each loop is triangulated by dynamic programming over its diagonals:
+//! no triangle may lie flat in a cell face (the neighbour across an ambiguous face would
+//! emit the same triangle, wound the other way, and the mesh would stop being manifold),
+//! and among the rest the triangles closest to equilateral win. Triangles therefore wind
 //! counter-clockwise seen from the outside region (values below the isovalue), i.e.
 //! their normals point down the gradient, out of the region above the isovalue.
 
@@ -90,9 +93,7 @@ fn generate() -> CaseTable {
                 lp.push(e as u8);
                 e = next[e];
             }
-            for i in 1..lp.len() - 1 {
-                tris.push([lp[0], lp[i], lp[i + 1]]);
-            }
+            triangulate_loop(&lp, &mut tris);
         }
         triangles.push(tris);
     }
@@ -101,6 +102,60 @@ fn generate() -> CaseTable {
         faces_crossed,
         edges_cut,
     }
+}
+
+/// Triangulates the polygon `lp` (local edges in loop order), keeping its orientation.
+fn triangulate_loop(lp: &[u8], out: &mut Vec<[u8; 3]>) {
+    let n = lp.len();
+    let pos: Vec<[f64; 3]> = lp.iter().map(|&e| edge_midpoint(e as usize)).collect();
+    let cost = |a: usize, b: usize, c: usize| -> f64 {
+        if shares_a_face([lp[a], lp[b], lp[c]]) {
+            return 1e9;
+        }
+        // Squared perimeter over area: 20.8 for an equilateral triangle, more when thin.
+        let (p, q, r) = (pos[a], pos[b], pos[c]);
+        let area = 0.5 * norm(cross(sub(q, p), sub(r, p)));
+        let perimeter = norm(sub(q, p)) + norm(sub(r, q)) + norm(sub(p, r));
+        perimeter * perimeter / area.max(1e-12)
+    };
+    // best[i][j]: cheapest triangulation of the sub-polygon i..=j (j > i + 1).
+    let mut best = vec![vec![0.0f64; n]; n];
+    let mut split = vec![vec![0usize; n]; n];
+    for len in 2..n {
+        for i in 0..n - len {
+            let j = i + len;
+            best[i][j] = f64::INFINITY;
+            for k in i + 1..j {
+                let c = best[i][k] + best[k][j] + cost(i, k, j);
+                if c < best[i][j] {
+                    best[i][j] = c;
+                    split[i][j] = k;
+                }
+            }
+        }
+    }
+    fn emit(i: usize, j: usize, split: &[Vec<usize>], lp: &[u8], out: &mut Vec<[u8; 3]>) {
+        if j < i + 2 {
+            return;
+        }
+        let k = split[i][j];
+        out.push([lp[i], lp[k], lp[j]]);
+        emit(i, k, split, lp, out);
+        emit(k, j, split, lp, out);
+    }
+    emit(0, n - 1, &split, lp, out);
+}
+
+/// True when the three local edges all lie on one face of the cell.
+fn shares_a_face(edges: [u8; 3]) -> bool {
+    (0..3).any(|a| {
+        (0..2).any(|s| {
+            edges.iter().all(|&e| {
+                let (c, axis) = edge_corner_axis(e as usize);
+                axis != a && (c >> a & 1) == s
+            })
+        })
+    })
 }
 
 /// Oriented segments (from edge, to edge) cutting face (axis `a`, side `s`).
@@ -174,6 +229,10 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
@@ -212,6 +271,40 @@ mod tests {
             // wound oppositely; the rest lie on the cell's faces.
             let tris = &t.triangles[case];
             assert!(tris.len() <= 12, "case {case}: {} triangles", tris.len());
+        }
+    }
+
+    #[test]
+    fn no_triangle_lies_in_a_cell_face() {
+        // Such a triangle would be emitted again, reversed, by the neighbour across that face.
+        let t = case_table();
+        for case in 0..256 {
+            for tri in &t.triangles[case] {
+                assert!(
+                    !shares_a_face(*tri),
+                    "case {case}: triangle {tri:?} lies in a face"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn triangles_keep_the_loop_orientation() {
+        // Each interior edge of a case's triangles is used once in each direction.
+        let t = case_table();
+        for case in 0..256 {
+            let mut directed = std::collections::HashMap::new();
+            for tri in &t.triangles[case] {
+                for k in 0..3 {
+                    *directed.entry((tri[k], tri[(k + 1) % 3])).or_insert(0) += 1;
+                }
+            }
+            for (&(a, b), &n) in &directed {
+                assert_eq!(n, 1, "case {case}: edge {a}->{b} used {n} times");
+                if let Some(&m) = directed.get(&(b, a)) {
+                    assert_eq!(m, 1, "case {case}");
+                }
+            }
         }
     }
 
