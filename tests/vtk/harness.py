@@ -1,0 +1,184 @@
+"""A small test harness shared by the VTK and ParaView tests.
+
+The tests run under Debian's /usr/bin/python3 (Debian VTK 9.1) and under pvbatch
+(ParaView's own VTK 9.2), neither of which has pytest; both have numpy. Each test
+prints `PASS name` or `FAIL name: why`; tests/vtk/run.sh counts those lines.
+Only `vtkmodules` APIs common to VTK 9.1 and 9.2 are used here.
+"""
+
+import os
+import subprocess
+import sys
+import tempfile
+import traceback
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.abspath(os.path.join(HERE, "..", ".."))
+DATA = os.environ.get(
+    "ISOBAR_DATA", os.path.abspath(os.path.join(REPO, "..", "shared", "data", "splashsurf"))
+)
+CLI = os.path.join(REPO, "target", "release", "isobar")
+PLUGIN = os.path.join(
+    REPO, "vtk-plugin", "build-pv", "lib", "paraview-5.11", "plugins", "IsobarSPH", "IsobarSPH.so"
+)
+XML = os.path.join(REPO, "vtk-plugin", "paraview", "IsobarSPHIsosurface.xml")
+FRAME_01 = os.path.join(DATA, "double_dam_break_frame_01_4732_particles.vtk")
+FRAME_26 = os.path.join(DATA, "double_dam_break_frame_26_4732_particles.vtk")
+BUNNY = os.path.join(DATA, "bunny_frame_14_7705_particles.vtk")
+
+# splashsurf's settings for these frames: r = 0.025, h = 2r, cube 0.75r, iso 0.6.
+H = 0.05
+GRID_FACTOR = 0.375
+ISO = 0.6
+
+_tests = []
+
+
+def test(fn):
+    """Registers a test function."""
+    _tests.append(fn)
+    return fn
+
+
+def run_all(only=None):
+    """Runs the registered tests; returns the number of failures."""
+    failed = 0
+    for fn in _tests:
+        if only and fn.__name__ not in only:
+            continue
+        try:
+            fn()
+        except Exception as e:  # noqa: BLE001 - every failure is reported, none stops the run
+            failed += 1
+            detail = "".join(traceback.format_exception_only(type(e), e)).strip()
+            print(f"FAIL {fn.__name__}: {detail}", flush=True)
+            traceback.print_exc(file=sys.stderr)
+        else:
+            print(f"PASS {fn.__name__}", flush=True)
+    return failed
+
+
+def tmpdir():
+    d = os.environ.get("ISOBAR_TEST_TMP")
+    if d:
+        os.makedirs(d, exist_ok=True)
+        return d
+    return tempfile.mkdtemp(prefix="isobar-vtk-")
+
+
+def cli_surface(particles, out, *args):
+    """Runs the isobar CLI (the reference) and returns the output path."""
+    cmd = [CLI, "sph", particles, "--quiet", "-o", out, *map(str, args)]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return out
+
+
+def read_vtp(path):
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    r = vtkXMLPolyDataReader()
+    r.SetFileName(path)
+    r.Update()
+    return r.GetOutput()
+
+
+def arrays(pd):
+    """Points (n, 3) and triangles (m, 3) of a triangle vtkPolyData as numpy arrays."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    n = pd.GetNumberOfPoints()
+    pts = vtk_to_numpy(pd.GetPoints().GetData()).reshape(-1, 3) if n else np.zeros((0, 3))
+    polys = pd.GetPolys()
+    if polys is None or polys.GetNumberOfCells() == 0:
+        return pts, np.zeros((0, 3), dtype=np.int64)
+    conn = vtk_to_numpy(polys.GetConnectivityArray()).astype(np.int64)
+    offs = vtk_to_numpy(polys.GetOffsetsArray()).astype(np.int64)
+    assert np.all(np.diff(offs) == 3), "not all cells are triangles"
+    return pts, conn.reshape(-1, 3)
+
+
+def point_array(pd, name):
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    a = pd.GetPointData().GetArray(name)
+    assert a is not None, f"no point array {name!r}"
+    return vtk_to_numpy(a)
+
+
+def sorted_rows(a):
+    a = np.asarray(a, dtype=np.float64).reshape(len(a), -1)
+    if len(a) == 0:
+        return a
+    return a[np.lexsort(a.T[::-1])]
+
+
+def canonical_triangles(pts, tris):
+    """Each triangle as its three vertex positions in sorted order (9 numbers), rows
+    sorted: independent of vertex numbering and triangle order."""
+    if len(tris) == 0:
+        return np.zeros((0, 9))
+    corners = pts[tris].reshape(-1, 3)  # (3m, 3)
+    tri_id = np.repeat(np.arange(len(tris)), 3)
+    order = np.lexsort((corners[:, 2], corners[:, 1], corners[:, 0], tri_id))
+    out = corners[order].reshape(-1, 9)
+    return sorted_rows(out)
+
+
+def assert_same_surface(a, b, tol=1e-9, what="surface"):
+    """Same triangle count, same vertex set and same triangles (after sorting) within
+    `tol` (absolute, on coordinates of order 1)."""
+    pa, ta = arrays(a)
+    pb, tb = arrays(b)
+    assert len(ta) == len(tb), f"{what}: {len(ta)} vs {len(tb)} triangles"
+    assert len(pa) == len(pb), f"{what}: {len(pa)} vs {len(pb)} vertices"
+    dv = np.max(np.abs(sorted_rows(pa) - sorted_rows(pb))) if len(pa) else 0.0
+    assert dv <= tol, f"{what}: vertex sets differ by {dv:.3e}"
+    dt = np.max(np.abs(canonical_triangles(pa, ta) - canonical_triangles(pb, tb))) if len(ta) else 0.0
+    assert dt <= tol, f"{what}: triangles differ by {dt:.3e}"
+    return len(ta)
+
+
+def duplicate_triangles(pd):
+    pts, tris = arrays(pd)
+    c = canonical_triangles(pts, tris)
+    if len(c) < 2:
+        return 0
+    return int(np.sum(np.all(np.abs(np.diff(c, axis=0)) <= 1e-12, axis=1)))
+
+
+def volume(pd):
+    from vtkmodules.vtkFiltersCore import vtkMassProperties
+
+    m = vtkMassProperties()
+    m.SetInputData(pd)
+    m.Update()
+    return m.GetVolume()
+
+
+def open_edges(pd):
+    """Boundary plus non-manifold edges (0 for a watertight manifold)."""
+    from vtkmodules.vtkFiltersCore import vtkFeatureEdges
+
+    f = vtkFeatureEdges()
+    f.SetInputData(pd)
+    f.BoundaryEdgesOn()
+    f.NonManifoldEdgesOn()
+    f.FeatureEdgesOff()
+    f.ManifoldEdgesOff()
+    f.Update()
+    return f.GetOutput().GetNumberOfCells()
+
+
+def xml_properties():
+    """The plugin's XML properties: {name: (element, attributes)}."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(XML).getroot()
+    proxy = root.find("ProxyGroup/SourceProxy")
+    out = {}
+    for el in proxy:
+        if el.tag.endswith("Property") and el.tag != "InputProperty":
+            out[el.get("name")] = (el.tag, dict(el.attrib), el)
+    return proxy, out

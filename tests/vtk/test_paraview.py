@@ -1,0 +1,327 @@
+"""The ParaView plugin in pvbatch (Debian ParaView 5.11), under xvfb-run for the screenshot.
+
+Run by tests/vtk/run.sh:
+    PYTHONPATH=<prefix>/usr/lib/python3/dist-packages xvfb-run -a -s "-screen 0 640x480x24" \
+        pvbatch tests/vtk/test_paraview.py
+The bad-input and MPI cases run pvbatch (and mpiexec) as child processes, so that their
+exit status is checked too.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import harness as h  # noqa: E402
+from harness import test  # noqa: E402
+
+from paraview import servermanager as sm  # noqa: E402
+from paraview.simple import (  # noqa: E402
+    ColorBy,
+    CreateView,
+    Delete,
+    LegacyVTKReader,
+    LoadPlugin,
+    OpenDataFile,
+    ResetCamera,
+    SaveScreenshot,
+    SetActiveView,
+    Show,
+)
+
+LoadPlugin(h.PLUGIN, remote=False, ns=globals())
+SPHIsosurface = globals()["SPHIsosurfaceMarchingCorrectors"]
+
+TMP = h.tmpdir()
+PVBATCH = shutil.which("pvbatch") or "/usr/bin/pvbatch"
+
+
+def free_surface(source, **props):
+    f = SPHIsosurface(Input=source)
+    f.SmoothingLength = h.H
+    f.GridFactor = h.GRID_FACTOR
+    f.Isovalues = [h.ISO]
+    for k, v in props.items():
+        setattr(f, k, v)
+    return f
+
+
+def output_at(proxy, time=None):
+    """The filter's output (builtin session): updated at `time`, copied."""
+    if time is None:
+        proxy.UpdatePipeline()
+    else:
+        proxy.UpdatePipeline(time)
+    data = proxy.GetClientSideObject().GetOutputDataObject(0)
+    copy = data.NewInstance()
+    copy.DeepCopy(data)
+    return copy
+
+
+def settings(proxy):
+    """The VTK object's settings as its PrintSelf lists them ({name: text})."""
+    text = str(proxy.GetClientSideObject())
+    out = {}
+    for line in text.splitlines():
+        key, sep, value = line.strip().partition(":")
+        if sep:
+            out[key] = value.strip()
+    return out
+
+
+def cli_reference(frame, name):
+    return h.read_vtp(h.cli_surface(frame, os.path.join(TMP, name), "--iso", h.ISO, "--h", h.H,
+                                    "--grid-factor", h.GRID_FACTOR))
+
+
+@test
+def test_plugin_filter_matches_core_on_a_real_frame():
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = free_surface(r)
+    out = sm.Fetch(f)
+    assert out.GetPoints().GetDataType() == 11, "points are not doubles"
+    n = h.assert_same_surface(out, cli_reference(h.FRAME_26, "ref26.vtp"), 1e-12, "frame 26")
+    assert n > 100000, n
+    for name in ("Normals", "SumOfWeights"):
+        assert out.GetPointData().GetArray(name) is not None, name
+    assert h.open_edges(out) == 0
+    info = f.GetDataInformation()
+    assert info.GetNumberOfCells() == n
+
+
+@test
+def test_screenshot_is_not_blank():
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = free_surface(r)
+    view = CreateView("RenderView")
+    view.ViewSize = [640, 480]
+    view.OrientationAxesVisibility = 0
+    SetActiveView(view)
+    d = Show(f, view)
+    ColorBy(d, ("POINTS", "Normals", "Z"))
+    view.CameraPosition = [4.0, 3.0, 5.0]
+    view.CameraFocalPoint = [0.0, 0.3, 0.0]
+    view.CameraViewUp = [0.0, 1.0, 0.0]
+    ResetCamera(view)
+    png = os.path.join(TMP, "isobar_frame26.png")
+    SaveScreenshot(png, view, ImageResolution=[640, 480])
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOImage import vtkPNGReader
+
+    reader = vtkPNGReader()
+    reader.SetFileName(png)
+    reader.Update()
+    img = reader.GetOutput()
+    pixels = vtk_to_numpy(img.GetPointData().GetScalars())[:, :3].astype(int)
+    background = pixels[0]
+    covered = np.mean(np.any(pixels != background, axis=1))
+    colours = len(np.unique(pixels, axis=0))
+    assert covered > 0.05, f"only {covered:.1%} of the image is not background"
+    assert colours > 50, f"only {colours} colours: flat image"
+    print(f"  screenshot {png}: {covered:.0%} covered, {colours} colours", flush=True)
+    # Release the GL context now: torn down at exit, Xvfb's GLX reports GLXBadContext.
+    Delete(view)
+    del view
+
+
+# A value for every XML property, and how the VTK object prints it back.
+ROUND_TRIP = {
+    "FieldMode": ("Point array", "1"),
+    "InputArray": (["POINTS", "velocity"], "velocity"),
+    "FieldComponent": (2, "2"),
+    "Isovalues": ([0.25, 0.75, 1.5], "0.25 0.75 1.5"),
+    "SmoothingLength": (0.0625, "0.0625"),
+    "SmoothingLengthArray": ("id", "id"),
+    "Kernel": ("Wendland C2", "1"),
+    "VolumeArray": ("id", "id"),
+    "DensityArray": ("id", "id"),
+    "MassArray": ("id", "id"),
+    "Mass": (0.125, "0.125"),
+    "GridFactor": (0.4375, "0.4375"),
+    "Correct": (0, "0"),
+    "ComputeNormals": (0, "0"),
+    "CarriedArrays": (["velocity", "id"], "id velocity"),
+    "HScale": (0.75, "0.75"),
+    "Tolerance": (1e-5, "1.0000000000000001e-05"),
+    "Trim": (0, "0"),
+    "TrimNode": (0.2, "0.20000000000000001"),
+    "TrimVertex": (0.375, "0.375"),
+    "Shepard": (1, "1"),
+    "MemoryBudget": (2.5, "2.5"),
+    "FullGrid": (1, "1"),
+}
+
+
+@test
+def test_every_xml_property_exists_and_round_trips():
+    _, props = h.xml_properties()
+    settable = {n for n, (_t, a, _e) in props.items() if a.get("information_only") != "1"}
+    assert settable == set(ROUND_TRIP), (
+        f"XML and test disagree: {sorted(settable ^ set(ROUND_TRIP))}")
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = SPHIsosurface(Input=r)
+    listed = set(f.ListProperties())
+    missing = (settable | {"ErrorMessage", "Input"}) - listed
+    assert not missing, f"not exposed to Python: {missing}"
+    for name, (value, _printed) in ROUND_TRIP.items():
+        setattr(f, name, value)
+        got = f.GetPropertyValue(name)
+        if isinstance(value, list):
+            got_list = list(got)
+            if name == "CarriedArrays":
+                assert sorted(got_list) == sorted(value), (name, got_list)
+            elif name == "InputArray":
+                assert got_list[-1] == value[-1], (name, got_list)
+            else:
+                assert got_list == value, (name, got_list)
+        else:
+            assert got == value or str(got) == str(value), (name, got, value)
+    f.UpdateVTKObjects()
+    s = settings(f)
+    for name, (_value, printed) in ROUND_TRIP.items():
+        got = s.get(name)
+        if name == "CarriedArrays":
+            got = " ".join(sorted(got.split()))
+        assert got == printed, f"{name}: the VTK object has {got!r}, expected {printed!r}"
+
+
+@test
+def test_filter_is_in_the_isobar_menu_category():
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = SPHIsosurface(Input=r)
+    assert f.SMProxy.GetXMLLabel() == "SPH Isosurface (Marching Correctors)"
+    assert f.SMProxy.GetVTKClassName() == "vtkIsobarSPHIsosurface"
+    menu = f.SMProxy.GetHints().FindNestedElementByName("ShowInMenu")
+    assert menu is not None and menu.GetAttribute("category") == "isobar"
+    for name in ("HScale", "Tolerance", "Trim", "TrimNode", "TrimVertex", "Shepard",
+                 "MemoryBudget", "FullGrid"):
+        assert f.GetProperty(name).SMProperty.GetPanelVisibility() == "advanced", name
+
+
+@test
+def test_error_message_property_and_empty_output_on_bad_input():
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = free_surface(r, FieldMode="Point array")
+    f.InputArray = ["POINTS", "pressure"]  # not in the data
+    out = output_at(f)
+    assert out.GetNumberOfPoints() == 0 and out.GetNumberOfCells() == 0
+    f.UpdatePropertyInformation()
+    msg = f.GetPropertyValue("ErrorMessage")
+    assert "'pressure'" in msg, msg
+    # Fixed, it works again.
+    f.FieldMode = "Sum of weights (free surface)"
+    out = output_at(f)
+    assert out.GetNumberOfCells() > 100000
+    f.UpdatePropertyInformation()
+    assert f.GetPropertyValue("ErrorMessage") == ""
+
+
+@test
+def test_bad_inputs_in_a_pvbatch_process():
+    """Missing array, NaN positions, no smoothing length: error messages, empty outputs,
+    exit status 0."""
+    p = subprocess.run(
+        [PVBATCH, os.path.join(h.HERE, "pv_bad_input.py"), TMP],
+        capture_output=True, text=True, timeout=300, env=clean_env())
+    assert p.returncode == 0, f"pvbatch exited {p.returncode}: {p.stderr[-2000:]}"
+    lines = p.stdout.splitlines()
+    for case in ("missing-array", "nan-positions", "no-smoothing-length"):
+        assert f"EMPTY {case}" in lines, f"{case}: {p.stdout[-2000:]}"
+    err = p.stderr
+    for fragment in ("'pressure'", "smoothing length", "isobar_sph_extract"):
+        assert fragment in err, f"stderr lacks {fragment!r}: {err[-3000:]}"
+
+
+def time_steps(proxy):
+    """TIME_STEPS of the filter's output as the pipeline reports them downstream."""
+    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline as sddp
+
+    proxy.UpdatePipelineInformation()
+    algo = proxy.GetClientSideObject()
+    algo.UpdateInformation()
+    steps = algo.GetOutputInformation(0).Get(sddp.TIME_STEPS())
+    return list(steps) if steps is not None else None
+
+
+def make_series_dir():
+    d = os.path.join(TMP, "series")
+    os.makedirs(d, exist_ok=True)
+    for src, name in ((h.FRAME_01, "frame_01.vtk"), (h.FRAME_26, "frame_26.vtk")):
+        dst = os.path.join(d, name)
+        if not os.path.exists(dst):
+            shutil.copy(src, dst)
+    return d
+
+
+@test
+def test_two_frame_series_extracts_frame_by_frame():
+    d = make_series_dir()
+    refs = [cli_reference(h.FRAME_01, "ref01.vtp"), cli_reference(h.FRAME_26, "ref26.vtp")]
+    # A file list (what File > Open of frame_..vtk gives) ...
+    r = LegacyVTKReader(FileNames=[os.path.join(d, "frame_01.vtk"), os.path.join(d, "frame_26.vtk")])
+    f = free_surface(r)
+    assert list(r.TimestepValues) == [0.0, 1.0], r.TimestepValues
+    assert time_steps(f) == [0.0, 1.0], time_steps(f)
+    counts = []
+    for t, ref in zip((0.0, 1.0), refs, strict=True):
+        counts.append(h.assert_same_surface(output_at(f, t), ref, 1e-12, f"t={t}"))
+    assert counts[0] != counts[1], counts
+    # ... and a .vtk.series file with its own times.
+    series = os.path.join(d, "frames.vtk.series")
+    with open(series, "w") as fh:
+        json.dump({"file-series-version": "1.0", "files": [
+            {"name": "frame_01.vtk", "time": 0.5}, {"name": "frame_26.vtk", "time": 2.25}]}, fh)
+    r2 = OpenDataFile(series)
+    assert r2 is not None, "ParaView cannot open the .vtk.series file"
+    f2 = free_surface(r2)
+    assert time_steps(f2) == [0.5, 2.25], time_steps(f2)
+    for t, ref in zip((0.5, 2.25), refs, strict=True):
+        h.assert_same_surface(output_at(f2, t), ref, 1e-12, f"series t={t}")
+    # Backwards in time works too (nothing cached wrongly).
+    h.assert_same_surface(output_at(f2, 0.5), refs[0], 1e-12, "series back to t=0.5")
+
+
+def clean_env(**extra):
+    """This pvbatch is an MPI singleton: its OpenMPI/PMIx variables would make a child
+    mpiexec or pvbatch believe it belongs to this job."""
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith(("OMPI_", "PMIX_", "OPAL_", "ORTE_"))}
+    env.update(extra)
+    return env
+
+
+def run_mpi(ranks, out):
+    env = clean_env(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+                    OMPI_MCA_rmaps_base_oversubscribe="1")
+    cmd = ["mpiexec", "-n", str(ranks), PVBATCH, os.path.join(h.HERE, "pv_mpi.py"), out]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert p.returncode == 0, f"{ranks} ranks: exit {p.returncode}\n{p.stdout[-2000:]}\n{p.stderr[-3000:]}"
+    return p.stdout
+
+
+@test
+def test_mpi_two_ranks_equal_one_rank():
+    one = os.path.join(TMP, "mpi_1.vtp")
+    two = os.path.join(TMP, "mpi_2.vtp")
+    log1 = run_mpi(1, one)
+    log2 = run_mpi(2, two)
+    assert "particles per rank: [4732]" in log1, log1
+    assert "bad input: 0 cells" in log1 and "bad input: 0 cells" in log2, log2
+    # The particles really were split over both ranks before the filter.
+    line = [ln for ln in log2.splitlines() if ln.startswith("particles per rank:")][0]
+    per_rank = json.loads(line.split(":", 1)[1])
+    assert len(per_rank) == 2 and min(per_rank) > 1000 and sum(per_rank) == 4732, line
+    a, b = h.read_vtp(one), h.read_vtp(two)
+    n = h.assert_same_surface(b, a, 1e-9, "2 ranks vs 1 rank")
+    assert h.duplicate_triangles(b) == 0, "duplicate triangles"
+    assert h.open_edges(b) == 0, "seams: boundary edges in the merged 2-rank surface"
+    assert n > 100000, n
+    print(f"  {[ln for ln in log2.splitlines() if 'rank(s)' in ln][0]}", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(1 if h.run_all(sys.argv[1:]) else 0)

@@ -1,0 +1,306 @@
+"""The VTK module with Debian's VTK 9.1, from Debian's /usr/bin/python3.
+
+Run by tests/vtk/run.sh with PYTHONPATH=vtk-plugin/build-vtk/python.
+"""
+
+import math
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import harness as h  # noqa: E402
+from harness import test  # noqa: E402
+
+import vtkmodules  # noqa: E402
+from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
+from vtkmodules.vtkCommonCore import vtkCommand, vtkPoints, vtkUnsignedCharArray, vtkVersion  # noqa: E402
+from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkDataSetAttributes, vtkPolyData  # noqa: E402
+from vtkmodules.vtkIOLegacy import vtkUnstructuredGridReader  # noqa: E402
+
+from vtkmodules.util.vtkConstants import VTK_STRING  # noqa: E402
+
+from isobar_vtk import vtkIsobarSPHIsosurface  # noqa: E402
+
+TMP = h.tmpdir()
+
+
+def reader(path):
+    r = vtkUnstructuredGridReader()
+    r.SetFileName(path)
+    r.ReadAllScalarsOn()
+    r.ReadAllVectorsOn()
+    r.ReadAllFieldsOn()
+    r.Update()
+    return r
+
+
+def free_surface_filter(source, **settings):
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputConnection(source.GetOutputPort())
+    f.SetSmoothingLength(h.H)
+    f.SetGridFactor(h.GRID_FACTOR)
+    f.SetIsovalue(0, h.ISO)
+    for k, v in settings.items():
+        getattr(f, "Set" + k)(v)
+    return f
+
+
+class Errors:
+    """Collects the ErrorEvent messages of a VTK object."""
+
+    def __init__(self, obj):
+        self.messages = []
+
+        def on_error(o, e, data):
+            self.messages.append(data)
+
+        on_error.CallDataType = VTK_STRING
+        obj.AddObserver(vtkCommand.ErrorEvent, on_error)
+
+
+@test
+def test_debian_vtk_9_1():
+    v = vtkVersion.GetVTKVersion()
+    assert v.startswith("9.1"), f"expected Debian's VTK 9.1, got {v} from {vtkmodules.__file__}"
+    assert vtkmodules.__file__.startswith("/usr/lib/python3/dist-packages"), vtkmodules.__file__
+
+
+@test
+def test_free_surface_watertight_and_volume_equals_core():
+    for frame in (h.FRAME_26, h.FRAME_01, h.BUNNY):
+        f = free_surface_filter(reader(frame))
+        f.Update()
+        out = f.GetOutput()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        assert out.GetNumberOfCells() > 1000, out.GetNumberOfCells()
+        assert out.GetPoints().GetDataType() == 11, "points are not doubles"
+        assert h.open_edges(out) == 0, f"{frame}: {h.open_edges(out)} boundary/non-manifold edges"
+        ref = h.read_vtp(
+            h.cli_surface(frame, os.path.join(TMP, "ref.vtp"), "--iso", h.ISO, "--h", h.H,
+                          "--grid-factor", h.GRID_FACTOR)
+        )
+        v, vr = h.volume(out), h.volume(ref)
+        assert vr > 0 and abs(v - vr) <= 1e-9 * abs(vr), f"{frame}: volume {v!r} vs core {vr!r}"
+        h.assert_same_surface(out, ref, 1e-12, os.path.basename(frame))
+        for name in ("Normals", "SumOfWeights"):
+            d = np.max(np.abs(np.sort(h.point_array(out, name), axis=0)
+                              - np.sort(h.point_array(ref, name), axis=0)))
+            assert d <= 1e-6, f"{name} differs by {d}"
+        assert out.GetPointData().GetNormals() is not None
+
+
+@test
+def test_vector_magnitude_component_and_carried_arrays_match_cli():
+    r = reader(h.FRAME_26)
+    speed = np.linalg.norm(h.point_array(r.GetOutput(), "velocity"), axis=1)
+    iso = float(np.percentile(speed, 60))
+    for component, field in ((-1, "velocity:mag"), (1, "velocity:1")):
+        f = free_surface_filter(r, FieldMode=vtkIsobarSPHIsosurface.POINT_ARRAY,
+                                FieldComponent=component)
+        iso_c = iso if component < 0 else 0.2
+        f.SetIsovalue(0, iso_c)
+        f.SetInputArrayToProcess(0, 0, 0, vtkDataObject.FIELD_ASSOCIATION_POINTS, "velocity")
+        f.GetCarriedArraySelection().EnableArray("velocity")
+        f.GetCarriedArraySelection().EnableArray("id")
+        f.Update()
+        out = f.GetOutput()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        assert f.FieldString("velocity", 3) == field
+        ref = h.read_vtp(h.cli_surface(
+            h.FRAME_26, os.path.join(TMP, "ref_vel.vtp"), "--field", field, "--iso", iso_c,
+            "--h", h.H, "--grid-factor", h.GRID_FACTOR, "--attributes", "velocity,id"))
+        n = h.assert_same_surface(out, ref, 1e-12, field)
+        assert n > 100, f"{field}: only {n} triangles"
+        for name, comps in (("velocity", 3), ("id", 1)):
+            a = out.GetPointData().GetArray(name)
+            assert a is not None and a.GetNumberOfComponents() == comps, name
+            d = np.max(np.abs(h.sorted_rows(h.point_array(out, name))
+                              - h.sorted_rows(h.point_array(ref, name))))
+            assert d <= 1e-9 * max(1.0, float(np.max(np.abs(h.point_array(ref, name))))), (name, d)
+
+
+@test
+def test_several_isovalues_give_isovalue_array():
+    f = free_surface_filter(reader(h.FRAME_26))
+    f.SetNumberOfIsovalues(2)
+    f.SetIsovalue(0, 0.4)
+    f.SetIsovalue(1, 0.6)
+    f.Update()
+    iso = h.point_array(f.GetOutput(), "Isovalue")
+    assert set(np.unique(iso)) == {0.4, 0.6}, np.unique(iso)
+    one = free_surface_filter(reader(h.FRAME_26))
+    one.Update()
+    assert f.GetOutput().GetNumberOfCells() > one.GetOutput().GetNumberOfCells()
+
+
+@test
+def test_polydata_input_and_ghost_points_are_skipped():
+    r = reader(h.FRAME_26)
+    ug = r.GetOutput()
+    base = free_surface_filter(r)
+    base.Update()
+    # The same particles as vtkPolyData, plus copies of the first 500 marked as ghosts.
+    pts = vtk_to_numpy(ug.GetPoints().GetData()).astype(np.float64)
+    both = np.vstack([pts, pts[:500]])
+    pd = vtkPolyData()
+    p = vtkPoints()
+    p.SetData(numpy_to_vtk(both, deep=True))
+    pd.SetPoints(p)
+    ghosts = np.zeros(len(both), dtype=np.uint8)
+    ghosts[len(pts):] = vtkDataSetAttributes.DUPLICATEPOINT
+    g = numpy_to_vtk(ghosts, deep=True, array_type=vtkUnsignedCharArray().GetDataType())
+    g.SetName(vtkDataSetAttributes.GhostArrayName())
+    pd.GetPointData().AddArray(g)
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputData(pd)
+    f.SetSmoothingLength(h.H)
+    f.SetGridFactor(h.GRID_FACTOR)
+    f.Update()
+    h.assert_same_surface(f.GetOutput(), base.GetOutput(), 1e-12, "ghosted polydata")
+
+
+def expect_error(f, fragment):
+    errors = Errors(f)
+    f.Update()
+    out = f.GetOutput()
+    assert out.GetNumberOfPoints() == 0 and out.GetNumberOfCells() == 0, "output not empty"
+    msg = f.GetErrorMessage()
+    assert fragment in msg, f"message {msg!r} lacks {fragment!r}"
+    assert errors.messages and fragment in errors.messages[-1], errors.messages
+    return msg
+
+
+@test
+def test_bad_inputs_give_error_and_empty_output():
+    r = reader(h.FRAME_26)
+    # A missing field array.
+    f = free_surface_filter(r, FieldMode=vtkIsobarSPHIsosurface.POINT_ARRAY)
+    f.SetInputArrayToProcess(0, 0, 0, vtkDataObject.FIELD_ASSOCIATION_POINTS, "pressure")
+    expect_error(f, "'pressure'")
+    # A missing carried array.
+    f = free_surface_filter(r)
+    f.GetCarriedArraySelection().EnableArray("nope")
+    expect_error(f, "'nope'")
+    # No smoothing length at all.
+    f = free_surface_filter(r, SmoothingLength=0.0)
+    expect_error(f, "smoothing length")
+    # NaN positions.
+    pd = vtkPolyData()
+    pts = vtkPoints()
+    pts.SetDataTypeToDouble()
+    for p in ((0.0, 0.0, 0.0), (0.01, 0.0, 0.0), (math.nan, 0.0, 0.0), (0.0, 0.02, 0.0)):
+        pts.InsertNextPoint(p)
+    pd.SetPoints(pts)
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputData(pd)
+    f.SetSmoothingLength(h.H)
+    msg = expect_error(f, "isobar_sph_extract")
+    assert "nan" in msg.lower() or "finite" in msg.lower(), msg
+    # A component that does not exist.
+    f = free_surface_filter(r, FieldMode=vtkIsobarSPHIsosurface.POINT_ARRAY, FieldComponent=7)
+    f.SetInputArrayToProcess(0, 0, 0, vtkDataObject.FIELD_ASSOCIATION_POINTS, "velocity")
+    expect_error(f, "Field Component 7")
+    # The core's own parameter checks come through too (tolerance must lie in (0, 1)).
+    f = free_surface_filter(r, Tolerance=0.0)
+    expect_error(f, "tolerance")
+    # And a good run afterwards still works.
+    f.SetTolerance(1e-6)
+    f.Update()
+    assert f.GetOutput().GetNumberOfCells() > 1000 and f.GetErrorMessage() == ""
+
+
+@test
+def test_empty_input_gives_empty_output_without_error():
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputData(vtkPolyData())
+    f.SetSmoothingLength(h.H)
+    errors = Errors(f)
+    f.Update()
+    assert f.GetOutput().GetNumberOfPoints() == 0 and not errors.messages
+
+
+@test
+def test_progress_and_abort():
+    f = free_surface_filter(reader(h.FRAME_26))
+    seen = []
+    f.AddObserver(vtkCommand.ProgressEvent, lambda o, e: seen.append(o.GetProgress()))
+    f.Update()
+    assert len(seen) >= 5 and seen[-1] == 1.0, seen
+    assert all(b >= a for a, b in zip(seen, seen[1:], strict=False)), "progress went backwards"
+
+    g = free_surface_filter(reader(h.FRAME_26), GridFactor=0.2)
+    calls = []
+    aborted_at = []
+
+    def abort(o, e):
+        calls.append(o.GetProgress())
+        if o.GetProgress() > 0.0 and not aborted_at:
+            aborted_at.append(len(calls))
+            o.SetAbortExecute(1)
+
+    g.AddObserver(vtkCommand.ProgressEvent, abort)
+    g.Update()
+    assert aborted_at, "no progress reported"
+    assert g.GetOutput().GetNumberOfCells() == 0, "aborted run has output"
+    assert g.GetErrorMessage() == "cancelled", g.GetErrorMessage()
+    assert len(calls) == aborted_at[0], f"progress went on after the abort: {calls}"
+    # The next update runs again, whole.
+    g.SetAbortExecute(0)
+    g.Modified()
+    g.RemoveAllObservers()
+    g.Update()
+    assert g.GetOutput().GetNumberOfCells() > 1000
+
+
+@test
+def test_defaults_come_from_the_core_and_match_the_xml():
+    _, props = h.xml_properties()
+    f = vtkIsobarSPHIsosurface()
+    checked = 0
+    for name, (tag, attrs, _el) in props.items():
+        if attrs.get("information_only") == "1" or "default_values" not in attrs:
+            continue
+        command = attrs["command"]
+        if tag == "StringVectorProperty":
+            getter = getattr(f, "Get" + command[3:])
+            assert (getter() or "") == attrs["default_values"], (name, getter())
+        elif name == "Isovalues":
+            assert [f.GetIsovalue(i) for i in range(f.GetNumberOfIsovalues())] == [
+                float(x) for x in attrs["default_values"].split()]
+        else:
+            value = getattr(f, "Get" + command[3:])()
+            assert math.isclose(float(value), float(attrs["default_values"]), rel_tol=1e-12), (
+                name, value, attrs["default_values"])
+        checked += 1
+    assert checked >= 18, checked
+    # Every setter the XML names exists on the class.
+    for name, (_tag, attrs, _el) in props.items():
+        assert hasattr(f, attrs["command"]), (name, attrs["command"])
+
+
+@test
+def test_time_steps_pass_through():
+    """The filter adds no time logic: a temporal source's TIME_STEPS reach its output
+    and the requested time goes upstream (ParaView's file series rely on this)."""
+    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline as sddp
+    from vtkmodules.vtkFiltersGeneral import vtkTimeSourceExample
+
+    src = vtkTimeSourceExample()
+    src.SetXAmplitude(0.0)
+    src.SetYAmplitude(0.0)
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputConnection(src.GetOutputPort())
+    f.SetSmoothingLength(0.5)
+    f.UpdateInformation()
+    info = f.GetOutputInformation(0)
+    steps = info.Get(sddp.TIME_STEPS())
+    assert steps is not None and len(steps) == 10, steps
+    f.UpdateTimeStep(steps[3])
+    assert src.GetOutputInformation(0).Get(sddp.UPDATE_TIME_STEP()) == steps[3]
+    assert f.GetOutput().GetInformation().Get(vtkDataObject.DATA_TIME_STEP()) == steps[3]
+
+
+if __name__ == "__main__":
+    sys.exit(1 if h.run_all(sys.argv[1:]) else 0)

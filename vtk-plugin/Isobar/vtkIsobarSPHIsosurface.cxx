@@ -1,0 +1,830 @@
+#include "vtkIsobarSPHIsosurface.h"
+
+#include "vtkCellArray.h"
+#include "vtkCommand.h"
+#include "vtkDataArray.h"
+#include "vtkDataArraySelection.h"
+#include "vtkDataObject.h"
+#include "vtkDataSetAttributes.h"
+#include "vtkDoubleArray.h"
+#include "vtkFloatArray.h"
+#include "vtkIdTypeArray.h"
+#include "vtkInformation.h"
+#include "vtkInformationVector.h"
+#include "vtkMultiProcessController.h"
+#include "vtkObjectFactory.h"
+#include "vtkPointData.h"
+#include "vtkPointSet.h"
+#include "vtkPoints.h"
+#include "vtkPolyData.h"
+#include "vtkSmartPointer.h"
+#include "vtkUnsignedCharArray.h"
+
+#include "isobar.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+
+vtkStandardNewMacro(vtkIsobarSPHIsosurface);
+vtkCxxSetObjectMacro(vtkIsobarSPHIsosurface, Controller, vtkMultiProcessController);
+
+namespace
+{
+/// Smoothing-length arrays looked for when neither a constant nor an array is given
+/// (the isobar CLI's rule).
+const char* const AutoSmoothingLengthArrays[] = { "h", "smoothing_length", "hsml" };
+
+/// A particle array the extraction asks for.
+struct Request
+{
+  std::string Name;
+  bool Required;
+};
+
+/// A particle array as doubles, item-major; Components < 0: absent.
+struct ParticleArray
+{
+  std::string Name;
+  int Components = -1;
+  std::vector<double> Data;
+};
+
+/// Particles (ghost points removed) with the requested arrays, in request order.
+struct ParticleBuffers
+{
+  vtkIdType Count = 0;
+  std::vector<double> Positions;
+  std::vector<ParticleArray> Arrays;
+
+  const ParticleArray* Find(const std::string& name) const
+  {
+    for (const auto& a : this->Arrays)
+    {
+      if (a.Name == name && a.Components > 0)
+      {
+        return &a;
+      }
+    }
+    return nullptr;
+  }
+};
+
+/// Owns an IsobarParticles handle.
+struct ParticlesHandle
+{
+  IsobarParticles* Ptr = nullptr;
+  ~ParticlesHandle() { isobar_particles_free(this->Ptr); }
+};
+
+/// Owns an IsobarSurface handle.
+struct SurfaceHandle
+{
+  IsobarSurface* Ptr = nullptr;
+  ~SurfaceHandle() { isobar_surface_free(this->Ptr); }
+};
+
+bool NonEmpty(const char* s)
+{
+  return s != nullptr && s[0] != '\0';
+}
+
+std::string PointArrayNames(vtkPointData* pd)
+{
+  std::string names;
+  for (int i = 0; i < pd->GetNumberOfArrays(); ++i)
+  {
+    const char* name = pd->GetArrayName(i);
+    if (name)
+    {
+      names += (names.empty() ? "" : ", ") + std::string(name);
+    }
+  }
+  return names.empty() ? "none" : names;
+}
+
+/// Copies `source` (tuples of any numeric type) as doubles, keeping tuples whose `keep`
+/// flag is set (all when `keep` is empty).
+void CopyAsDoubles(vtkDataArray* source, const std::vector<char>& keep, std::vector<double>& out)
+{
+  vtkNew<vtkDoubleArray> asDouble;
+  const double* data = nullptr;
+  if (auto* d = vtkDoubleArray::SafeDownCast(source))
+  {
+    data = d->GetPointer(0);
+  }
+  else
+  {
+    asDouble->DeepCopy(source);
+    data = asDouble->GetPointer(0);
+  }
+  const int nc = source->GetNumberOfComponents();
+  const vtkIdType n = source->GetNumberOfTuples();
+  if (keep.empty())
+  {
+    out.assign(data, data + n * nc);
+    return;
+  }
+  out.clear();
+  for (vtkIdType i = 0; i < n; ++i)
+  {
+    if (keep[i])
+    {
+      out.insert(out.end(), data + i * nc, data + (i + 1) * nc);
+    }
+  }
+}
+
+/// This rank's particles and requested arrays. Returns an error message or "".
+std::string CollectLocal(
+  vtkPointSet* input, const std::vector<Request>& requests, ParticleBuffers& out)
+{
+  out = ParticleBuffers();
+  const vtkIdType n = input ? input->GetNumberOfPoints() : 0;
+  std::vector<char> keep;
+  vtkIdType kept = n;
+  if (n > 0)
+  {
+    if (vtkUnsignedCharArray* ghosts = input->GetPointGhostArray())
+    {
+      keep.resize(n);
+      kept = 0;
+      const unsigned char skip =
+        vtkDataSetAttributes::DUPLICATEPOINT | vtkDataSetAttributes::HIDDENPOINT;
+      for (vtkIdType i = 0; i < n; ++i)
+      {
+        keep[i] = (ghosts->GetValue(i) & skip) == 0;
+        kept += keep[i];
+      }
+    }
+  }
+  out.Count = kept;
+  out.Arrays.resize(requests.size());
+  for (size_t k = 0; k < requests.size(); ++k)
+  {
+    out.Arrays[k].Name = requests[k].Name;
+  }
+  if (kept == 0)
+  {
+    return std::string();
+  }
+  CopyAsDoubles(input->GetPoints()->GetData(), keep, out.Positions);
+  vtkPointData* pd = input->GetPointData();
+  for (size_t k = 0; k < requests.size(); ++k)
+  {
+    const Request& r = requests[k];
+    vtkDataArray* a = pd->GetArray(r.Name.c_str());
+    if (!a)
+    {
+      if (pd->GetAbstractArray(r.Name.c_str()))
+      {
+        return "point array '" + r.Name + "' is not numeric";
+      }
+      if (r.Required)
+      {
+        return "the input has no point array '" + r.Name +
+          "' (point arrays: " + PointArrayNames(pd) + ")";
+      }
+      continue;
+    }
+    out.Arrays[k].Components = a->GetNumberOfComponents();
+    CopyAsDoubles(a, keep, out.Arrays[k].Data);
+  }
+  return std::string();
+}
+
+/// Gathers every rank's particles on rank 0 (all ranks must call it). On rank 0, `local`
+/// becomes the concatenation in rank order; the return value is an error message or "".
+std::string GatherToRoot(vtkMultiProcessController* controller, const std::string& localError,
+  const std::vector<Request>& requests, ParticleBuffers& local)
+{
+  const int nproc = controller->GetNumberOfProcesses();
+  const int rank = controller->GetLocalProcessId();
+  const size_t k = requests.size();
+  // Header: error flag, particle count, components of each requested array.
+  const size_t hlen = 2 + k;
+  std::vector<long long> header(hlen, 0);
+  header[0] = localError.empty() ? 0 : 1;
+  header[1] = localError.empty() ? local.Count : 0;
+  for (size_t a = 0; a < k; ++a)
+  {
+    header[2 + a] = local.Arrays[a].Components;
+  }
+  std::vector<long long> headers(rank == 0 ? hlen * nproc : hlen);
+  controller->Gather(header.data(), headers.data(), static_cast<vtkIdType>(hlen), 0);
+
+  // Payload: positions, then each present array.
+  std::vector<double> payload;
+  if (localError.empty())
+  {
+    payload = local.Positions;
+    for (const auto& a : local.Arrays)
+    {
+      if (a.Components > 0)
+      {
+        payload.insert(payload.end(), a.Data.begin(), a.Data.end());
+      }
+    }
+  }
+  std::vector<vtkIdType> lengths(nproc, 0), offsets(nproc, 0);
+  vtkIdType total = 0;
+  if (rank == 0)
+  {
+    for (int p = 0; p < nproc; ++p)
+    {
+      const long long* h = &headers[p * hlen];
+      vtkIdType items = 3;
+      for (size_t a = 0; a < k; ++a)
+      {
+        items += h[2 + a] > 0 ? h[2 + a] : 0;
+      }
+      lengths[p] = static_cast<vtkIdType>(h[1]) * items;
+      offsets[p] = total;
+      total += lengths[p];
+    }
+  }
+  std::vector<double> all(rank == 0 ? std::max<vtkIdType>(total, 1) : 1);
+  controller->GatherV(payload.data(), all.data(), static_cast<vtkIdType>(payload.size()),
+    lengths.data(), offsets.data(), 0);
+  if (rank != 0)
+  {
+    return localError;
+  }
+
+  // Rank 0: check agreement, then unpack rank after rank.
+  for (int p = 0; p < nproc; ++p)
+  {
+    if (headers[p * hlen] != 0)
+    {
+      std::ostringstream msg;
+      msg << "rank " << p << " could not collect its particles"
+          << (p == 0 ? ": " + localError : std::string(" (see its error message)"));
+      return msg.str();
+    }
+  }
+  ParticleBuffers merged;
+  merged.Arrays.resize(k);
+  for (size_t a = 0; a < k; ++a)
+  {
+    merged.Arrays[a].Name = requests[a].Name;
+    for (int p = 0; p < nproc; ++p)
+    {
+      const long long* h = &headers[p * hlen];
+      if (h[1] == 0)
+      {
+        continue;
+      }
+      const int c = static_cast<int>(h[2 + a]);
+      if (merged.Arrays[a].Components == -1 && c > 0)
+      {
+        merged.Arrays[a].Components = c;
+      }
+    }
+    for (int p = 0; p < nproc; ++p)
+    {
+      const long long* h = &headers[p * hlen];
+      if (h[1] > 0 && h[2 + a] != merged.Arrays[a].Components)
+      {
+        std::ostringstream msg;
+        msg << "point array '" << requests[a].Name << "' has " << h[2 + a]
+            << " components on rank " << p << " but " << merged.Arrays[a].Components
+            << " elsewhere (-1: absent)";
+        return msg.str();
+      }
+    }
+  }
+  for (int p = 0; p < nproc; ++p)
+  {
+    const long long* h = &headers[p * hlen];
+    const vtkIdType n = static_cast<vtkIdType>(h[1]);
+    const double* src = all.data() + offsets[p];
+    merged.Positions.insert(merged.Positions.end(), src, src + 3 * n);
+    src += 3 * n;
+    for (size_t a = 0; a < k; ++a)
+    {
+      if (h[2 + a] > 0)
+      {
+        const vtkIdType len = n * h[2 + a];
+        merged.Arrays[a].Data.insert(merged.Arrays[a].Data.end(), src, src + len);
+        src += len;
+      }
+    }
+    merged.Count += n;
+  }
+  local = std::move(merged);
+  return std::string();
+}
+
+std::string CoreError(const char* what, IsobarStatus status)
+{
+  std::ostringstream msg;
+  msg << what << " failed (status " << static_cast<int>(status)
+      << "): " << isobar_last_error_message();
+  return msg.str();
+}
+
+/// The core's particle set from the buffers. Returns an error message or "".
+std::string MakeParticles(const ParticleBuffers& particles, ParticlesHandle& handle)
+{
+  IsobarStatus status = isobar_particles_create(
+    particles.Positions.data(), static_cast<size_t>(particles.Count), &handle.Ptr);
+  if (status != ISOBAR_STATUS_OK)
+  {
+    return CoreError("isobar_particles_create", status);
+  }
+  for (const auto& a : particles.Arrays)
+  {
+    if (a.Components <= 0)
+    {
+      continue;
+    }
+    status = isobar_particles_add_array(handle.Ptr, a.Name.c_str(), a.Data.data(),
+      static_cast<size_t>(particles.Count), static_cast<size_t>(a.Components));
+    if (status != ISOBAR_STATUS_OK)
+    {
+      return CoreError(("isobar_particles_add_array('" + a.Name + "')").c_str(), status);
+    }
+  }
+  return std::string();
+}
+
+/// Surface -> vtkPolyData: double points, triangles, Normals, per-vertex double arrays.
+/// Returns an error message or "".
+std::string SurfaceToPolyData(const IsobarSurface* surface, vtkPolyData* output)
+{
+  const vtkIdType nv = static_cast<vtkIdType>(isobar_surface_vertex_count(surface));
+  const vtkIdType nt = static_cast<vtkIdType>(isobar_surface_triangle_count(surface));
+  vtkNew<vtkDoubleArray> xyz;
+  xyz->SetNumberOfComponents(3);
+  xyz->SetNumberOfTuples(nv);
+  if (nv > 0)
+  {
+    std::copy_n(isobar_surface_positions(surface), 3 * nv, xyz->GetPointer(0));
+  }
+  vtkNew<vtkPoints> points;
+  points->SetData(xyz);
+  output->SetPoints(points);
+
+  vtkNew<vtkIdTypeArray> offsets;
+  vtkNew<vtkIdTypeArray> connectivity;
+  offsets->SetNumberOfValues(nt + 1);
+  connectivity->SetNumberOfValues(3 * nt);
+  const uint32_t* tris = isobar_surface_triangles(surface);
+  for (vtkIdType t = 0; t <= nt; ++t)
+  {
+    offsets->SetValue(t, 3 * t);
+  }
+  for (vtkIdType i = 0; i < 3 * nt; ++i)
+  {
+    connectivity->SetValue(i, static_cast<vtkIdType>(tris[i]));
+  }
+  vtkNew<vtkCellArray> polys;
+  polys->SetData(offsets, connectivity);
+  output->SetPolys(polys);
+
+  vtkPointData* pd = output->GetPointData();
+  if (const float* normals = isobar_surface_normals(surface))
+  {
+    vtkNew<vtkFloatArray> n;
+    n->SetName("Normals");
+    n->SetNumberOfComponents(3);
+    n->SetNumberOfTuples(nv);
+    std::copy_n(normals, 3 * nv, n->GetPointer(0));
+    pd->SetNormals(n);
+  }
+  const size_t na = isobar_surface_attribute_count(surface);
+  for (size_t i = 0; i < na; ++i)
+  {
+    const char* name = nullptr;
+    size_t components = 0;
+    const double* data = nullptr;
+    IsobarStatus status = isobar_surface_attribute(surface, i, &name, &components, &data);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      output->Initialize();
+      return CoreError("isobar_surface_attribute", status);
+    }
+    vtkNew<vtkDoubleArray> a;
+    a->SetName(name);
+    a->SetNumberOfComponents(static_cast<int>(components));
+    a->SetNumberOfTuples(nv);
+    if (nv > 0 && components > 0)
+    {
+      std::copy_n(data, nv * static_cast<vtkIdType>(components), a->GetPointer(0));
+    }
+    pd->AddArray(a);
+  }
+  return std::string();
+}
+} // anonymous namespace
+
+/// The progress callback handed to the core.
+struct vtkIsobarSPHIsosurfaceProgress
+{
+  static int32_t Call(void* user, double fraction, const char* phase)
+  {
+    auto* self = static_cast<vtkIsobarSPHIsosurface*>(user);
+    return self->ReportProgress(fraction, phase) ? 1 : 0;
+  }
+};
+
+//------------------------------------------------------------------------------
+vtkIsobarSPHIsosurface::vtkIsobarSPHIsosurface()
+{
+  // Defaults come from the core, so every host starts from the same parameters.
+  IsobarSphParams defaults;
+  std::memset(&defaults, 0, sizeof(defaults));
+  isobar_sph_params_default(&defaults);
+
+  this->FieldMode = SUM_OF_WEIGHTS;
+  this->FieldComponent = -1;
+  this->Isovalues.assign(1, 0.6);
+  this->SmoothingLength = 0.0;
+  this->SmoothingLengthArrayName = nullptr;
+  this->HScale = defaults.h_scale;
+  this->VolumeArrayName = nullptr;
+  this->DensityArrayName = nullptr;
+  this->MassArrayName = nullptr;
+  this->Mass = defaults.mass;
+  this->Shepard = defaults.shepard != 0;
+  this->Kernel = static_cast<int>(defaults.kernel);
+  this->GridFactor = defaults.grid_factor;
+  this->Correct = defaults.correct != 0;
+  this->Tolerance = defaults.tolerance;
+  this->Trim = defaults.trim != 0;
+  this->TrimNode = defaults.trim_node;
+  this->TrimVertex = defaults.trim_vertex;
+  this->ComputeNormals = defaults.normals != 0;
+  this->MemoryBudget = static_cast<double>(defaults.memory_budget) / (1024.0 * 1024.0 * 1024.0);
+  this->FullGrid = defaults.full_grid != 0;
+  this->CarriedArraySelection = vtkDataArraySelection::New();
+  this->Controller = nullptr;
+  this->SetController(vtkMultiProcessController::GetGlobalController());
+  this->LastProgress = -1.0;
+
+  this->SetInputArrayToProcess(
+    0, 0, 0, vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
+}
+
+//------------------------------------------------------------------------------
+vtkIsobarSPHIsosurface::~vtkIsobarSPHIsosurface()
+{
+  this->SetSmoothingLengthArrayName(nullptr);
+  this->SetVolumeArrayName(nullptr);
+  this->SetDensityArrayName(nullptr);
+  this->SetMassArrayName(nullptr);
+  this->CarriedArraySelection->Delete();
+  this->SetController(nullptr);
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarSPHIsosurface::SetNumberOfIsovalues(int count)
+{
+  count = std::max(count, 0);
+  if (static_cast<size_t>(count) != this->Isovalues.size())
+  {
+    this->Isovalues.resize(count, 0.0);
+    this->Modified();
+  }
+}
+
+int vtkIsobarSPHIsosurface::GetNumberOfIsovalues()
+{
+  return static_cast<int>(this->Isovalues.size());
+}
+
+void vtkIsobarSPHIsosurface::SetIsovalue(int index, double value)
+{
+  if (index < 0)
+  {
+    return;
+  }
+  if (static_cast<size_t>(index) >= this->Isovalues.size())
+  {
+    this->Isovalues.resize(index + 1, 0.0);
+  }
+  else if (this->Isovalues[index] == value)
+  {
+    return;
+  }
+  this->Isovalues[index] = value;
+  this->Modified();
+}
+
+double vtkIsobarSPHIsosurface::GetIsovalue(int index)
+{
+  return index >= 0 && static_cast<size_t>(index) < this->Isovalues.size()
+    ? this->Isovalues[index]
+    : 0.0;
+}
+
+//------------------------------------------------------------------------------
+vtkMTimeType vtkIsobarSPHIsosurface::GetMTime()
+{
+  return std::max(this->Superclass::GetMTime(), this->CarriedArraySelection->GetMTime());
+}
+
+//------------------------------------------------------------------------------
+std::string vtkIsobarSPHIsosurface::FieldString(const char* arrayName, int components) const
+{
+  if (this->FieldMode == SUM_OF_WEIGHTS || !NonEmpty(arrayName))
+  {
+    return "SumOfWeights";
+  }
+  std::string field(arrayName);
+  if (components > 1)
+  {
+    field += this->FieldComponent < 0 ? std::string(":mag")
+                                      : ":" + std::to_string(this->FieldComponent);
+  }
+  return field;
+}
+
+//------------------------------------------------------------------------------
+int vtkIsobarSPHIsosurface::FillInputPortInformation(int, vtkInformation* info)
+{
+  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkPointSet");
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarSPHIsosurface::Fail(const std::string& message)
+{
+  this->ErrorMessage = message;
+  vtkErrorMacro(<< message);
+}
+
+//------------------------------------------------------------------------------
+bool vtkIsobarSPHIsosurface::ReportProgress(double fraction, const char* phase)
+{
+  // The core reports often; VTK observers only need percent steps and phase changes.
+  if (fraction >= 1.0 || fraction - this->LastProgress >= 0.01 || fraction < this->LastProgress)
+  {
+    this->LastProgress = fraction;
+    this->SetProgressText(phase);
+    this->UpdateProgress(fraction);
+  }
+  return this->GetAbortExecute() != 0;
+}
+
+//------------------------------------------------------------------------------
+std::vector<std::string> vtkIsobarSPHIsosurface::CarriedArrayNames()
+{
+  std::vector<std::string> names;
+  for (int i = 0; i < this->CarriedArraySelection->GetNumberOfArrays(); ++i)
+  {
+    const char* name = this->CarriedArraySelection->GetArrayName(i);
+    if (name && this->CarriedArraySelection->ArrayIsEnabled(name))
+    {
+      names.emplace_back(name);
+    }
+  }
+  return names;
+}
+
+//------------------------------------------------------------------------------
+std::string vtkIsobarSPHIsosurface::FieldArrayName()
+{
+  vtkInformation* info = this->GetInputArrayInformation(0);
+  if (this->FieldMode == POINT_ARRAY && info && info->Has(vtkDataObject::FIELD_NAME()))
+  {
+    return info->Get(vtkDataObject::FIELD_NAME());
+  }
+  return std::string();
+}
+
+//------------------------------------------------------------------------------
+int vtkIsobarSPHIsosurface::RequestData(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
+{
+  vtkPointSet* input = vtkPointSet::GetData(inputVector[0], 0);
+  vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
+  output->Initialize();
+  this->ErrorMessage.clear();
+  this->LastProgress = -1.0;
+
+  // 1. The particle arrays to collect, in an order every rank shares. Errors found from
+  // the settings alone happen alike on every rank, so no rank skips a collective call.
+  const std::string fieldArray = this->FieldArrayName();
+  if (this->FieldMode == POINT_ARRAY && fieldArray.empty())
+  {
+    this->Fail("Field Mode is 'Point array' but no input array is selected");
+    return 1;
+  }
+  const bool hFromArray = NonEmpty(this->SmoothingLengthArrayName);
+  const bool hAuto = !hFromArray && this->SmoothingLength <= 0.0;
+  const std::vector<std::string> carried = this->CarriedArrayNames();
+  std::vector<Request> requests;
+  if (!fieldArray.empty())
+  {
+    requests.push_back({ fieldArray, true });
+  }
+  if (hFromArray)
+  {
+    requests.push_back({ this->SmoothingLengthArrayName, true });
+  }
+  for (const char* name : AutoSmoothingLengthArrays)
+  {
+    if (hAuto)
+    {
+      requests.push_back({ name, false });
+    }
+  }
+  for (const char* name : { this->VolumeArrayName, this->DensityArrayName, this->MassArrayName })
+  {
+    if (NonEmpty(name))
+    {
+      requests.push_back({ name, true });
+    }
+  }
+  for (const auto& name : carried)
+  {
+    requests.push_back({ name, true });
+  }
+
+  // 2. This rank's particles; in a parallel run, everybody's on rank 0.
+  ParticleBuffers particles;
+  std::string error = CollectLocal(input, requests, particles);
+  vtkMultiProcessController* controller = this->Controller;
+  if (controller && controller->GetNumberOfProcesses() > 1)
+  {
+    if (!error.empty())
+    {
+      this->Fail(error);
+    }
+    error = GatherToRoot(controller, error, requests, particles);
+    if (controller->GetLocalProcessId() != 0)
+    {
+      return 1; // rank 0 extracts the whole surface; this piece stays empty
+    }
+  }
+  if (!error.empty())
+  {
+    this->Fail(error);
+    return 1;
+  }
+  if (particles.Count == 0)
+  {
+    vtkDebugMacro(<< "No particles: empty output");
+    return 1;
+  }
+
+  // 3. What the data decides: the smoothing-length array, the field string.
+  std::string hArray = hFromArray ? std::string(this->SmoothingLengthArrayName) : std::string();
+  for (const char* name : AutoSmoothingLengthArrays)
+  {
+    if (hAuto && hArray.empty() && particles.Find(name))
+    {
+      hArray = name;
+    }
+  }
+  if (hAuto && hArray.empty())
+  {
+    this->Fail("no smoothing length: set Smoothing Length (a constant h > 0) or Smoothing "
+               "Length Array (the input has no 'h', 'smoothing_length' or 'hsml' array)");
+    return 1;
+  }
+  const int fieldComponents = fieldArray.empty() ? 1 : particles.Find(fieldArray)->Components;
+  if (fieldComponents > 1 && this->FieldComponent >= fieldComponents)
+  {
+    std::ostringstream msg;
+    msg << "Field Component " << this->FieldComponent << " does not exist: '" << fieldArray
+        << "' has " << fieldComponents << " components (-1 = magnitude)";
+    this->Fail(msg.str());
+    return 1;
+  }
+  const std::string field = this->FieldString(fieldArray.c_str(), fieldComponents);
+
+  // 4. The core does the rest.
+  ParticlesHandle handle;
+  error = MakeParticles(particles, handle);
+  particles = ParticleBuffers(); // the particle set owns copies now
+  if (!error.empty())
+  {
+    this->Fail(error);
+    return 1;
+  }
+  std::vector<const char*> carriedNames;
+  for (const auto& name : carried)
+  {
+    carriedNames.push_back(name.c_str());
+  }
+  const IsobarSphParams params = this->MakeParams(field, hArray, carriedNames);
+  SurfaceHandle surface;
+  this->UpdateProgress(0.0);
+  const IsobarStatus status = isobar_sph_extract(
+    handle.Ptr, &params, &vtkIsobarSPHIsosurfaceProgress::Call, this, &surface.Ptr);
+  if (status == ISOBAR_STATUS_CANCELLED)
+  {
+    this->ErrorMessage = "cancelled";
+    vtkDebugMacro(<< "Extraction cancelled: empty output");
+    return 1;
+  }
+  if (status != ISOBAR_STATUS_OK)
+  {
+    this->Fail(CoreError("isobar_sph_extract", status));
+    return 1;
+  }
+  error = SurfaceToPolyData(surface.Ptr, output);
+  if (!error.empty())
+  {
+    this->Fail(error);
+    return 1;
+  }
+  this->UpdateProgress(1.0);
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+IsobarSphParams vtkIsobarSPHIsosurface::MakeParams(const std::string& field,
+  const std::string& hArray, const std::vector<const char*>& carried) const
+{
+  IsobarSphParams params;
+  std::memset(&params, 0, sizeof(params));
+  isobar_sph_params_default(&params);
+  params.kernel = static_cast<uint32_t>(this->Kernel);
+  params.h = this->SmoothingLength;
+  params.h_array = hArray.empty() ? nullptr : hArray.c_str();
+  params.h_scale = this->HScale;
+  params.field = field.c_str();
+  params.volume_array = NonEmpty(this->VolumeArrayName) ? this->VolumeArrayName : nullptr;
+  params.density_array = NonEmpty(this->DensityArrayName) ? this->DensityArrayName : nullptr;
+  params.mass_array = NonEmpty(this->MassArrayName) ? this->MassArrayName : nullptr;
+  params.mass = this->Mass;
+  params.shepard = this->Shepard ? 1 : 0;
+  params.correct = this->Correct ? 1 : 0;
+  params.isovalues = this->Isovalues.data();
+  params.isovalue_count = this->Isovalues.size();
+  params.grid_factor = this->GridFactor;
+  params.tolerance = this->Tolerance;
+  // As the CLI: a free surface is never trimmed against its own field.
+  params.trim = (this->Trim && this->FieldMode != SUM_OF_WEIGHTS) ? 1 : 0;
+  params.trim_node = this->TrimNode;
+  params.trim_vertex = this->TrimVertex;
+  params.normals = this->ComputeNormals ? 1 : 0;
+  params.attributes = carried.empty() ? nullptr : carried.data();
+  params.attribute_count = carried.size();
+  params.memory_budget =
+    static_cast<uint64_t>(std::min(this->MemoryBudget, 1.0e9) * 1024.0 * 1024.0 * 1024.0);
+  params.full_grid = this->FullGrid ? 1 : 0;
+  return params;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarSPHIsosurface::PrintSelf(ostream& os, vtkIndent indent)
+{
+  this->Superclass::PrintSelf(os, indent);
+  // One "Name: value" line per ParaView property (same names), full precision: the
+  // ParaView tests read the settings back from here.
+  auto str = [](const char* s) { return s ? s : ""; };
+  const auto precision = os.precision(17);
+  std::string inputArray;
+  if (vtkInformation* info = this->GetInputArrayInformation(0))
+  {
+    if (info->Has(vtkDataObject::FIELD_NAME()))
+    {
+      inputArray = info->Get(vtkDataObject::FIELD_NAME());
+    }
+  }
+  os << indent << "FieldMode: " << this->FieldMode << "\n";
+  os << indent << "InputArray: " << inputArray << "\n";
+  os << indent << "FieldComponent: " << this->FieldComponent << "\n";
+  os << indent << "Isovalues:";
+  for (double v : this->Isovalues)
+  {
+    os << " " << v;
+  }
+  os << "\n";
+  os << indent << "SmoothingLength: " << this->SmoothingLength << "\n";
+  os << indent << "SmoothingLengthArray: " << str(this->SmoothingLengthArrayName) << "\n";
+  os << indent << "HScale: " << this->HScale << "\n";
+  os << indent << "Kernel: " << this->Kernel << "\n";
+  os << indent << "VolumeArray: " << str(this->VolumeArrayName) << "\n";
+  os << indent << "DensityArray: " << str(this->DensityArrayName) << "\n";
+  os << indent << "MassArray: " << str(this->MassArrayName) << "\n";
+  os << indent << "Mass: " << this->Mass << "\n";
+  os << indent << "Shepard: " << this->Shepard << "\n";
+  os << indent << "GridFactor: " << this->GridFactor << "\n";
+  os << indent << "Correct: " << this->Correct << "\n";
+  os << indent << "Tolerance: " << this->Tolerance << "\n";
+  os << indent << "Trim: " << this->Trim << "\n";
+  os << indent << "TrimNode: " << this->TrimNode << "\n";
+  os << indent << "TrimVertex: " << this->TrimVertex << "\n";
+  os << indent << "ComputeNormals: " << this->ComputeNormals << "\n";
+  os << indent << "MemoryBudget: " << this->MemoryBudget << "\n";
+  os << indent << "FullGrid: " << this->FullGrid << "\n";
+  os << indent << "CarriedArrays:";
+  for (int i = 0; i < this->CarriedArraySelection->GetNumberOfArrays(); ++i)
+  {
+    const char* name = this->CarriedArraySelection->GetArrayName(i);
+    if (name && this->CarriedArraySelection->ArrayIsEnabled(name))
+    {
+      os << " " << name;
+    }
+  }
+  os << "\n";
+  os << indent << "Controller: " << this->Controller << "\n";
+  os << indent << "ErrorMessage: " << this->ErrorMessage << "\n";
+  os.precision(precision);
+}

@@ -1,0 +1,262 @@
+/**
+ * @class   vtkIsobarSPHIsosurface
+ * @brief   exact isosurfaces of SPH particle data (Marching Correctors)
+ *
+ * The input is any vtkPointSet whose points are SPH particles and whose point data holds
+ * the particle arrays. The output is a triangle mesh whose vertices lie on the level set
+ * of the SPH interpolant itself (to a relative tolerance, 1e-6 by default), with
+ * "Normals" from the SPH gradient, "SumOfWeights", the carried arrays interpolated with
+ * the same kernel, and "Isovalue" when several isovalues are given. Points are doubles.
+ *
+ * All numeric work is done by the isobar core (Rust, linked statically through
+ * isobar.h); this class converts arrays, maps its parameters onto IsobarSphParams,
+ * reports progress, honours AbortExecute and turns core errors into vtkErrorMacro with
+ * an empty output.
+ *
+ * Field: the sum of weights sum_j V_j W (the free surface; isovalue 0.6 with computed
+ * volumes is splashsurf's surface) or the point array chosen with
+ * SetInputArrayToProcess(0, ...): a scalar as is, a vector as its magnitude
+ * (FieldComponent = -1) or one component (FieldComponent = k).
+ *
+ * Parallel runs: with a multi-process controller (pvbatch/pvserver under MPI) each rank
+ * sends its particles (ghost points skipped) to rank 0, which extracts the whole
+ * surface; the other ranks output empty pieces. The result is the single-process surface
+ * exactly, with no seams or duplicate triangles, at the cost of rank 0 holding all
+ * particles.
+ */
+
+#ifndef vtkIsobarSPHIsosurface_h
+#define vtkIsobarSPHIsosurface_h
+
+#include "IsobarVTKModule.h" // For export macro
+#include "vtkPolyDataAlgorithm.h"
+
+#include <string> // For ErrorMessage
+#include <vector> // For Isovalues
+
+class vtkDataArraySelection;
+class vtkMultiProcessController;
+struct IsobarSphParams;
+
+class ISOBARVTK_EXPORT vtkIsobarSPHIsosurface : public vtkPolyDataAlgorithm
+{
+public:
+  static vtkIsobarSPHIsosurface* New();
+  vtkTypeMacro(vtkIsobarSPHIsosurface, vtkPolyDataAlgorithm);
+  void PrintSelf(ostream& os, vtkIndent indent) override;
+
+  /// What is contoured.
+  enum FieldModes
+  {
+    SUM_OF_WEIGHTS = 0, ///< sum_j V_j W(x - x_j): the free surface
+    POINT_ARRAY = 1     ///< the array chosen with SetInputArrayToProcess(0, ...)
+  };
+
+  /// SPH kernels (the core's ISOBAR_KERNEL_* values).
+  enum Kernels
+  {
+    CUBIC = 0,     ///< Monaghan's cubic spline, support 2h
+    WENDLAND = 1,  ///< Wendland C2, support 2h
+    QUINTIC = 2,   ///< Morris' quintic spline, support 3h
+    QUADRATIC = 3  ///< Johnson's quadratic kernel, support 2h
+  };
+
+  ///@{
+  /// SUM_OF_WEIGHTS (default) or POINT_ARRAY.
+  vtkSetClampMacro(FieldMode, int, SUM_OF_WEIGHTS, POINT_ARRAY);
+  vtkGetMacro(FieldMode, int);
+  ///@}
+
+  ///@{
+  /// For a multi-component input array: -1 (default) contours its magnitude, k >= 0 its
+  /// component k. Ignored for one-component arrays.
+  vtkSetClampMacro(FieldComponent, int, -1, VTK_INT_MAX);
+  vtkGetMacro(FieldComponent, int);
+  ///@}
+
+  ///@{
+  /// Isovalues: one surface each, all in one output. Default: one value, 0.6.
+  void SetNumberOfIsovalues(int count);
+  int GetNumberOfIsovalues();
+  void SetIsovalue(int index, double value);
+  double GetIsovalue(int index);
+  ///@}
+
+  ///@{
+  /// Constant smoothing length h, used when no smoothing-length array is named. 0 (the
+  /// default) means: use the point array "h", "smoothing_length" or "hsml", whichever
+  /// exists first (as the isobar CLI does); with none, RequestData reports an error.
+  vtkSetClampMacro(SmoothingLength, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(SmoothingLength, double);
+  ///@}
+
+  ///@{
+  /// Per-particle smoothing-length array (empty or NULL: none).
+  vtkSetStringMacro(SmoothingLengthArrayName);
+  vtkGetStringMacro(SmoothingLengthArrayName);
+  ///@}
+
+  ///@{
+  /// Multiplies every smoothing length (1, 0.75, 0.5 ... for quick previews).
+  vtkSetClampMacro(HScale, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(HScale, double);
+  ///@}
+
+  ///@{
+  /// Particle volumes: a volume array (m/rho) wins; else a density array with a mass
+  /// (MassArrayName or Mass); else the core computes densities from the particles.
+  vtkSetStringMacro(VolumeArrayName);
+  vtkGetStringMacro(VolumeArrayName);
+  vtkSetStringMacro(DensityArrayName);
+  vtkGetStringMacro(DensityArrayName);
+  vtkSetStringMacro(MassArrayName);
+  vtkGetStringMacro(MassArrayName);
+  ///@}
+
+  ///@{
+  /// Constant particle mass (0: none).
+  vtkSetClampMacro(Mass, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(Mass, double);
+  ///@}
+
+  ///@{
+  /// Divide the field by the sum of weights (Shepard normalisation). Default off.
+  vtkSetMacro(Shepard, vtkTypeBool);
+  vtkGetMacro(Shepard, vtkTypeBool);
+  vtkBooleanMacro(Shepard, vtkTypeBool);
+  ///@}
+
+  ///@{
+  /// One of Kernels; default CUBIC.
+  vtkSetClampMacro(Kernel, int, CUBIC, QUADRATIC);
+  vtkGetMacro(Kernel, int);
+  ///@}
+
+  ///@{
+  /// Virtual cell size in units of the smallest smoothing length (core default 0.5).
+  vtkSetClampMacro(GridFactor, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(GridFactor, double);
+  ///@}
+
+  ///@{
+  /// Correct vertices onto the level set (default on); off gives a linear preview.
+  vtkSetMacro(Correct, vtkTypeBool);
+  vtkGetMacro(Correct, vtkTypeBool);
+  vtkBooleanMacro(Correct, vtkTypeBool);
+  ///@}
+
+  ///@{
+  /// Relative tolerance of the correction (core default 1e-6).
+  vtkSetClampMacro(Tolerance, double, 0.0, 1.0);
+  vtkGetMacro(Tolerance, double);
+  ///@}
+
+  ///@{
+  /// Trim the surface at free surfaces where the sum of weights falls below the
+  /// thresholds (node: cells discarded; vertex: triangles clipped). Default on; never
+  /// applied to the SUM_OF_WEIGHTS field itself (it would cut the surface away).
+  vtkSetMacro(Trim, vtkTypeBool);
+  vtkGetMacro(Trim, vtkTypeBool);
+  vtkBooleanMacro(Trim, vtkTypeBool);
+  vtkSetClampMacro(TrimNode, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(TrimNode, double);
+  vtkSetClampMacro(TrimVertex, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(TrimVertex, double);
+  ///@}
+
+  ///@{
+  /// Vertex normals from the SPH gradient (default on).
+  vtkSetMacro(ComputeNormals, vtkTypeBool);
+  vtkGetMacro(ComputeNormals, vtkTypeBool);
+  vtkBooleanMacro(ComputeNormals, vtkTypeBool);
+  ///@}
+
+  ///@{
+  /// Memory the core may use for extent-sized structures, in GiB (core default 4).
+  vtkSetClampMacro(MemoryBudget, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(MemoryBudget, double);
+  ///@}
+
+  ///@{
+  /// Resample onto a full grid and run marching cubes instead (the core's baseline, for
+  /// comparisons). Default off.
+  vtkSetMacro(FullGrid, vtkTypeBool);
+  vtkGetMacro(FullGrid, vtkTypeBool);
+  vtkBooleanMacro(FullGrid, vtkTypeBool);
+  ///@}
+
+  /// Point arrays interpolated onto the surface: enable them by name. None by default.
+  vtkGetObjectMacro(CarriedArraySelection, vtkDataArraySelection);
+
+  ///@{
+  /// The controller of a parallel run (default: the global controller).
+  virtual void SetController(vtkMultiProcessController*);
+  vtkGetObjectMacro(Controller, vtkMultiProcessController);
+  ///@}
+
+  /// The message of the last failed execution ("" after a success).
+  const char* GetErrorMessage() { return this->ErrorMessage.c_str(); }
+
+  /// The field string handed to the core for the current settings, given the number of
+  /// components of the input array ("SumOfWeights", "NAME", "NAME:mag" or "NAME:K").
+  std::string FieldString(const char* arrayName, int components) const;
+
+  vtkMTimeType GetMTime() override;
+
+protected:
+  vtkIsobarSPHIsosurface();
+  ~vtkIsobarSPHIsosurface() override;
+
+  int FillInputPortInformation(int port, vtkInformation* info) override;
+  int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
+
+  /// Reports `message` through vtkErrorMacro and remembers it for GetErrorMessage.
+  void Fail(const std::string& message);
+
+  /// Progress from the core: UpdateProgress, and whether to abort.
+  bool ReportProgress(double fraction, const char* phase);
+
+  /// The enabled carried arrays, in selection order.
+  std::vector<std::string> CarriedArrayNames();
+
+  /// The input array's name in POINT_ARRAY mode ("" otherwise or when none is set).
+  std::string FieldArrayName();
+
+  /// The core's parameters for these settings; the strings must outlive the result.
+  IsobarSphParams MakeParams(const std::string& field, const std::string& hArray,
+    const std::vector<const char*>& carried) const;
+
+  int FieldMode;
+  int FieldComponent;
+  std::vector<double> Isovalues;
+  double SmoothingLength;
+  char* SmoothingLengthArrayName;
+  double HScale;
+  char* VolumeArrayName;
+  char* DensityArrayName;
+  char* MassArrayName;
+  double Mass;
+  vtkTypeBool Shepard;
+  int Kernel;
+  double GridFactor;
+  vtkTypeBool Correct;
+  double Tolerance;
+  vtkTypeBool Trim;
+  double TrimNode;
+  double TrimVertex;
+  vtkTypeBool ComputeNormals;
+  double MemoryBudget;
+  vtkTypeBool FullGrid;
+  vtkDataArraySelection* CarriedArraySelection;
+  vtkMultiProcessController* Controller;
+  std::string ErrorMessage;
+  double LastProgress;
+
+private:
+  vtkIsobarSPHIsosurface(const vtkIsobarSPHIsosurface&) = delete;
+  void operator=(const vtkIsobarSPHIsosurface&) = delete;
+
+  friend struct vtkIsobarSPHIsosurfaceProgress;
+};
+
+#endif
