@@ -101,6 +101,17 @@ typedef struct IsobarSphParams {
   uint64_t memory_budget;
   // Non-zero: the full-grid resampling baseline instead of Marching Correctors.
   int32_t full_grid;
+  // Non-zero: put the virtual grid on the lattice `lattice_origin + (i,j,k) ·
+  // lattice_cell_size` instead of grid_factor × smallest h, so pieces of a
+  // data-parallel run share their grid nodes.
+  int32_t fixed_lattice;
+  double lattice_origin[3];
+  double lattice_cell_size;
+  // Non-zero: keep only the surface in cells whose lowest corner lies in the
+  // half-open box [clip_min, clip_max); particles outside it still shape the field.
+  int32_t clip;
+  double clip_min[3];
+  double clip_max[3];
 } IsobarSphParams;
 
 // Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.

@@ -5,7 +5,7 @@
 
 use crate::correctors::cache::{NodeSample, NodeValues};
 use crate::correctors::vertices::Placement;
-use crate::correctors::{surface, virtual_grid, Extraction, Params, Stats};
+use crate::correctors::{clip_cells, surface, virtual_grid, Extraction, Params, Stats};
 use crate::error::{Error, Result};
 use crate::field::particles::{Attribute, ParticleData};
 use crate::field::sph::SphField;
@@ -39,7 +39,7 @@ pub fn extract(
 ) -> Result<Extraction> {
     params.validate()?;
     let start = Instant::now();
-    let grid = virtual_grid(field, params.grid_factor)?;
+    let grid = virtual_grid(field, params)?;
     let nodes = grid.cells.map(|c| c as usize + 1);
     let count = nodes.iter().map(|&n| n as u128).product::<u128>();
     let needed = count * std::mem::size_of::<NodeSample>() as u128;
@@ -77,7 +77,7 @@ pub fn extract(
     let n = params.isovalues.len() as f64;
     for (k, &iso) in params.isovalues.iter().enumerate() {
         let node_threshold = params.trim.map(|t| t.node);
-        let active: Vec<ActiveCell> = (0..grid.cells[2])
+        let mut active: Vec<ActiveCell> = (0..grid.cells[2])
             .into_par_iter()
             .flat_map_iter(|z| {
                 let dense = &dense;
@@ -97,6 +97,7 @@ pub fn extract(
                 })
             })
             .collect();
+        clip_cells(&grid, &mut active, params);
         stats.cells_used += active.len() as u64;
         let mut part = surface::build(
             field,

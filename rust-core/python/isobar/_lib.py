@@ -77,6 +77,13 @@ class SphParams(Structure):
         ("attribute_count", c_size_t),
         ("memory_budget", c_uint64),
         ("full_grid", c_int32),
+        # after ABI 1: shared lattice and clip box for data-parallel pieces
+        ("fixed_lattice", c_int32),
+        ("lattice_origin", c_double * 3),
+        ("lattice_cell_size", c_double),
+        ("clip", c_int32),
+        ("clip_min", c_double * 3),
+        ("clip_max", c_double * 3),
     ]
 
 

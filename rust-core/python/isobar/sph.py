@@ -72,6 +72,8 @@ def extract(
     shepard: bool = False,
     memory_budget: Optional[int] = None,
     full_grid: bool = False,
+    lattice: Optional[Tuple[float, float, float, float]] = None,
+    clip: Optional[Tuple[Sequence[float], Sequence[float]]] = None,
     progress: Optional[ProgressCallback] = None,
 ) -> Surface:
     """Extracts isosurfaces of the particles' SPH field; every vertex lies on the level set
@@ -108,6 +110,10 @@ def extract(
         shepard: divide the field by the sum of weights.
         memory_budget: bytes that extent-sized structures may use (default: the core's).
         full_grid: resample onto a full grid and run marching cubes (the baseline).
+        lattice: (x, y, z, cell): put the virtual grid on nodes x + i·cell, ... instead of
+            grid_factor × smallest h, so separately extracted pieces share their nodes.
+        clip: ((x0, y0, z0), (x1, y1, z1)): keep only the surface in cells whose lowest
+            corner lies in this half-open box; particles outside still shape the field.
         progress: ``callable(fraction, phase)`` called on this thread between chunks of
             work; return None or True to go on, False to cancel. An exception raised in
             it cancels the extraction and is re-raised here.
@@ -192,6 +198,16 @@ def extract(
             raise InvalidArgumentError(f"parameter 'memory_budget': must be a positive byte count, got {memory_budget}")
         params.memory_budget = int(memory_budget)
     params.full_grid = _flag(full_grid)
+    if lattice is not None:
+        x, y, z, cell = (float(v) for v in lattice)
+        params.fixed_lattice = 1
+        params.lattice_origin[:] = (x, y, z)
+        params.lattice_cell_size = cell
+    if clip is not None:
+        lo, hi = clip
+        params.clip = 1
+        params.clip_min[:] = tuple(float(v) for v in lo)
+        params.clip_max[:] = tuple(float(v) for v in hi)
 
     # The callback runs on this thread. It is always installed, so that Ctrl-C (a
     # KeyboardInterrupt raised while it runs) cancels the extraction too.

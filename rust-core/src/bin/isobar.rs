@@ -1,8 +1,9 @@
 //! The `isobar` command line: SPH isosurfaces from particle files, and the demo.
 
 use clap::{Args, Parser, Subcommand};
+use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
-use isobar::correctors::{self, Extraction, Params, Stats, Trim};
+use isobar::correctors::{self, Extraction, Lattice, Params, Stats, Trim};
 use isobar::field::kernel::Kernel;
 use isobar::field::particles::ParticleData;
 use isobar::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
@@ -106,6 +107,14 @@ struct SphArgs {
     /// No vertex normals.
     #[arg(long)]
     no_normals: bool,
+    /// Put the virtual grid on a fixed lattice X,Y,Z,CELL (nodes at origin + integer
+    /// multiples of CELL; replaces --grid-factor), so separately extracted pieces line up.
+    #[arg(long, value_delimiter = ',', num_args = 4)]
+    lattice: Option<Vec<f64>>,
+    /// Keep only the surface in cells whose lowest corner lies in [X0,Y0,Z0, X1,Y1,Z1);
+    /// particles outside still shape the field (a halo).
+    #[arg(long, value_delimiter = ',', num_args = 6)]
+    clip: Option<Vec<f64>>,
     /// Resample onto the full grid and run plain marching cubes (the baseline).
     #[arg(long)]
     full_grid: bool,
@@ -217,6 +226,14 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Params {
         trim,
         normals: !args.no_normals,
         attributes: args.attributes.clone(),
+        lattice: args.lattice.as_ref().map(|l| Lattice {
+            origin: DVec3::new(l[0], l[1], l[2]),
+            cell_size: l[3],
+        }),
+        clip: args
+            .clip
+            .as_ref()
+            .map(|c| (DVec3::new(c[0], c[1], c[2]), DVec3::new(c[3], c[4], c[5]))),
     }
 }
 

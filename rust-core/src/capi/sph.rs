@@ -3,11 +3,12 @@
 use super::particles::IsobarParticles;
 use super::surface::IsobarSurface;
 use super::{guard, invalid, non_null, opt_str, put, slice, IsobarStatus};
-use crate::correctors::{self, Params, Trim};
+use crate::correctors::{self, Lattice, Params, Trim};
 use crate::field::kernel::Kernel;
 use crate::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
 use crate::field::DEFAULT_MEMORY_BUDGET;
 use crate::progress::Progress;
+use glam::DVec3;
 use std::ffi::{c_char, c_void, CString};
 
 /// Kernel: Monaghan's cubic spline (support 2h).
@@ -69,6 +70,19 @@ pub struct IsobarSphParams {
     pub memory_budget: u64,
     /// Non-zero: the full-grid resampling baseline instead of Marching Correctors.
     pub full_grid: i32,
+    // ---- end of ABI 1 (SPH_PARAMS_V1_SIZE); fields below keep their defaults for
+    // callers whose struct_size stops before them.
+    /// Non-zero: put the virtual grid on the lattice `lattice_origin + (i,j,k) ·
+    /// lattice_cell_size` instead of grid_factor × smallest h, so pieces of a
+    /// data-parallel run share their grid nodes.
+    pub fixed_lattice: i32,
+    pub lattice_origin: [f64; 3],
+    pub lattice_cell_size: f64,
+    /// Non-zero: keep only the surface in cells whose lowest corner lies in the
+    /// half-open box [clip_min, clip_max); particles outside it still shape the field.
+    pub clip: i32,
+    pub clip_min: [f64; 3],
+    pub clip_max: [f64; 3],
 }
 
 /// Size of the ABI-1 parameter struct: the smallest `struct_size` ever accepted. Fields
@@ -108,6 +122,12 @@ impl Default for IsobarSphParams {
             attribute_count: 0,
             memory_budget: DEFAULT_MEMORY_BUDGET,
             full_grid: 0,
+            fixed_lattice: 0,
+            lattice_origin: [0.0; 3],
+            lattice_cell_size: 0.0,
+            clip: 0,
+            clip_min: [0.0; 3],
+            clip_max: [0.0; 3],
         }
     }
 }
@@ -210,6 +230,11 @@ fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), crate::Error> 
         memory_budget: p.memory_budget,
     };
     let params = Params {
+        lattice: (p.fixed_lattice != 0).then_some(Lattice {
+            origin: DVec3::from(p.lattice_origin),
+            cell_size: p.lattice_cell_size,
+        }),
+        clip: (p.clip != 0).then_some((DVec3::from(p.clip_min), DVec3::from(p.clip_max))),
         isovalues: slice(p.isovalues, p.isovalue_count, "params.isovalues")?.to_vec(),
         grid_factor: p.grid_factor,
         correct: p.correct != 0,

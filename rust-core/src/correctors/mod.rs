@@ -17,6 +17,7 @@ use crate::mc::VirtualGrid;
 use crate::mesh::Mesh;
 use crate::progress::Progress;
 use cache::NodeCache;
+use glam::DVec3;
 use std::time::Instant;
 use vertices::Placement;
 
@@ -38,6 +39,15 @@ impl Default for Trim {
     }
 }
 
+/// A fixed lattice for the virtual grid: node positions `origin + (i, j, k) · cell_size`
+/// for integers i, j, k. Pieces of a data-parallel extraction share one so their grids
+/// coincide where they overlap.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lattice {
+    pub origin: DVec3,
+    pub cell_size: f64,
+}
+
 /// Parameters of an extraction.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Params {
@@ -56,6 +66,11 @@ pub struct Params {
     pub normals: bool,
     /// Particle arrays to interpolate onto the surface vertices.
     pub attributes: Vec<String>,
+    /// Use this lattice instead of `grid_factor` × smallest h from the data's corner.
+    pub lattice: Option<Lattice>,
+    /// Keep only the surface in cells whose lowest corner lies in the half-open box
+    /// `[min, max)`; the surface is still tracked through every particle given (the halo).
+    pub clip: Option<(DVec3, DVec3)>,
 }
 
 impl Default for Params {
@@ -68,6 +83,8 @@ impl Default for Params {
             trim: Some(Trim::default()),
             normals: true,
             attributes: vec![],
+            lattice: None,
+            clip: None,
         }
     }
 }
@@ -87,6 +104,30 @@ impl Params {
                 "grid_factor",
                 format!("must be positive, got {}", self.grid_factor),
             );
+        }
+        if let Some(l) = self.lattice {
+            if !(l.cell_size > 0.0 && l.cell_size.is_finite() && l.origin.is_finite()) {
+                return bad(
+                    "lattice",
+                    format!(
+                        "needs a finite origin and a positive cell size, got {:?} and {}",
+                        l.origin.to_array(),
+                        l.cell_size
+                    ),
+                );
+            }
+        }
+        if let Some((lo, hi)) = self.clip {
+            if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
+                return bad(
+                    "clip",
+                    format!(
+                        "needs min < max on every axis, got {:?} and {:?}",
+                        lo.to_array(),
+                        hi.to_array()
+                    ),
+                );
+            }
         }
         if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
             return bad(
@@ -155,13 +196,35 @@ pub struct Extraction {
     pub stats: Stats,
 }
 
-/// The virtual grid for `field`: cells of `grid_factor` × the smallest smoothing length,
-/// covering every point where some particle's kernel is non-zero.
-pub fn virtual_grid(field: &SphField, grid_factor: f64) -> Result<VirtualGrid> {
-    let cell = grid_factor * field.min_h();
+/// The virtual grid for `field`: cells of `grid_factor` × the smallest smoothing length
+/// (or the given lattice), covering every point where some particle's kernel is non-zero.
+pub fn virtual_grid(field: &SphField, params: &Params) -> Result<VirtualGrid> {
     let (lo, hi) = field.bounds();
-    let pad = field.max_support() + cell;
-    VirtualGrid::covering(lo - pad, hi + pad, cell)
+    match params.lattice {
+        None => {
+            let cell = params.grid_factor * field.min_h();
+            let pad = field.max_support() + cell;
+            VirtualGrid::covering(lo - pad, hi + pad, cell)
+        }
+        Some(l) => {
+            let pad = field.max_support() + l.cell_size;
+            VirtualGrid::on_lattice(l.origin, l.cell_size, lo - pad, hi + pad)
+        }
+    }
+}
+
+/// Drops the cells outside `params.clip` (by their lowest corner).
+pub(crate) fn clip_cells(
+    grid: &VirtualGrid,
+    cells: &mut Vec<crate::mc::ActiveCell>,
+    params: &Params,
+) {
+    if let Some((lo, hi)) = params.clip {
+        cells.retain(|c| {
+            let p = grid.node_position(c.key);
+            p.cmpge(lo).all() && p.cmplt(hi).all()
+        });
+    }
 }
 
 /// Absolute tolerance on |F − iso| for relative tolerance `rel`.
@@ -187,7 +250,7 @@ pub fn extract(
 ) -> Result<Extraction> {
     params.validate()?;
     let start = Instant::now();
-    let grid = virtual_grid(field, params.grid_factor)?;
+    let grid = virtual_grid(field, params)?;
     let attributes = surface::AttributeSource::new(field, data, &params.attributes)?;
     let mut stats = Stats {
         virtual_cells: grid.cell_count(),
@@ -212,7 +275,7 @@ pub fn extract(
         progress.phase("surface tracking", at(0.1), at(0.5))?;
         let t = Instant::now();
         let node_threshold = params.trim.map(|t| t.node);
-        let tracked = tracking::track(
+        let mut tracked = tracking::track(
             field,
             &grid,
             seeds,
@@ -221,6 +284,7 @@ pub fn extract(
             &mut cache,
             progress,
         )?;
+        clip_cells(&grid, &mut tracked.active, params);
         stats.non_intersected_seeds += tracked.non_intersected_seeds;
         stats.discarded_cells += tracked.discarded;
         stats.cells_used += tracked.active.len() as u64;

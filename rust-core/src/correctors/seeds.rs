@@ -95,8 +95,8 @@ pub fn seed_cells(
 /// Appends the keys of the grid cells that the segment p–q passes through (3D DDA,
 /// Amanatides & Woo); cells outside the grid are skipped.
 pub fn cells_on_segment(grid: &VirtualGrid, p: DVec3, q: DVec3, out: &mut Vec<u64>) {
-    let u = (p - grid.origin) / grid.cell_size;
-    let v = (q - grid.origin) / grid.cell_size;
+    let u = grid.to_grid(p);
+    let v = grid.to_grid(q);
     let d = v - u;
     let mut cell = [u.x.floor() as i64, u.y.floor() as i64, u.z.floor() as i64];
     let last = [v.x.floor() as i64, v.y.floor() as i64, v.z.floor() as i64];

@@ -18,26 +18,58 @@ pub const MAX_NODES_PER_AXIS: u64 = 1 << AXIS_BITS;
 /// A uniform grid of cubic cells described by origin, cell size and cell counts; never
 /// stored. Nodes and cells are named by keys packing (x, y, z) with x in the low bits, so
 /// sorting keys orders them z-slice by z-slice, the order the paper's cache relies on.
+///
+/// The grid is a window onto a lattice: node (x, y, z) sits at
+/// `origin + (offset + (x, y, z)) · cell_size`. Extractions that share a lattice (the
+/// pieces of a data-parallel run) therefore compute bit-identical node positions even
+/// when their windows differ.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VirtualGrid {
+    /// Origin of the lattice.
     pub origin: DVec3,
+    /// Lattice index of the window's first node.
+    pub offset: [i64; 3],
     pub cell_size: f64,
     /// Cells per axis (nodes per axis = cells + 1).
     pub cells: [u32; 3],
 }
 
 impl VirtualGrid {
-    /// The grid of cell size `cell_size` whose cells cover the box `lo..hi`.
+    /// The grid of cell size `cell_size` whose cells cover the box `lo..hi`, with its
+    /// first node at `lo`.
     pub fn covering(lo: DVec3, hi: DVec3, cell_size: f64) -> Result<Self> {
+        Self::on_lattice(lo, cell_size, lo, hi)
+    }
+
+    /// The window of the lattice (`origin`, `cell_size`) whose cells cover `lo..hi`.
+    pub fn on_lattice(origin: DVec3, cell_size: f64, lo: DVec3, hi: DVec3) -> Result<Self> {
         if !(cell_size > 0.0 && cell_size.is_finite()) {
             return Err(Error::InvalidParameter {
                 name: "grid cell size",
                 message: format!("must be positive and finite, got {cell_size}"),
             });
         }
+        if !origin.is_finite() {
+            return Err(Error::InvalidParameter {
+                name: "lattice origin",
+                message: format!("must be finite, got {:?}", origin.to_array()),
+            });
+        }
         let mut cells = [0u32; 3];
+        let mut offset = [0i64; 3];
         for a in 0..3 {
-            let n = ((hi[a] - lo[a]) / cell_size).ceil().max(1.0);
+            let first = ((lo[a] - origin[a]) / cell_size).floor();
+            let last = ((hi[a] - origin[a]) / cell_size).ceil();
+            if !(first.abs() < 1e15 && last.abs() < 1e15) {
+                return Err(Error::InvalidParameter {
+                    name: "lattice origin",
+                    message: format!(
+                        "the data lies too far from the lattice origin along axis {a}"
+                    ),
+                });
+            }
+            offset[a] = first as i64;
+            let n = (last - first).max(1.0);
             if n + 1.0 > MAX_NODES_PER_AXIS as f64 {
                 return Err(Error::InvalidParameter {
                     name: "grid_factor",
@@ -51,7 +83,8 @@ impl VirtualGrid {
             cells[a] = n as u32;
         }
         Ok(VirtualGrid {
-            origin: lo,
+            origin,
+            offset,
             cell_size,
             cells,
         })
@@ -82,7 +115,20 @@ impl VirtualGrid {
     #[inline]
     pub fn node_position(&self, node: u64) -> DVec3 {
         let [x, y, z] = Self::coords(node);
-        self.origin + DVec3::new(x as f64, y as f64, z as f64) * self.cell_size
+        let [ox, oy, oz] = self.offset;
+        self.origin
+            + DVec3::new(
+                (ox + x as i64) as f64,
+                (oy + y as i64) as f64,
+                (oz + z as i64) as f64,
+            ) * self.cell_size
+    }
+
+    /// `p` in cell units relative to the window's first node.
+    #[inline]
+    pub fn to_grid(&self, p: DVec3) -> DVec3 {
+        let [ox, oy, oz] = self.offset;
+        (p - self.origin) / self.cell_size - DVec3::new(ox as f64, oy as f64, oz as f64)
     }
 
     /// Key of corner `corner` of cell `cell`.
@@ -112,7 +158,7 @@ impl VirtualGrid {
 
     /// The cell containing `p`, if inside the grid.
     pub fn cell_of(&self, p: DVec3) -> Option<[u32; 3]> {
-        let c = (p - self.origin) / self.cell_size;
+        let c = self.to_grid(p);
         let mut out = [0u32; 3];
         for a in 0..3 {
             let f = c[a].floor();
