@@ -34,8 +34,8 @@ in positions after 0.5 s; the flow is chaotic).  The default ``--threads 1`` gav
 bit-identical files in repeated runs with the same pysplishsplash version; ``--threads 0``
 (all cores) is faster but not reproducible.  The committed .npz is the reference.
 
-Run time (2 cores, default options): about 5 minutes (measured: see README.md in
-rust-core/data).
+Run time: 5 min 17 s with the default options (one thread) on the idle 2-core dev
+machine. Output: 1.3 MB, and a second run gave a byte-identical file.
 
 Usage::
 

@@ -40,6 +40,18 @@ impl Kernel {
         }
     }
 
+    /// How far (as a fraction of the support) a lone particle's level set W(r)/W(0) = f
+    /// can lie from the linear estimate r = (1 − f)·support, over all f in (0, 1): the
+    /// kernel's departure from a straight line. Seeding uses it to size its windows.
+    pub fn linear_crossing_error(self) -> f64 {
+        match self {
+            Kernel::CubicSpline => 0.273,
+            Kernel::WendlandC2 => 0.319,
+            Kernel::QuinticSpline => 0.389,
+            Kernel::Quadratic => 0.251,
+        }
+    }
+
     /// Name used on command lines and in files.
     pub fn name(self) -> &'static str {
         match self {
@@ -174,6 +186,32 @@ mod tests {
                     "{k:?} r={r}: {fd} vs {d}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn linear_crossing_error_bounds_every_isovalue() {
+        for k in Kernel::ALL {
+            let (h, support) = (1.0, k.support_factor());
+            let mut worst = 0.0f64;
+            for i in 1..1000 {
+                let f = i as f64 / 1000.0;
+                let (mut lo, mut hi) = (0.0, support);
+                for _ in 0..60 {
+                    let mid = 0.5 * (lo + hi);
+                    if k.value(mid, h) > f * k.value(0.0, h) {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                worst = worst.max((lo / support - (1.0 - f)).abs());
+            }
+            assert!(worst <= k.linear_crossing_error(), "{k:?}: {worst}");
+            assert!(
+                worst > k.linear_crossing_error() - 0.005,
+                "{k:?}: bound {worst} is loose"
+            );
         }
     }
 
