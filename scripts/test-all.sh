@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the tests need (apt, pip, cargo) and runs every test: the Rust core, the C
-# ABI from C, the Python package with pyvista, the VTK module and ParaView plugin. On a fresh Debian 12 machine with the Rust
+# ABI from C, the Python package with pyvista, the VTK module and ParaView plugin, the
+# Blender add-on. On a fresh Debian 12 machine with the Rust
 # toolchain (rustup) and CPython 3.11; run as root so apt can install.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -49,6 +50,9 @@ bash tests/python/run.sh 2>&1 | tee -a "$results"
 
 log "VTK module and ParaView plugin tests (installs Debian VTK 9.1 / ParaView 5.11)"
 bash tests/vtk/run.sh 2>&1 | tee -a "$results"
+
+log "Blender add-on tests (bpy 5.0.1 from PyPI, headless)"
+bash tests/blender/run.sh 2>&1 | tee -a "$results"
 
 # One closing line for the whole suite (cargo's and pytest's summaries added up).
 passed=$(grep -Eo '[0-9]+ passed' "$results" | awk '{s+=$1} END {print s+0}')

@@ -1,0 +1,469 @@
+"""From a fluid-surface object's settings to its mesh at a frame.
+
+Finds the particles of the frame (a file of the sequence, or a scene object evaluated by
+the depsgraph), extracts the surface through ``extraction`` (or reads the baked frame
+through ``cache`` when one matches the current parameters) and writes it into the object's
+mesh through ``mesh``. No UI here: operators and the frame-change handler call
+:func:`update_object`; errors end up in the object's status text (and are returned), never
+raised into Blender.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import traceback
+from typing import Dict, Iterator, List, Optional, Tuple
+
+import bpy
+import numpy as np
+
+from . import cache, extraction, sequence
+from . import mesh as mesh_io
+from .extraction import FrameMesh, Params
+
+# -- runtime state (not saved; cleared when a file is loaded) --------------------------
+
+#: Per object: what the mesh shows now, so that an unchanged frame is not extracted again
+#: (Cycles' motion blur and repeated frame_set calls land on the same frame).
+_shown: Dict[str, Tuple] = {}
+#: Per object: (name, components) of the particle arrays last read, for the UI's search.
+_arrays: Dict[str, List[Tuple[str, int]]] = {}
+#: Objects being baked: the frame-change handler leaves them alone.
+_baking: set = set()
+#: Depth of suspend_updates(): property updates do nothing while > 0.
+_suspended = 0
+
+
+def clear_runtime() -> None:
+    """Forgets the runtime state (on file load)."""
+    _shown.clear()
+    _arrays.clear()
+    _baking.clear()
+
+
+@contextlib.contextmanager
+def suspend_updates() -> Iterator[None]:
+    """Property changes inside do not re-extract (set many settings, extract once)."""
+    global _suspended
+    _suspended += 1
+    try:
+        yield
+    finally:
+        _suspended -= 1
+
+
+@contextlib.contextmanager
+def baking(obj) -> Iterator[None]:
+    """The frame-change handler skips `obj` inside (the bake drives its frames)."""
+    key = object_key(obj)
+    _baking.add(key)
+    try:
+        yield
+    finally:
+        _baking.discard(key)
+
+
+def object_key(obj) -> str:
+    return obj.name_full
+
+
+def is_fluid(obj) -> bool:
+    """True for a mesh object that is an isobar fluid surface."""
+    try:
+        return obj is not None and obj.type == "MESH" and obj.isobar.enabled
+    except (AttributeError, ReferenceError):
+        return False
+
+
+def is_baking(obj) -> bool:
+    return object_key(obj) in _baking
+
+
+# -- errors ----------------------------------------------------------------------------
+
+
+def describe_error(error: BaseException) -> str:
+    """A one-line message for the user."""
+    try:
+        isobar = extraction.isobar_module()
+        if isinstance(error, isobar.Error):
+            return str(error)
+    except Exception:  # noqa: BLE001 - the package itself may be what failed
+        pass
+    if isinstance(error, ImportError):
+        return f"the isobar package could not be loaded: {error}"
+    if isinstance(error, (OSError, ValueError)):
+        return str(error)
+    return f"{type(error).__name__}: {error}"
+
+
+# -- sources ---------------------------------------------------------------------------
+
+
+def source_description(settings) -> str:
+    """What the surface is made from, for the bake fingerprint."""
+    if settings.source_type == "OBJECT":
+        src = settings.source_object
+        return f"object:{src.name_full if src else ''}:{settings.particle_system}"
+    return (
+        f"sequence:{settings.directory}:{settings.pattern}:{settings.file_first}:{settings.file_last}:"
+        f"{settings.frame_offset}:{int(settings.hold)}"
+    )
+
+
+def fingerprint(settings, params: Optional[Params] = None) -> str:
+    return (params or Params.from_settings(settings)).fingerprint(source_description(settings))
+
+
+def sequence_path(settings, frame: int) -> Optional[str]:
+    """The particle file of scene `frame` (None: no file, an empty surface)."""
+    number = sequence.file_number(frame, settings.frame_offset, settings.file_first, settings.file_last, settings.hold)
+    if number is None:
+        return None
+    directory = bpy.path.abspath(settings.directory) if settings.directory else ""
+    if not directory:
+        raise ValueError("the fluid surface has no particle folder")
+    return sequence.path_for(directory, settings.pattern, number)
+
+
+def read_particles(path: str):
+    """isobar.Particles of a file, with a clear message when it is missing."""
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"particle file not found: {path}")
+    return extraction.isobar_module().Particles.read(path)
+
+
+_FLOAT_TYPES = {
+    "FLOAT": ("value", 1),
+    "INT": ("value", 1),
+    "FLOAT2": ("vector", 2),
+    "FLOAT_VECTOR": ("vector", 3),
+    "FLOAT_COLOR": ("color", 4),
+}
+_SKIP_ATTRIBUTES = {"position", "custom_normal", "sharp_face", "sharp_edge", "material_index"}
+
+
+def _geometry_of(evaluated):
+    """(owner, data): the evaluated point cloud or mesh of an object. Keep `owner` alive
+    while reading `data` (a geometry set frees its parts with itself)."""
+    geometry = None
+    if hasattr(evaluated, "evaluated_geometry"):
+        try:
+            geometry = evaluated.evaluated_geometry()
+        except Exception:  # noqa: BLE001 - fall back to the object data
+            geometry = None
+    if geometry is not None:
+        if getattr(geometry, "pointcloud", None) is not None:
+            return geometry, geometry.pointcloud
+        if getattr(geometry, "mesh", None) is not None:
+            return geometry, geometry.mesh
+    return evaluated, evaluated.data
+
+
+def _point_arrays(data) -> Tuple[np.ndarray, Dict[str, np.ndarray]]:
+    """Positions and float point attributes of a mesh or point cloud (local space)."""
+    attributes = data.attributes
+    if "position" not in attributes:
+        raise ValueError(f"'{data.name}' has no point positions")
+    n = len(attributes["position"].data)
+    positions = np.empty(n * 3, dtype=np.float32)
+    attributes["position"].data.foreach_get("vector", positions)
+    arrays = {}
+    for attr in attributes:
+        name = attr.name
+        if (
+            attr.domain != "POINT"
+            or name in _SKIP_ATTRIBUTES
+            or name.startswith(".")
+            or attr.data_type not in _FLOAT_TYPES
+        ):
+            continue
+        key, k = _FLOAT_TYPES[attr.data_type]
+        values = np.empty(n * k, dtype=np.float32 if attr.data_type != "INT" else np.int32)
+        attr.data.foreach_get(key, values)
+        arrays[name] = values.astype(np.float64).reshape(n, k) if k > 1 else values.astype(np.float64)
+    return positions.reshape(n, 3).astype(np.float64), arrays
+
+
+def _alive_values(ps) -> List[int]:
+    """alive_state values of particles that are shown."""
+    items = {i.identifier: i.value for i in bpy.types.Particle.bl_rna.properties["alive_state"].enum_items}
+    shown = [items["ALIVE"], items["DYING"]]
+    settings = ps.settings
+    if getattr(settings, "show_unborn", False):
+        shown.append(items["UNBORN"])
+    if getattr(settings, "use_dead", False):
+        shown.append(items["DEAD"])
+    return shown
+
+
+def scene_arrays(settings, depsgraph) -> Tuple[np.ndarray, Dict[str, np.ndarray]]:
+    """World-space particle positions and arrays from the settings' scene object."""
+    src = settings.source_object
+    if src is None:
+        raise ValueError("choose the object whose particles make the surface")
+    evaluated = src.evaluated_get(depsgraph) if depsgraph is not None else src
+    if settings.particle_system:
+        ps = evaluated.particle_systems.get(settings.particle_system)
+        if ps is None:
+            raise ValueError(f"'{src.name}' has no particle system '{settings.particle_system}'")
+        particles = ps.particles
+        n = len(particles)
+        loc = np.empty(n * 3, dtype=np.float32)
+        vel = np.empty(n * 3, dtype=np.float32)
+        size = np.empty(n, dtype=np.float32)
+        state = np.empty(n, dtype=np.int32)
+        if n:
+            particles.foreach_get("location", loc)
+            particles.foreach_get("velocity", vel)
+            particles.foreach_get("size", size)
+            particles.foreach_get("alive_state", state)
+        keep = np.isin(state, _alive_values(ps))
+        arrays = {"velocity": vel.reshape(n, 3)[keep].astype(np.float64), "size": size[keep].astype(np.float64)}
+        return loc.reshape(n, 3)[keep].astype(np.float64), arrays  # particles are in world space
+
+    owner, data = _geometry_of(evaluated)
+    positions, arrays = _point_arrays(data)
+    del owner
+    matrix = np.array(evaluated.matrix_world, dtype=np.float64)
+    rotation = matrix[:3, :3]
+    positions = positions @ rotation.T + matrix[:3, 3]
+    for name in extraction.VELOCITY_NAMES:
+        values = arrays.get(name)
+        if values is not None and values.ndim == 2 and values.shape[1] == 3:
+            arrays[name] = values @ rotation.T
+    return positions, arrays
+
+
+def scene_particles(settings, depsgraph):
+    positions, arrays = scene_arrays(settings, depsgraph)
+    if positions.shape[0] == 0:
+        return None
+    return extraction.isobar_module().Particles.from_arrays(positions, arrays)
+
+
+# -- one frame -------------------------------------------------------------------------
+
+
+def cache_folder(obj, settings=None, assign_name: bool = False) -> str:
+    """The folder of `obj`'s baked frames.
+
+    Raises:
+        ValueError: the cache folder is relative to an unsaved .blend file.
+    """
+    settings = settings or obj.isobar
+    base = settings.cache_directory or "//isobar_cache/"
+    if base.startswith("//") and not bpy.data.filepath:
+        raise ValueError("save the .blend file first, or choose an absolute cache folder")
+    name = settings.cache_name
+    if not name:
+        name = re.sub(r"[^0-9A-Za-z_.-]", "_", obj.name) or "surface"
+        if assign_name:
+            settings.cache_name = name
+    return os.path.join(bpy.path.abspath(base), name)
+
+
+def extract_live(
+    obj, scene, depsgraph, frame: int, params: Optional[Params] = None, progress=None
+) -> Tuple[Optional[FrameMesh], str]:
+    """Extracts `frame` from the particles: (mesh, or None for a frame without particles;
+    where they came from)."""
+    settings = obj.isobar
+    params = params or Params.from_settings(settings)
+    if settings.source_type == "OBJECT":
+        if depsgraph is None:
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+        particles = scene_particles(settings, depsgraph)
+        origin = f"'{settings.source_object.name}'"
+    else:
+        path = sequence_path(settings, frame)
+        if path is None:
+            return None, "no file"
+        particles = read_particles(path)
+        origin = os.path.basename(path)
+    if particles is None:
+        return None, origin + ", no particles"
+    try:
+        _arrays[object_key(obj)] = extraction.array_infos(particles)
+        frame_mesh = extraction.extract(particles, params, progress=progress)
+    finally:
+        particles.close()
+    return frame_mesh, origin
+
+
+def empty_mesh() -> FrameMesh:
+    return FrameMesh(points=np.empty((0, 3), np.float32), triangles=np.empty((0, 3), np.int32))
+
+
+def _live_key(settings, frame: int, current: str) -> Optional[Tuple]:
+    """Identifies the input of a live extraction (None: always extract again)."""
+    if settings.source_type == "OBJECT":
+        return None  # the scene may have changed in any way
+    path = sequence_path(settings, frame)
+    if path is None:
+        return ("empty", current)
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None  # missing: the extraction reports it
+    return ("file", path, stat.st_mtime_ns, stat.st_size, current)
+
+
+def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progress=None):
+    """The surface of `obj` at `frame`: (mesh, origin text, memo key); mesh None when the
+    object shows that very surface already. A baked frame is used when baking is on and
+    its fingerprint matches the current settings; else the particles are extracted."""
+    settings = obj.isobar
+    params = Params.from_settings(settings)
+    current = fingerprint(settings, params)
+    note = ""
+    if use_cache and settings.use_cache:
+        try:
+            folder = cache_folder(obj, settings)
+        except ValueError:
+            folder = ""
+        path = cache.frame_path(folder, frame) if folder else ""
+        if path and os.path.isfile(path):
+            if cache.read_fingerprint(path) == current:
+                stat = os.stat(path)
+                key = ("cache", path, stat.st_mtime_ns, current)
+                if _is_shown(obj, key):
+                    return None, "bake", key
+                mesh, _ = cache.read(path)
+                return mesh, "bake", key
+            note = ", baked frame made with other settings"
+    key = _live_key(settings, frame, current)
+    if _is_shown(obj, key):
+        return None, "unchanged", key
+    mesh, origin = extract_live(obj, scene, depsgraph, frame, params, progress)
+    return (mesh if mesh is not None else empty_mesh()), origin + note, key
+
+
+def _is_shown(obj, key) -> bool:
+    shown = _shown.get(object_key(obj))
+    if shown is None or key is None or shown[0] != key:
+        return False
+    data = obj.data
+    return len(data.vertices) == shown[1] and len(data.polygons) == shown[2]
+
+
+def update_object(
+    obj, scene=None, depsgraph=None, frame: Optional[int] = None, force: bool = False
+) -> Tuple[bool, str]:
+    """Shows the surface of `frame` (default: the scene's current frame) in `obj`'s mesh.
+
+    Never raises: returns (ok, message) and writes the message into ``obj.isobar.status``.
+    On failure the mesh keeps what it showed (the last good frame).
+    """
+    try:
+        settings = obj.isobar
+        scene = scene or bpy.context.scene
+        frame = scene.frame_current if frame is None else int(frame)
+        if force:
+            _shown.pop(object_key(obj), None)
+        mesh, origin, key = frame_mesh(obj, scene, depsgraph, frame)
+        if mesh is None:  # the mesh shows this surface already
+            _, n, m, origin = _shown[object_key(obj)]
+            message = f"Frame {frame}: {n} vertices, {m} triangles ({origin})"
+            _set_status(settings, message, False)
+            return True, message
+        mesh_io.write(obj.data, mesh)
+        if key is not None:
+            _shown[object_key(obj)] = (key, mesh.n_points, mesh.n_triangles, origin)
+        else:
+            _shown.pop(object_key(obj), None)
+        seconds = mesh.info.get("seconds")
+        timing = f", {seconds:.2f} s" if isinstance(seconds, (int, float)) and origin != "bake" else ""
+        message = f"Frame {frame}: {mesh.n_points} vertices, {mesh.n_triangles} triangles ({origin}{timing})"
+        _set_status(settings, message, False)
+        return True, message
+    except Exception as error:  # noqa: BLE001 - nothing may raise into Blender
+        message = describe_error(error)
+        if not _is_expected(error):
+            traceback.print_exc()
+        try:
+            frame_text = f"Frame {frame}: " if isinstance(frame, int) else ""
+            message = frame_text + message
+            _set_status(obj.isobar, message, True)
+        except Exception:  # noqa: BLE001 - the object may be gone
+            pass
+        print(f"isobar: {getattr(obj, 'name', '?')}: {message}")
+        return False, message
+
+
+def _is_expected(error: BaseException) -> bool:
+    if isinstance(error, (OSError, ValueError)):
+        return True
+    try:
+        return isinstance(error, extraction.isobar_module().Error)
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def _set_status(settings, message: str, is_error: bool) -> None:
+    if settings.status != message:
+        settings.status = message
+    if settings.status_error != is_error:
+        settings.status_error = is_error
+
+
+def update_all(scene, depsgraph=None) -> None:
+    """Updates every fluid surface of `scene` to its current frame (the handler's work)."""
+    for obj in list(scene.objects):
+        if is_fluid(obj) and not is_baking(obj):
+            update_object(obj, scene, depsgraph)
+
+
+# -- property updates and UI helpers ----------------------------------------------------
+
+
+def on_settings_changed(settings, context) -> None:
+    """A property of `settings` changed: re-extract the current frame."""
+    if _suspended:
+        return
+    try:
+        obj = settings.id_data
+        if not is_fluid(obj) or not settings.live_update or is_baking(obj):
+            return
+        scene = getattr(context, "scene", None) or bpy.context.scene
+        update_object(obj, scene, force=True)
+    except Exception:  # noqa: BLE001 - never raise out of a property update
+        traceback.print_exc()
+
+
+def known_arrays(settings) -> List[Tuple[str, int]]:
+    try:
+        return _arrays.get(object_key(settings.id_data), [])
+    except Exception:  # noqa: BLE001
+        return []
+
+
+def field_suggestions(settings, text: str) -> List[str]:
+    out = ["SumOfWeights"]
+    for name, k in known_arrays(settings):
+        out.append(name)
+        if k > 1:
+            out.append(f"{name}:mag")
+    return [s for s in out if text.lower() in s.lower()]
+
+
+def array_suggestions(settings, text: str) -> List[str]:
+    return [n for n, _ in known_arrays(settings) if text.lower() in n.lower()]
+
+
+__all__ = [
+    "baking",
+    "cache_folder",
+    "clear_runtime",
+    "extract_live",
+    "fingerprint",
+    "frame_mesh",
+    "is_fluid",
+    "scene_arrays",
+    "sequence_path",
+    "suspend_updates",
+    "update_all",
+    "update_object",
+]

@@ -1,0 +1,417 @@
+"""Operators: import a particle sequence, make a surface from scene particles, refresh,
+bake (modal, Esc cancels) and free the bake. Errors reach the user through self.report."""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
+from bpy_extras.io_utils import ImportHelper
+
+from . import bake, extraction, importer, sequence
+
+
+def _fluid_object(context, name: str = ""):
+    """The object named `name`, else the active object, when it is a fluid surface."""
+    obj = bpy.data.objects.get(name) if name else getattr(context, "active_object", None)
+    return obj if importer.is_fluid(obj) else None
+
+
+def _new_surface_object(context, name: str):
+    mesh = bpy.data.meshes.new(name)
+    obj = bpy.data.objects.new(name, mesh)
+    collection = getattr(context, "collection", None) or context.scene.collection
+    collection.objects.link(obj)
+    for other in context.view_layer.objects:
+        other.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    return obj
+
+
+def _default_material():
+    """A water-like material (created once per file, shared by the surfaces)."""
+    name = "isobar Water"
+    material = bpy.data.materials.get(name)
+    if material is None:
+        material = bpy.data.materials.new(name)
+        material.diffuse_color = (0.35, 0.6, 0.9, 1.0)
+        if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+            material.use_nodes = True  # always on (and deprecated) from 5.0
+        bsdf = material.node_tree.nodes.get("Principled BSDF") if material.node_tree else None
+        if bsdf is not None:
+            bsdf.inputs["Base Color"].default_value = (0.35, 0.6, 0.9, 1.0)
+            bsdf.inputs["Roughness"].default_value = 0.05
+    return material
+
+
+class _SurfaceParameters:
+    """Parameters asked for when a surface is made (the panel has them all)."""
+
+    iso: FloatProperty(
+        name="Isovalue", default=0.6, precision=4, description="Level of the free-surface field (sum of weights)"
+    )
+    h: FloatProperty(
+        name="Smoothing Length",
+        default=0.05,
+        min=1e-9,
+        precision=5,
+        subtype="DISTANCE",
+        description="SPH smoothing length, about twice the particle radius (a per-particle h array in the files wins)",
+    )
+    grid_factor: FloatProperty(
+        name="Grid Factor", default=0.5, min=0.01, soft_max=2.0, description="Cell size in units of h"
+    )
+
+    def apply(self, settings, names):
+        settings.iso = self.iso
+        settings.grid_factor = self.grid_factor
+        settings.h = self.h
+        h_array = extraction.h_array_name([n for n, _ in names])
+        if h_array:
+            settings.h_mode, settings.h_array = "ARRAY", h_array
+        else:
+            settings.h_mode = "CONSTANT"
+        settings.velocity_array = extraction.velocity_name(names) or "velocity"
+
+
+class ISOBAR_OT_import_sequence(bpy.types.Operator, ImportHelper, _SurfaceParameters):
+    """Import a numbered SPH particle sequence as a fluid surface extracted on frame change"""
+
+    bl_idname = "isobar.import_sequence"
+    bl_label = "Import SPH Particle Sequence"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filter_glob: StringProperty(default=";".join("*" + e for e in sequence.PARTICLE_EXTENSIONS), options={"HIDDEN"})
+    frame_offset: IntProperty(name="Frame Offset", default=0, description="Scene frame = file number + offset")
+    set_frame_range: BoolProperty(
+        name="Set Scene Frame Range", default=True, description="Make the scene's frame range the sequence's"
+    )
+    y_up: BoolProperty(
+        name="Y Up",
+        default=False,
+        description="The simulation's up axis is Y: rotate the object so it stands in Blender's Z up",
+    )
+    relative_path: BoolProperty(
+        name="Relative Path",
+        default=True,
+        description="Store the folder relative to the .blend file (when it is saved)",
+    )
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        for name in ("iso", "h", "grid_factor", "frame_offset", "set_frame_range", "y_up", "relative_path"):
+            layout.prop(self, name)
+
+    def execute(self, context):
+        try:
+            seq = sequence.detect(self.filepath)
+        except ValueError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        try:
+            particles = importer.read_particles(seq.path(seq.first))
+            try:
+                names = extraction.array_infos(particles)
+            finally:
+                particles.close()
+        except Exception as error:  # noqa: BLE001 - reported, not raised
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+
+        stem = sequence.split_pattern(seq.pattern)[0].rstrip("_-. ") or "fluid"
+        obj = _new_surface_object(context, f"{stem}_surface")
+        obj.data.materials.append(_default_material())
+        directory = seq.directory
+        if self.relative_path and bpy.data.filepath:
+            try:
+                directory = bpy.path.relpath(directory)
+            except ValueError:  # another drive
+                pass
+        settings = obj.isobar
+        with importer.suspend_updates():
+            settings.enabled = True
+            settings.source_type = "SEQUENCE"
+            settings.directory = directory if directory.endswith(("/", os.sep)) else directory + os.sep
+            settings.pattern = seq.pattern
+            settings.file_first, settings.file_last = seq.first, seq.last
+            settings.frame_offset = self.frame_offset
+            self.apply(settings, names)
+        importer._arrays[importer.object_key(obj)] = names
+        if self.y_up:
+            obj.rotation_euler = (1.5707963267948966, 0.0, 0.0)
+        scene = context.scene
+        if self.set_frame_range:
+            scene.frame_start = seq.first + self.frame_offset
+            scene.frame_end = seq.last + self.frame_offset
+
+        ok, message = importer.update_object(obj, scene, force=True)
+        missing = seq.missing()
+        if missing:
+            self.report({"WARNING"}, f"{len(missing)} files missing in the sequence (first: {seq.path(missing[0])})")
+        if not ok:
+            self.report({"WARNING"}, f"Imported '{obj.name}', but the current frame failed: {message}")
+        else:
+            self.report({"INFO"}, f"Imported {len(seq.numbers)} files as '{obj.name}': {message}")
+        return {"FINISHED"}
+
+
+class ISOBAR_OT_surface_from_object(bpy.types.Operator, _SurfaceParameters):
+    """Fluid surface from scene particles: a mesh's or point cloud's points and attributes, or a particle system"""
+
+    bl_idname = "isobar.surface_from_object"
+    bl_label = "Fluid Surface from Object"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: StringProperty(
+        name="Source", description="Object with the particles (default: the active object)", options={"SKIP_SAVE"}
+    )
+    particle_system: StringProperty(
+        name="Particle System",
+        description="Particle system to use (default: the first one, if any; 'NONE' for the points)",
+        options={"SKIP_SAVE"},
+    )
+
+    def execute(self, context):
+        src = bpy.data.objects.get(self.source) if self.source else context.active_object
+        if src is None:
+            self.report({"ERROR"}, "select the object with the particles (a mesh, point cloud or particle emitter)")
+            return {"CANCELLED"}
+        if src.type not in {"MESH", "POINTCLOUD"} or importer.is_fluid(src):
+            self.report({"ERROR"}, f"'{src.name}' is not a mesh, point cloud or particle emitter")
+            return {"CANCELLED"}
+        psys = self.particle_system
+        if psys == "NONE":
+            psys = ""
+        elif not psys and len(src.particle_systems):
+            psys = src.particle_systems[0].name
+        if psys and psys not in src.particle_systems:
+            self.report({"ERROR"}, f"'{src.name}' has no particle system '{psys}'")
+            return {"CANCELLED"}
+
+        obj = _new_surface_object(context, f"{src.name}_surface")
+        obj.data.materials.append(_default_material())
+        settings = obj.isobar
+        with importer.suspend_updates():
+            settings.enabled = True
+            settings.source_type = "OBJECT"
+            settings.source_object = src
+            settings.particle_system = psys
+            try:
+                _, arrays = importer.scene_arrays(settings, context.evaluated_depsgraph_get())
+                names = [(n, 1 if v.ndim == 1 else v.shape[1]) for n, v in arrays.items()]
+            except Exception:  # noqa: BLE001 - the update below reports it
+                names = []
+            self.apply(settings, names)
+        importer._arrays[importer.object_key(obj)] = names
+        ok, message = importer.update_object(obj, context.scene, context.evaluated_depsgraph_get(), force=True)
+        if not ok:
+            self.report({"WARNING"}, f"Made '{obj.name}', but the current frame failed: {message}")
+        else:
+            self.report({"INFO"}, f"Made '{obj.name}': {message}")
+        return {"FINISHED"}
+
+
+class ISOBAR_OT_refresh(bpy.types.Operator):
+    """Extract the current frame of the fluid surface again"""
+
+    bl_idname = "isobar.refresh"
+    bl_label = "Refresh Surface"
+    bl_options = {"REGISTER"}
+
+    object_name: StringProperty(
+        name="Object", description="Fluid surface (default: the active object)", options={"SKIP_SAVE"}
+    )
+
+    def execute(self, context):
+        obj = _fluid_object(context, self.object_name)
+        if obj is None:
+            self.report({"ERROR"}, "select an isobar fluid surface")
+            return {"CANCELLED"}
+        ok, message = importer.update_object(obj, context.scene, force=True)
+        if not ok:
+            self.report({"ERROR"}, message)
+            return {"CANCELLED"}
+        self.report({"INFO"}, message)
+        return {"FINISHED"}
+
+
+class ISOBAR_OT_bake(bpy.types.Operator):
+    """Extract every frame of the range into the cache on disk (Esc cancels); playback then reads the cache"""
+
+    bl_idname = "isobar.bake"
+    bl_label = "Bake Fluid Surface"
+    bl_options = {"REGISTER"}
+
+    object_name: StringProperty(
+        name="Object", description="Fluid surface (default: the active object)", options={"SKIP_SAVE"}
+    )
+    use_scene_range: BoolProperty(
+        name="Scene Range", default=True, description="Bake the scene's frame range", options={"SKIP_SAVE"}
+    )
+    frame_start: IntProperty(name="Start", default=1, options={"SKIP_SAVE"})
+    frame_end: IntProperty(name="End", default=250, options={"SKIP_SAVE"})
+
+    _job = None
+    _timer = None
+
+    def _make_job(self, context):
+        obj = _fluid_object(context, self.object_name)
+        if obj is None:
+            raise ValueError("select an isobar fluid surface to bake")
+        scene = context.scene
+        frames = (
+            bake.scene_frames(scene)
+            if self.use_scene_range
+            else bake.scene_frames(scene, self.frame_start, self.frame_end)
+        )
+        return bake.BakeJob(obj, scene, frames)
+
+    # -- all at once (scripts, background mode) ----------------------------------------
+
+    def execute(self, context):
+        try:
+            job = self._make_job(context)
+        except Exception as error:  # noqa: BLE001
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, job.total)
+        try:
+            while not job.done:
+                i = job.index
+
+                def progress(fraction, _phase, i=i):
+                    wm.progress_update(i + fraction)
+
+                job.step(progress)
+                wm.progress_update(job.index)
+        except Exception as error:  # noqa: BLE001
+            frame = job.current_frame
+            job.finish()
+            self.report({"ERROR"}, f"Bake stopped at frame {frame}: {importer.describe_error(error)}")
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        job.finish()
+        self.report({"INFO"}, f"Baked {len(job.baked)} frames to {job.folder}")
+        return {"FINISHED"}
+
+    # -- one frame per timer tick (interactive) ------------------------------------------
+
+    def invoke(self, context, event):
+        if context.window is None:
+            return self.execute(context)
+        try:
+            self._job = self._make_job(context)
+        except Exception as error:  # noqa: BLE001
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, self._job.total)
+        self._timer = wm.event_timer_add(0.001, window=context.window)
+        wm.modal_handler_add(self)
+        self._status(context)
+        return {"RUNNING_MODAL"}
+
+    def _status(self, context, text=None):
+        workspace = getattr(context, "workspace", None)
+        if workspace is None:
+            return
+        if text is None and self._job is not None and not self._job.done:
+            job = self._job
+            frame, count = job.current_frame, f"{job.index + 1}/{job.total}"
+            text = f"isobar: baking '{job.obj_name}' frame {frame} ({count}), Esc to cancel"
+        workspace.status_text_set(text)
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        workspace = getattr(context, "workspace", None)
+        if workspace is not None:
+            workspace.status_text_set(None)
+        if self._job is not None:
+            try:
+                self._job.finish()
+            except Exception as error:  # noqa: BLE001
+                self.report({"WARNING"}, importer.describe_error(error))
+        if context.area is not None:
+            context.area.tag_redraw()
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS":
+            self._end(context)
+            self.report({"WARNING"}, f"Bake cancelled: {len(job.baked)} of {job.total} frames baked")
+            return {"CANCELLED"}
+        if event.type != "TIMER" or event.timer is not self._timer:
+            return {"PASS_THROUGH"}
+        try:
+            job.step()
+        except Exception as error:  # noqa: BLE001
+            frame = job.current_frame
+            self._end(context)
+            self.report({"ERROR"}, f"Bake stopped at frame {frame}: {importer.describe_error(error)}")
+            return {"CANCELLED"}
+        context.window_manager.progress_update(job.index)
+        if job.done:
+            self._end(context)
+            self.report({"INFO"}, f"Baked {len(job.baked)} frames to {job.folder}")
+            return {"FINISHED"}
+        self._status(context)
+        return {"RUNNING_MODAL"}
+
+
+class ISOBAR_OT_free_bake(bpy.types.Operator):
+    """Delete the baked frames of the fluid surface; playback extracts from the particles again"""
+
+    bl_idname = "isobar.free_bake"
+    bl_label = "Free Bake"
+    bl_options = {"REGISTER", "UNDO"}
+
+    object_name: StringProperty(
+        name="Object", description="Fluid surface (default: the active object)", options={"SKIP_SAVE"}
+    )
+
+    def execute(self, context):
+        obj = _fluid_object(context, self.object_name)
+        if obj is None:
+            self.report({"ERROR"}, "select an isobar fluid surface")
+            return {"CANCELLED"}
+        try:
+            removed = bake.free(obj)
+        except Exception as error:  # noqa: BLE001
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Deleted {removed} baked frames")
+        return {"FINISHED"}
+
+
+def menu_import(self, context):
+    self.layout.operator(ISOBAR_OT_import_sequence.bl_idname, text="SPH Particle Sequence (isobar)")
+
+
+classes = (
+    ISOBAR_OT_import_sequence,
+    ISOBAR_OT_surface_from_object,
+    ISOBAR_OT_refresh,
+    ISOBAR_OT_bake,
+    ISOBAR_OT_free_bake,
+)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.TOPBAR_MT_file_import.append(menu_import)
+
+
+def unregister():
+    bpy.types.TOPBAR_MT_file_import.remove(menu_import)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,157 @@
+"""The sidebar panel: View3D > Sidebar > isobar."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import importer
+
+
+class _Sidebar:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "isobar"
+
+
+def _fluid(context):
+    obj = getattr(context, "active_object", None)
+    return obj if importer.is_fluid(obj) else None
+
+
+class ISOBAR_PT_main(_Sidebar, bpy.types.Panel):
+    bl_label = "Fluid Surface"
+    bl_idname = "ISOBAR_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        col = layout.column(align=True)
+        col.operator("isobar.import_sequence", text="Import Particle Sequence", icon="IMPORT")
+        col.operator("isobar.surface_from_object", text="Surface from Active Object", icon="MOD_FLUIDSIM")
+        obj = _fluid(context)
+        if obj is None:
+            layout.label(text="Select a fluid surface to edit it", icon="INFO")
+            return
+        settings = obj.isobar
+        box = layout.box()
+        box.label(text=obj.name, icon="MOD_FLUIDSIM")
+        if settings.status:
+            row = box.row()
+            row.alert = settings.status_error
+            row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+        row = box.row(align=True)
+        row.operator("isobar.refresh", text="Refresh", icon="FILE_REFRESH")
+        row.prop(settings, "live_update", text="Live", toggle=True)
+
+
+class ISOBAR_PT_source(_Sidebar, bpy.types.Panel):
+    bl_label = "Particles"
+    bl_parent_id = "ISOBAR_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return _fluid(context) is not None
+
+    def draw(self, context):
+        settings = _fluid(context).isobar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "source_type")
+        if settings.source_type == "SEQUENCE":
+            layout.prop(settings, "directory")
+            layout.prop(settings, "pattern")
+            col = layout.column(align=True)
+            col.prop(settings, "file_first", text="Files")
+            col.prop(settings, "file_last", text="To")
+            layout.prop(settings, "frame_offset")
+            layout.prop(settings, "hold")
+        else:
+            layout.prop(settings, "source_object")
+            if settings.source_object is not None and len(settings.source_object.particle_systems):
+                layout.prop(settings, "particle_system")
+
+
+class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
+    bl_label = "Surface"
+    bl_parent_id = "ISOBAR_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return _fluid(context) is not None
+
+    def draw(self, context):
+        settings = _fluid(context).isobar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "field")
+        layout.prop(settings, "iso")
+        layout.prop(settings, "kernel")
+        layout.prop(settings, "h_mode")
+        if settings.h_mode == "ARRAY":
+            layout.prop(settings, "h_array")
+        else:
+            layout.prop(settings, "h")
+        layout.prop(settings, "h_scale")
+        layout.prop(settings, "grid_factor")
+        layout.prop(settings, "correct")
+        layout.prop(settings, "trim")
+        if settings.trim == "CUSTOM":
+            col = layout.column(align=True)
+            col.prop(settings, "trim_node")
+            col.prop(settings, "trim_vertex")
+
+
+class ISOBAR_PT_attributes(_Sidebar, bpy.types.Panel):
+    bl_label = "Attributes"
+    bl_parent_id = "ISOBAR_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return _fluid(context) is not None
+
+    def draw(self, context):
+        settings = _fluid(context).isobar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "attributes")
+        layout.prop(settings, "speed")
+        layout.prop(settings, "velocity_array")
+        layout.prop(settings, "motion_blur")
+        sub = layout.column()
+        sub.active = settings.motion_blur
+        sub.prop(settings, "velocity_scale")
+        layout.label(text="Shader: Attribute node, name sph_<array>", icon="NODE")
+
+
+class ISOBAR_PT_cache(_Sidebar, bpy.types.Panel):
+    bl_label = "Bake"
+    bl_parent_id = "ISOBAR_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return _fluid(context) is not None
+
+    def draw(self, context):
+        settings = _fluid(context).isobar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "cache_directory")
+        layout.prop(settings, "use_cache")
+        if settings.baked_end >= settings.baked_start:
+            layout.label(text=f"Baked frames {settings.baked_start} to {settings.baked_end}", icon="INFO")
+        row = layout.row(align=True)
+        row.operator("isobar.bake", text="Bake", icon="REC")
+        row.operator("isobar.free_bake", text="Free", icon="TRASH")
+
+
+classes = (ISOBAR_PT_main, ISOBAR_PT_source, ISOBAR_PT_surface, ISOBAR_PT_attributes, ISOBAR_PT_cache)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,269 @@
+"""The settings of a fluid-surface object (``object.isobar``), saved in the .blend."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
+
+
+def _changed(self, context):
+    """A parameter changed: re-extract the current frame (errors go to the status)."""
+    from . import importer  # late: avoids an import cycle
+
+    importer.on_settings_changed(self, context)
+
+
+def _field_search(self, context, edit_text):
+    from . import importer
+
+    return importer.field_suggestions(self, edit_text)
+
+
+def _array_search(self, context, edit_text):
+    from . import importer
+
+    return importer.array_suggestions(self, edit_text)
+
+
+def _particle_system_search(self, context, edit_text):
+    source = self.source_object
+    if source is None:
+        return []
+    return [ps.name for ps in source.particle_systems if edit_text.lower() in ps.name.lower()]
+
+
+def _source_poll(self, obj):
+    return obj.type in {"MESH", "POINTCLOUD"} and obj is not self.id_data and not obj.isobar.enabled
+
+
+KERNELS = [
+    ("cubic", "Cubic Spline", "Monaghan's cubic spline, support 2h"),
+    ("wendland", "Wendland C2", "Wendland C2, support 2h"),
+    ("quintic", "Quintic Spline", "Quintic spline, support 3h"),
+    ("quadratic", "Quadratic", "Quadratic kernel, support 2h"),
+]
+
+TRIM_MODES = [
+    ("AUTO", "Auto", "Trim at the free surface except when extracting the free surface itself"),
+    ("OFF", "Off", "No free-surface trimming"),
+    ("ON", "On", "Trim at the free surface with the core's thresholds"),
+    ("CUSTOM", "Custom", "Trim with the thresholds below"),
+]
+
+
+class IsobarSettings(bpy.types.PropertyGroup):
+    """isobar fluid-surface settings of an object."""
+
+    enabled: BoolProperty(
+        name="Fluid Surface", description="This object's mesh is an isobar fluid surface", default=False
+    )
+
+    # -- source ---------------------------------------------------------------------
+    source_type: EnumProperty(
+        name="Source",
+        items=[
+            ("SEQUENCE", "File Sequence", "Numbered particle files on disk"),
+            ("OBJECT", "Scene Object", "Points of a mesh or point cloud, or a particle system, in this scene"),
+        ],
+        default="SEQUENCE",
+        update=_changed,
+    )
+    directory: StringProperty(
+        name="Folder", subtype="DIR_PATH", description="Folder of the particle files", update=_changed
+    )
+    pattern: StringProperty(
+        name="Files",
+        description="File name pattern; a run of # is the frame number, zero padded (frame_####.vtk)",
+        default="frame_####.vtk",
+        update=_changed,
+    )
+    file_first: IntProperty(
+        name="First File", description="Number of the first file of the sequence", default=1, update=_changed
+    )
+    file_last: IntProperty(
+        name="Last File", description="Number of the last file of the sequence", default=1, update=_changed
+    )
+    frame_offset: IntProperty(
+        name="Frame Offset",
+        description="Scene frame = file number + offset",
+        default=0,
+        update=_changed,
+    )
+    hold: BoolProperty(
+        name="Hold Ends",
+        description="Before the first and after the last file show those files (else an empty mesh)",
+        default=True,
+        update=_changed,
+    )
+    source_object: PointerProperty(
+        name="Object",
+        type=bpy.types.Object,
+        poll=_source_poll,
+        description="Mesh or point cloud whose points (and attributes) are the particles, or a particle emitter",
+        update=_changed,
+    )
+    particle_system: StringProperty(
+        name="Particle System",
+        description="Particle system of the object to use (empty: the mesh or point cloud points themselves)",
+        search=_particle_system_search,
+        update=_changed,
+    )
+
+    # -- extraction -----------------------------------------------------------------
+    field: StringProperty(
+        name="Field",
+        description="Particle array to contour ('NAME', 'NAME:mag', 'NAME:K'), or SumOfWeights for the free surface",
+        default="SumOfWeights",
+        search=_field_search,
+        search_options={"SUGGESTION"},
+        update=_changed,
+    )
+    iso: FloatProperty(
+        name="Isovalue",
+        description="Level of the field the surface is drawn at",
+        default=0.6,
+        precision=4,
+        update=_changed,
+    )
+    kernel: EnumProperty(name="Kernel", items=KERNELS, default="cubic", update=_changed)
+    h_mode: EnumProperty(
+        name="Smoothing Length",
+        items=[
+            ("CONSTANT", "Constant", "One smoothing length for every particle"),
+            ("ARRAY", "Per Particle", "A per-particle array holds the smoothing lengths"),
+        ],
+        default="CONSTANT",
+        update=_changed,
+    )
+    h: FloatProperty(
+        name="h",
+        description="Smoothing length (about twice the particle radius)",
+        default=0.05,
+        min=1e-9,
+        soft_min=1e-4,
+        precision=5,
+        subtype="DISTANCE",
+        update=_changed,
+    )
+    h_array: StringProperty(
+        name="h Array",
+        description="Per-particle smoothing length array",
+        default="h",
+        search=_array_search,
+        update=_changed,
+    )
+    h_scale: FloatProperty(
+        name="h Scale",
+        description="Multiplies every smoothing length (0.75 or 0.5 for quick previews)",
+        default=1.0,
+        min=1e-3,
+        soft_max=4.0,
+        update=_changed,
+    )
+    grid_factor: FloatProperty(
+        name="Grid Factor",
+        description="Cell size of the virtual grid in units of the smallest h (smaller: finer mesh)",
+        default=0.5,
+        min=0.01,
+        soft_min=0.1,
+        soft_max=2.0,
+        update=_changed,
+    )
+    correct: BoolProperty(
+        name="Correction",
+        description="Move every vertex onto the level set (off: a faster linear preview)",
+        default=True,
+        update=_changed,
+    )
+    trim: EnumProperty(name="Trimming", items=TRIM_MODES, default="AUTO", update=_changed)
+    trim_node: FloatProperty(
+        name="Node Threshold",
+        description="Sum-of-weights threshold at the grid nodes",
+        default=0.1,
+        min=0.0,
+        update=_changed,
+    )
+    trim_vertex: FloatProperty(
+        name="Vertex Threshold",
+        description="Sum-of-weights level of the trimming surface",
+        default=0.5,
+        min=0.0,
+        update=_changed,
+    )
+
+    # -- attributes -----------------------------------------------------------------
+    attributes: StringProperty(
+        name="Attributes",
+        description="Particle arrays to interpolate onto the vertices, separated by commas ('*': all, 'none': none); "
+        "stored as sph_<name> point attributes",
+        default="*",
+        update=_changed,
+    )
+    speed: BoolProperty(
+        name="Speed",
+        description="Add sph_speed, the SPH-interpolated particle speed |velocity|",
+        default=True,
+        update=_changed,
+    )
+    velocity_array: StringProperty(
+        name="Velocity",
+        description="Particle velocity array",
+        default="velocity",
+        search=_array_search,
+        update=_changed,
+    )
+    motion_blur: BoolProperty(
+        name="Motion Blur Velocities",
+        description="Write the interpolated velocity as the 'velocity' vertex attribute Cycles uses for motion blur",
+        default=True,
+        update=_changed,
+    )
+    velocity_scale: FloatProperty(
+        name="Velocity Scale",
+        description="Multiplies the velocities (units per second of scene time)",
+        default=1.0,
+        update=_changed,
+    )
+
+    # -- cache ----------------------------------------------------------------------
+    cache_directory: StringProperty(
+        name="Cache Folder",
+        subtype="DIR_PATH",
+        description="Folder of baked frames ('//' is the folder of the .blend file)",
+        default="//isobar_cache/",
+    )
+    cache_name: StringProperty(
+        name="Cache Name", description="Subfolder of this object's baked frames (set on the first bake)"
+    )
+    use_cache: BoolProperty(
+        name="Use Bake",
+        description="Play baked frames back (a frame baked with other parameters is extracted again)",
+        default=False,
+        update=_changed,
+    )
+    baked_start: IntProperty(name="Baked From", default=0)
+    baked_end: IntProperty(name="Baked To", default=-1)
+
+    # -- runtime feedback (saved, harmless) -----------------------------------------
+    live_update: BoolProperty(
+        name="Live Update", description="Re-extract the current frame when a parameter changes", default=True
+    )
+    status: StringProperty(name="Status", description="Result of the last update of this surface")
+    status_error: BoolProperty(name="Status Is Error", default=False)
+
+
+def register():
+    bpy.utils.register_class(IsobarSettings)
+    bpy.types.Object.isobar = PointerProperty(type=IsobarSettings)
+
+
+def unregister():
+    del bpy.types.Object.isobar
+    bpy.utils.unregister_class(IsobarSettings)

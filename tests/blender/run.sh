@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# Tests the Blender add-on the way an artist gets it: bpy 5.0.1 from PyPI (headless, in a
+# venv made with this machine's python3, 3.11), the extension zip built by
+# blender-addon/build.sh, installed and enabled by Blender's own extension installer.
+#
+#   bash tests/blender/run.sh [pytest args...]
+#
+# Environment: ISOBAR_BLENDER_VENV (default .venv-blender at the repository root),
+# ISOBAR_BLENDER_PYTHON (interpreter for a new venv, default python3),
+# ISOBAR_BLENDER_BPY (bpy requirement, default bpy==5.0.1), ISOBAR_SKIP_APT=1 (never run
+# apt-get), ISOBAR_TEST_DATA (folder holding splashsurf/, default ../shared/data).
+set -euo pipefail
+root="$(cd "$(dirname "$0")/../.." && pwd)"
+cd "$root"
+
+venv="${ISOBAR_BLENDER_VENV:-$root/.venv-blender}"
+python="${ISOBAR_BLENDER_PYTHON:-python3}"
+bpy_req="${ISOBAR_BLENDER_BPY:-bpy==5.0.1}"
+
+log() { printf '\n== %s\n' "$*"; }
+
+# X client libraries bpy links against even headless (Debian package names).
+packages=(libgl1 libx11-6 libxext6 libxfixes3 libxi6 libxrender1 libxkbcommon0 libsm6 libice6 libxxf86vm1)
+missing=()
+if command -v dpkg-query >/dev/null 2>&1; then
+    for p in "${packages[@]}"; do
+        dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+    done
+fi
+if [ "${#missing[@]}" -gt 0 ] && [ "${ISOBAR_SKIP_APT:-0}" != 1 ]; then
+    log "apt-get install ${missing[*]}"
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+if [ ! -x "$venv/bin/python" ]; then
+    log "venv $venv ($("$python" --version 2>&1))"
+    "$python" -m venv "$venv"
+fi
+if ! "$venv/bin/python" -c 'import bpy, pytest' >/dev/null 2>&1; then
+    log "pip install $bpy_req pytest (bpy brings numpy<2)"
+    "$venv/bin/python" -m pip install -q "$bpy_req" pytest
+fi
+"$venv/bin/python" -c 'import bpy, numpy, sys; print("bpy", bpy.app.version_string, "numpy", numpy.__version__, "python", sys.version.split()[0])'
+
+log "build the extension (blender-addon/build.sh)"
+zip="$(PYTHON="$python" bash "$root/blender-addon/build.sh")"
+echo "$zip"
+
+log "pytest tests/blender"
+export ISOBAR_BLENDER_ZIP="$zip"
+unset ISOBAR_LIBRARY
+cd "$root/tests/blender"
+exec "$venv/bin/python" -m pytest -ra -p no:cacheprovider "$@" .

@@ -1,0 +1,228 @@
+"""Importing particle sequences, stepping frames, parameters, attributes and errors."""
+
+import struct
+
+import bpy
+import numpy as np
+import pytest
+from conftest import (
+    FRAME_01,
+    FRAME_26,
+    GRID_FACTOR,
+    ISO,
+    H,
+    assert_mesh_equals,
+    attribute,
+    make_sequence,
+    mesh_arrays,
+    reference,
+)
+
+
+def import_sequence(path, **kwargs):
+    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
+    params.update(kwargs)
+    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
+    obj = bpy.context.active_object
+    assert obj.isobar.enabled
+    return obj
+
+
+def test_import_and_step_frames(scene, isobar, demo_sequence):
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    assert settings.pattern == "frame_####.vtk"
+    assert (settings.file_first, settings.file_last) == (1, 3)
+    assert (scene.frame_start, scene.frame_end) == (1, 3)
+    references = [reference(isobar, p) for p in demo_sequence]
+    for frame in (1, 2, 3, 2, 1):
+        scene.frame_set(frame)
+        assert not settings.status_error, settings.status
+        assert_mesh_equals(obj, references[frame - 1])
+        assert f"Frame {frame}:" in settings.status
+    assert references[0].n_points != references[1].n_points  # the frames do differ
+
+
+def test_smooth_shading_custom_normals_and_attributes(scene, isobar, demo_sequence):
+    obj = import_sequence(demo_sequence[1])
+    scene.frame_set(2)
+    ref = reference(isobar, demo_sequence[1], attributes=["velocity"])
+    mesh = obj.data
+    assert_mesh_equals(obj, ref)
+    smooth = np.empty(len(mesh.polygons), bool)
+    mesh.polygons.foreach_get("use_smooth", smooth)
+    assert smooth.all()
+    assert mesh.has_custom_normals
+    corner = np.empty(len(mesh.loops) * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", corner)
+    corner = corner.reshape(-1, 3)
+    sph = ref.normals[ref.triangles.ravel()]
+    assert np.einsum("ij,ij->i", corner, sph).min() > 0.9999
+    # SPH attributes for the shader's Attribute node, prefixed; velocity for motion blur.
+    names = set(mesh.attributes.keys())
+    assert {"sph_SumOfWeights", "sph_speed", "velocity"} <= names, names
+    assert not {"speed", "SumOfWeights", "id", "sph_id"} & names
+    sow = attribute(obj, "sph_SumOfWeights")
+    np.testing.assert_array_equal(sow, ref.attributes["SumOfWeights"].astype(np.float32))
+    np.testing.assert_array_equal(attribute(obj, "velocity"), ref.attributes["velocity"].astype(np.float32))
+    assert mesh.attributes["velocity"].data_type == "FLOAT_VECTOR" and mesh.attributes["velocity"].domain == "POINT"
+    # sph_speed interpolates the particles' |v| (between 0 and the largest particle speed).
+    speed = attribute(obj, "sph_speed")
+    vmax = np.linalg.norm(isobar.Particles.read(str(demo_sequence[1])).array("velocity"), axis=1).max()
+    assert speed.min() >= 0 and 0 < speed.max() <= vmax * 1.0001
+    assert obj.active_material is not None
+
+
+def test_parameter_change_reextracts(scene, isobar, demo_sequence):
+    obj = import_sequence(demo_sequence[0])
+    scene.frame_set(2)
+    settings = obj.isobar
+    path = demo_sequence[1]
+    settings.iso = 0.5
+    assert_mesh_equals(obj, reference(isobar, path, iso=0.5))
+    settings.h_scale = 1.2
+    assert_mesh_equals(obj, reference(isobar, path, iso=0.5, h_scale=1.2))
+    settings.grid_factor = 0.5
+    assert_mesh_equals(obj, reference(isobar, path, iso=0.5, h_scale=1.2, grid_factor=0.5))
+    settings.kernel = "wendland"
+    assert_mesh_equals(obj, reference(isobar, path, iso=0.5, h_scale=1.2, grid_factor=0.5, kernel="wendland"))
+    settings.correct = False
+    assert_mesh_equals(
+        obj, reference(isobar, path, iso=0.5, h_scale=1.2, grid_factor=0.5, kernel="wendland", correct=False)
+    )
+    settings.trim = "CUSTOM"
+    settings.trim_node, settings.trim_vertex = 0.1, 0.5
+    expected = reference(
+        isobar, path, iso=0.5, h_scale=1.2, grid_factor=0.5, kernel="wendland", correct=False, trim=(0.1, 0.5)
+    )
+    assert_mesh_equals(obj, expected)
+    # Another field: the magnitude of the velocity, trimmed at the free surface.
+    settings.correct, settings.trim, settings.kernel, settings.h_scale, settings.grid_factor = (
+        True,
+        "AUTO",
+        "cubic",
+        1.0,
+        0.5,
+    )
+    settings.field = "velocity:mag"
+    settings.iso = 1.5
+    assert not settings.status_error, settings.status
+    expected = reference(isobar, path, iso=1.5, grid_factor=0.5, field="velocity:mag")
+    assert expected.n_points > 1000
+    assert_mesh_equals(obj, expected)
+    settings.iso = 0.5
+    # Live update off: no re-extraction until refreshed.
+    settings.live_update = False
+    before = mesh_arrays(obj)[0].shape
+    settings.field = "SumOfWeights"
+    assert mesh_arrays(obj)[0].shape == before
+    assert bpy.ops.isobar.refresh() == {"FINISHED"}
+    assert_mesh_equals(obj, reference(isobar, path, iso=0.5, grid_factor=0.5))
+
+
+def test_frame_offset_and_hold(scene, isobar, demo_sequence):
+    obj = import_sequence(demo_sequence[0], frame_offset=10)
+    assert (scene.frame_start, scene.frame_end) == (11, 13)
+    first, second = reference(isobar, demo_sequence[0]), reference(isobar, demo_sequence[1])
+    scene.frame_set(12)
+    assert_mesh_equals(obj, second)
+    scene.frame_set(5)  # before the sequence: the first file
+    assert_mesh_equals(obj, first)
+    scene.frame_set(40)  # after it: the last file (frame 3 = dam break frame 1)
+    assert_mesh_equals(obj, first)
+    obj.isobar.hold = False
+    assert len(obj.data.vertices) == 0 and not obj.isobar.status_error
+    scene.frame_set(12)
+    assert_mesh_equals(obj, second)
+
+
+def _write_ply(path, positions, velocity):
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {len(positions)}\n"
+        "property double x\nproperty double y\nproperty double z\n"
+        "property float vx\nproperty float vy\nproperty float vz\nend_header\n"
+    ).encode()
+    rows = np.zeros(len(positions), dtype=[("p", "<f8", 3), ("v", "<f4", 3)])
+    rows["p"], rows["v"] = positions, velocity
+    path.write_bytes(header + rows.tobytes())
+
+
+@pytest.mark.parametrize("fmt", ["npz", "ply", "bgeo"])
+def test_other_formats(scene, isobar, tmp_path, fmt):
+    folder = tmp_path / fmt
+    folder.mkdir()
+    if fmt == "bgeo":
+        data = FRAME_01.parent
+        paths = make_sequence(
+            folder,
+            [data / "dam_break_frame_9_6859_particles.bgeo", data / "dam_break_frame_23_24389_particles.bgeo"],
+            "frame_{:04d}.bgeo",
+        )
+    else:
+        paths = []
+        for i, src in enumerate([FRAME_01, FRAME_26], start=1):
+            particles = isobar.Particles.read(str(src))
+            path = folder / f"frame_{i:04d}.{fmt}"
+            if fmt == "npz":
+                np.savez(path, positions=particles.positions, velocity=particles.array("velocity"))
+            else:
+                _write_ply(path, particles.positions, particles.array("velocity"))
+            paths.append(path)
+    obj = import_sequence(paths[0])
+    assert obj.isobar.pattern == f"frame_####.{fmt}"
+    for frame, path in enumerate(paths, start=1):
+        scene.frame_set(frame)
+        assert not obj.isobar.status_error, obj.isobar.status
+        assert_mesh_equals(obj, reference(isobar, path))
+        names = isobar.Particles.read(str(path)).names
+        has_velocity = "velocity" in names or "vx" in names  # PLY: vx, vy, vz joined
+        assert ("velocity" in obj.data.attributes) == has_velocity
+        assert ("sph_speed" in obj.data.attributes) == has_velocity
+    if fmt == "npz":  # same particles as the VTK files: same surfaces
+        assert_mesh_equals(obj, reference(isobar, FRAME_26))
+
+
+def test_missing_file_reports_and_keeps_last_good_mesh(scene, isobar, demo_sequence):
+    obj = import_sequence(demo_sequence[0])
+    first = reference(isobar, demo_sequence[0])
+    demo_sequence[1].unlink()  # frame_0002.vtk disappears
+    scene.frame_set(2)  # no exception from the handler
+    assert obj.isobar.status_error
+    assert "frame_0002.vtk" in obj.isobar.status
+    assert_mesh_equals(obj, first)  # the mesh of the last good frame
+    # An operator reports it (a script sees the report as RuntimeError).
+    with pytest.raises(RuntimeError, match="frame_0002.vtk"):
+        bpy.ops.isobar.refresh()
+    assert_mesh_equals(obj, first)
+    scene.frame_set(3)  # the next good frame shows again
+    assert not obj.isobar.status_error
+    assert_mesh_equals(obj, reference(isobar, demo_sequence[2]))
+
+
+def test_bad_parameters_report_and_keep_mesh(scene, isobar, demo_sequence):
+    obj = import_sequence(demo_sequence[0])
+    first = reference(isobar, demo_sequence[0])
+    obj.isobar.field = "no_such_array"
+    assert obj.isobar.status_error and "no_such_array" in obj.isobar.status
+    assert_mesh_equals(obj, first)
+    obj.isobar.field = "SumOfWeights"
+    obj.isobar.h_mode = "ARRAY"
+    obj.isobar.h_array = "hsml"
+    assert obj.isobar.status_error and "hsml" in obj.isobar.status
+    assert_mesh_equals(obj, first)
+    obj.isobar.h_mode = "CONSTANT"
+    assert not obj.isobar.status_error
+    assert_mesh_equals(obj, first)
+
+
+def test_import_errors_are_reported(scene, tmp_path):
+    with pytest.raises(RuntimeError, match="not found"):
+        bpy.ops.isobar.import_sequence(filepath=str(tmp_path / "frame_0001.vtk"))
+    bad = tmp_path / "frame_0001.vtk"
+    bad.write_bytes(struct.pack("<4d", 1, 2, 3, 4))
+    with pytest.raises(RuntimeError):
+        bpy.ops.isobar.import_sequence(filepath=str(bad))
+    assert len(bpy.data.objects) == 0  # nothing half-made is left behind
+    with pytest.raises(RuntimeError, match="frame number"):
+        bpy.ops.isobar.import_sequence(filepath=str(FRAME_01.parent / "LICENSE"))
