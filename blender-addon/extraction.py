@@ -201,22 +201,8 @@ def _isobar_kwargs(params: Params) -> dict:
 
 
 def array_infos(particles) -> List[Tuple[str, int]]:
-    """(name, components) of the particle arrays.
-
-    isobar.Particles has no public call for the component counts: use its internal listing
-    when there, else copy each array once to learn its shape.
-    """
-    infos = getattr(particles, "_infos", None)
-    if callable(infos):
-        try:
-            return [(str(n), int(k)) for n, k in infos()]
-        except Exception:  # noqa: BLE001 - fall back to the public API
-            pass
-    out = []
-    for name in particles.names:
-        values = particles.array(name)
-        out.append((name, 1 if values.ndim == 1 else int(values.shape[1])))
-    return out
+    """(name, components) of the particle arrays."""
+    return [(str(n), int(k)) for n, k in particles.infos()]
 
 
 def extract(particles, params: Params, progress: Optional[ProgressFn] = None) -> FrameMesh:

@@ -29,14 +29,14 @@ impl NodeValues for DenseNodes {
 }
 
 /// Extracts the isosurfaces by full-grid resampling and marching cubes. Refuses, before
-/// allocating, a grid over `memory_budget` bytes.
+/// allocating, a grid over `params.memory_budget` bytes.
 pub fn extract(
     field: &SphField,
     data: &ParticleData,
     params: &Params,
-    memory_budget: u64,
     progress: &mut Progress,
 ) -> Result<Extraction> {
+    let memory_budget = params.memory_budget;
     params.validate()?;
     let start = Instant::now();
     let grid = virtual_grid(field, params)?;

@@ -209,7 +209,7 @@ fn preview_equals_the_full_grid_baseline() {
     };
     let field = SphField::new(&data, &s).unwrap();
     let mc = correctors::extract(&field, &data, &p, &mut Progress::none()).unwrap();
-    let full = baseline::extract(&field, &data, &p, 1 << 30, &mut Progress::none()).unwrap();
+    let full = baseline::extract(&field, &data, &p, &mut Progress::none()).unwrap();
     assert!(mc.mesh.triangles.len() > 100);
     assert_eq!(mc.mesh.positions, full.mesh.positions);
     assert_eq!(mc.mesh.triangles, full.mesh.triangles);
@@ -423,9 +423,24 @@ fn bad_input_gets_a_clear_error() {
         &Params {
             isovalues: vec![1.0],
             grid_factor: 0.01,
+            memory_budget: 1 << 20,
             ..Params::default()
         },
-        1 << 20,
+        &mut Progress::none(),
+    )
+    .unwrap_err();
+    assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+    // Marching Correctors stores no grid, but a surface far too fine for the budget is
+    // refused during tracking, before any vertex is built.
+    let err = correctors::extract(
+        &field,
+        &good,
+        &Params {
+            isovalues: vec![500.0],
+            grid_factor: 0.01,
+            memory_budget: 1 << 20,
+            ..Params::default()
+        },
         &mut Progress::none(),
     )
     .unwrap_err();

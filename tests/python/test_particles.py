@@ -89,3 +89,10 @@ def test_closed_particles_refuse_use():
     with pytest.raises(isobar.InvalidArgumentError, match="closed"):
         len(p)
     p.close()  # twice is fine
+
+
+def test_infos_lists_names_and_components():
+    p = isobar.Particles.from_arrays(
+        np.zeros((4, 3)), pressure=np.arange(4.0), velocity=np.ones((4, 3))
+    )
+    assert dict(p.infos()) == {"pressure": 1, "velocity": 3}

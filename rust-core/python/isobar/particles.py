@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import weakref
 from ctypes import POINTER, byref, c_char_p, c_double, c_float, c_size_t
-from typing import Dict, Iterator, List, Mapping, Optional
+from typing import Dict, Iterator, List, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -117,9 +117,10 @@ class Particles:
     @property
     def names(self) -> List[str]:
         """Names of the per-particle arrays, in the core's order."""
-        return [name for name, _ in self._infos()]
+        return [name for name, _ in self.infos()]
 
-    def _infos(self):
+    def infos(self) -> List[Tuple[str, int]]:
+        """(name, components) of each per-particle array, in the core's order."""
         self._check_open()
         out = []
         name = c_char_p()
@@ -144,7 +145,7 @@ class Particles:
             isobar.InvalidInputError: no such array (the message lists those there are).
         """
         self._check_open()
-        components = dict(self._infos()).get(name)
+        components = dict(self.infos()).get(name)
         n = len(self)
         if components is None:
             # Let the core word the error (it lists the arrays there are).
@@ -173,7 +174,7 @@ class Particles:
     def __repr__(self) -> str:
         if self._handle is None:
             return "<isobar.Particles (closed)>"
-        return f"<isobar.Particles {len(self)} particles, arrays {self._infos()}>"
+        return f"<isobar.Particles {len(self)} particles, arrays {self.infos()}>"
 
     # -- lifetime ---------------------------------------------------------------------
 

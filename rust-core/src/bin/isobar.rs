@@ -219,6 +219,7 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Params {
         Some(Trim::default())
     };
     Params {
+        memory_budget: (args.memory_budget * (1u64 << 30) as f64) as u64,
         isovalues: args.iso.clone(),
         grid_factor: args.grid_factor,
         correct: !args.preview,
@@ -390,7 +391,7 @@ fn extract(
     };
     progress.window(0.1, 1.0);
     let result = if full_grid {
-        baseline::extract(&field, data, params, settings.memory_budget, &mut progress)
+        baseline::extract(&field, data, params, &mut progress)
     } else {
         correctors::extract(&field, data, params, &mut progress)
     };

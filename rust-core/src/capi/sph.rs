@@ -230,6 +230,7 @@ fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), crate::Error> 
         memory_budget: p.memory_budget,
     };
     let params = Params {
+        memory_budget: p.memory_budget,
         lattice: (p.fixed_lattice != 0).then_some(Lattice {
             origin: DVec3::from(p.lattice_origin),
             cell_size: p.lattice_cell_size,
@@ -280,7 +281,7 @@ pub extern "C" fn isobar_sph_extract(
         let field = SphField::build(data, &sph, &mut sink)?;
         sink.window(0.1, 1.0);
         let extraction = if p.full_grid != 0 {
-            crate::baseline::extract(&field, data, &params, sph.memory_budget, &mut sink)?
+            crate::baseline::extract(&field, data, &params, &mut sink)?
         } else {
             correctors::extract(&field, data, &params, &mut sink)?
         };

@@ -71,6 +71,10 @@ pub struct Params {
     /// Keep only the surface in cells whose lowest corner lies in the half-open box
     /// `[min, max)`; the surface is still tracked through every particle given (the halo).
     pub clip: Option<(DVec3, DVec3)>,
+    /// Bytes the extraction may use. The surface's size is unknown until it is tracked, so
+    /// tracking stops with `OverBudget` as soon as what it found would need more (a grid
+    /// factor far too fine, say), before building any vertex.
+    pub memory_budget: u64,
 }
 
 impl Default for Params {
@@ -85,6 +89,7 @@ impl Default for Params {
             attributes: vec![],
             lattice: None,
             clip: None,
+            memory_budget: crate::field::DEFAULT_MEMORY_BUDGET,
         }
     }
 }
@@ -282,6 +287,7 @@ pub fn extract(
             iso,
             node_threshold,
             &mut cache,
+            params.memory_budget,
             progress,
         )?;
         clip_cells(&grid, &mut tracked.active, params);

@@ -8,7 +8,7 @@
 //! result does not depend on the order or on the thread count.
 
 use super::cache::NodeCache;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::field::sph::SphField;
 use crate::mc::{case_index, case_table, ActiveCell, VirtualGrid};
 use crate::progress::Progress;
@@ -34,6 +34,13 @@ enum Visit {
     Discarded,
 }
 
+/// Bytes an extraction will need for what tracking has found: cached nodes (key and
+/// sample, with hash-table slack), visited cells, and per active cell its share of edges,
+/// placed vertices, triangles and the output mesh.
+fn estimated_bytes(cached_nodes: usize, visited: usize, active: usize) -> u64 {
+    cached_nodes as u64 * 40 + visited as u64 * 16 + active as u64 * 240
+}
+
 /// Walks the surface `iso` from `seeds` (sorted, unique).
 pub fn track(
     field: &SphField,
@@ -42,6 +49,7 @@ pub fn track(
     iso: f64,
     node_threshold: Option<f64>,
     cache: &mut NodeCache,
+    memory_budget: u64,
     progress: &mut Progress,
 ) -> Result<Tracked> {
     let table = case_table();
@@ -92,6 +100,18 @@ pub fn track(
             }
         }
         next.par_sort_unstable();
+        let needed = estimated_bytes(cache.len(), visited.len(), out.active.len());
+        if needed > memory_budget {
+            return Err(Error::OverBudget {
+                what: format!(
+                    "the surface at this grid resolution ({} cells found so far, {} still to visit)",
+                    out.active.len(),
+                    next.len()
+                ),
+                needed_bytes: needed,
+                budget_bytes: memory_budget,
+            });
+        }
         frontier = next;
         is_seed_wave = false;
         let seen = out.visited as f64;
