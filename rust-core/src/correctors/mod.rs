@@ -279,17 +279,7 @@ pub fn extract(
 
         progress.phase("surface tracking", at(0.1), at(0.5))?;
         let t = Instant::now();
-        let node_threshold = params.trim.map(|t| t.node);
-        let mut tracked = tracking::track(
-            field,
-            &grid,
-            seeds,
-            iso,
-            node_threshold,
-            &mut cache,
-            params.memory_budget,
-            progress,
-        )?;
+        let mut tracked = tracking::track(field, &grid, seeds, iso, params, &mut cache, progress)?;
         clip_cells(&grid, &mut tracked.active, params);
         stats.non_intersected_seeds += tracked.non_intersected_seeds;
         stats.discarded_cells += tracked.discarded;

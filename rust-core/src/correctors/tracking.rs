@@ -8,6 +8,7 @@
 //! result does not depend on the order or on the thread count.
 
 use super::cache::NodeCache;
+use super::Params;
 use crate::error::{Error, Result};
 use crate::field::sph::SphField;
 use crate::mc::{case_index, case_table, ActiveCell, VirtualGrid};
@@ -41,17 +42,19 @@ fn estimated_bytes(cached_nodes: usize, visited: usize, active: usize) -> u64 {
     cached_nodes as u64 * 40 + visited as u64 * 16 + active as u64 * 240
 }
 
-/// Walks the surface `iso` from `seeds` (sorted, unique).
+/// Walks the surface `iso` from `seeds` (sorted, unique), discarding cells below the
+/// node threshold of `params.trim` and stopping at `params.memory_budget`.
 pub fn track(
     field: &SphField,
     grid: &VirtualGrid,
     seeds: Vec<u64>,
     iso: f64,
-    node_threshold: Option<f64>,
+    params: &Params,
     cache: &mut NodeCache,
-    memory_budget: u64,
     progress: &mut Progress,
 ) -> Result<Tracked> {
+    let node_threshold = params.trim.map(|t| t.node);
+    let memory_budget = params.memory_budget;
     let table = case_table();
     let mut out = Tracked::default();
     let mut visited: FxHashSet<u64> = seeds.iter().copied().collect();
