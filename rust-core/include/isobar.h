@@ -28,13 +28,6 @@
 // Kernel: Johnson's quadratic kernel (support 2h).
 #define ISOBAR_KERNEL_QUADRATIC 3
 
-// Least half-width, in cells, of the stretch of a segment seeded around its estimated
-// crossing.
-#define WINDOW_CELLS 2.0
-
-// Least half-width, as a fraction of the segment, of that stretch.
-#define WINDOW_FRACTION 0.35
-
 // Status of a fallible call.
 typedef enum IsobarStatus {
   ISOBAR_STATUS_OK = 0,

@@ -33,9 +33,9 @@ use rayon::prelude::*;
 
 /// Least half-width, in cells, of the stretch of a segment seeded around its estimated
 /// crossing.
-pub const WINDOW_CELLS: f64 = 2.0;
+pub(crate) const WINDOW_CELLS: f64 = 2.0;
 /// Added to the kernel's linear-crossing error, as a fraction of the segment.
-pub const WINDOW_MARGIN: f64 = 0.05;
+pub(crate) const WINDOW_MARGIN: f64 = 0.05;
 
 /// The smoothed field at each particle (grid-slot order), for [`seed_cells`].
 pub fn smoothed_at_particles(field: &SphField) -> Vec<f64> {
