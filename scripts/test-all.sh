@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the tests need (apt, pip, cargo) and runs every test: the Rust core, the C
-# ABI from C, the Python package with pyvista, the VTK module and ParaView plugin, the
-# Blender add-on. On a fresh Debian 12 machine with the Rust
+# ABI from C, the Python package with pyvista, the USD writer, the VTK module and ParaView
+# plugin, the Blender add-on. On a fresh Debian 12 machine with the Rust
 # toolchain (rustup) and CPython 3.11; run as root so apt can install.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -47,6 +47,9 @@ cargo test --workspace --release --no-fail-fast 2>&1 | tee -a "$results"
 
 log "python tests"
 bash tests/python/run.sh 2>&1 | tee -a "$results"
+
+log "USD writer tests (usd-core from PyPI, in the Python tests' venv)"
+ISOBAR_USD_SKIP_CORE=1 bash tests/usd/run.sh 2>&1 | tee -a "$results"
 
 log "VTK module and ParaView plugin tests (installs Debian VTK 9.1 / ParaView 5.11)"
 bash tests/vtk/run.sh 2>&1 | tee -a "$results"

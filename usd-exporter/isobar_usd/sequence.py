@@ -1,0 +1,836 @@
+"""Frames and sequences: extraction (through the isobar package), one layer per frame,
+value clips joining them, parallel writers, atomic commits."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import multiprocessing
+import os
+import re
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _atomic
+from .errors import Error, InputError, StitchError, frame_error
+from .frames import expand_sequence, frame_number, is_pattern, parse_frame_selection
+from .layers import (
+    MeshLayer,
+    StageSettings,
+    check_output_path,
+    merge_schema,
+    read_record,
+    write_clips_root,
+    write_manifest,
+)
+from .mesh import CORE_ATTRIBUTES, VELOCITY_ARRAY, FrameMesh, SchemaEntry, to_mesh
+
+#: File name of the clip manifest inside a sequence's clips folder.
+MANIFEST = "manifest.usda"
+_LOCK = ".lock"
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+# -- where things go ------------------------------------------------------------------
+
+
+def clips_folder(output: PathLike) -> Path:
+    """The folder holding a sequence's frame layers: ``fluid.usd`` -> ``fluid.clips/``."""
+    output = Path(output)
+    return output.with_name(output.stem + ".clips")
+
+
+def _frame_text(frame: int) -> str:
+    return f"-{abs(frame):04d}" if frame < 0 else f"{frame:04d}"
+
+
+def clip_path(output: PathLike, frame: int) -> Path:
+    """The frame layer of `frame` in the sequence `output`:
+    ``fluid.usd``, 12 -> ``fluid.clips/fluid.0012.usdc``."""
+    output = Path(output)
+    return clips_folder(output) / f"{output.stem}.{_frame_text(int(frame))}.usdc"
+
+
+def _committed_clips(output: Path) -> Dict[int, Path]:
+    """Frame number -> frame layer, for the layers in the clips folder."""
+    folder = clips_folder(output)
+    pattern = re.compile(rf"^{re.escape(output.stem)}\.(-?[0-9]+)\.usdc$")
+    found: Dict[int, Path] = {}
+    try:
+        names = os.listdir(folder)
+    except FileNotFoundError:
+        return found
+    for name in names:
+        match = pattern.match(name)
+        if match:
+            frame = int(match.group(1))
+            if frame in found:  # fluid.0012 and fluid.012: keep the canonical name
+                if found[frame].name != clip_path(output, frame).name:
+                    found[frame] = folder / name
+                continue
+            found[frame] = folder / name
+    return found
+
+
+# -- stopping ------------------------------------------------------------------------
+
+_STOP = threading.Event()
+
+
+def request_stop() -> None:
+    """Asks a running write to stop as soon as it can (safe to call from a signal
+    handler): the extraction in progress is cancelled through the core's progress
+    callback, the frame being written is finished, then KeyboardInterrupt unwinds the write
+    (staged files removed, the previous stage intact). The command line calls this on
+    SIGTERM and on the first Ctrl-C. A request made while no write runs stops the next."""
+    _STOP.set()
+
+
+def _check_stop() -> None:
+    if _STOP.is_set():
+        _STOP.clear()  # one request stops one write
+        raise KeyboardInterrupt
+
+
+# -- extraction options ---------------------------------------------------------------
+
+
+def _extract_parameters() -> List[str]:
+    import isobar
+
+    skip = {"particles", "iso", "progress"}
+    return [p for p in inspect.signature(isobar.extract).parameters if p not in skip]
+
+
+def check_extract_options(options: Mapping[str, Any]) -> Dict[str, Any]:
+    """The options for :func:`isobar.extract`; unknown names raise InputError."""
+    allowed = _extract_parameters()
+    unknown = [k for k in options if k not in allowed]
+    if unknown:
+        raise InputError(
+            f"unknown extraction option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} "
+            f"(isobar.extract takes {', '.join(allowed)})"
+        )
+    out = dict(options)
+    attributes = out.get("attributes")
+    if isinstance(attributes, (str, bytes)):
+        out["attributes"] = [attributes]
+    elif attributes is not None:
+        out["attributes"] = list(attributes)
+    return out
+
+
+@dataclass
+class Job:
+    """Everything a process needs to turn one frame into one layer (picklable)."""
+
+    iso: Optional[List[float]]
+    options: Dict[str, Any]
+    velocities: Union[str, None]
+    primvars: Union[str, None, List[str]]
+    settings: StageSettings
+
+    def describe(self) -> str:
+        return json.dumps({"iso": self.iso, **self.options}, default=str, sort_keys=True)
+
+
+def _isovalues(iso) -> Optional[List[float]]:
+    if iso is None:
+        return None
+    if isinstance(iso, str):
+        try:
+            return [float(v) for v in iso.split(",") if v.strip()]
+        except ValueError:
+            raise InputError(f"iso must be numbers, got '{iso}'") from None
+    try:
+        values = [float(v) for v in (iso if isinstance(iso, (list, tuple)) else np.atleast_1d(iso).ravel())]
+    except (TypeError, ValueError):
+        raise InputError(f"iso must be a number or a sequence of numbers, got {iso!r}") from None
+    if not values:
+        raise InputError("iso: give at least one isovalue")
+    return values
+
+
+def _velocity_option(velocities):
+    if velocities is None or velocities is False:
+        return None
+    if velocities is True:
+        return "auto"
+    if isinstance(velocities, str):
+        if velocities:
+            return velocities
+    elif hasattr(velocities, "__len__"):
+        return velocities  # an (n, 3) array, for one in-memory frame
+    raise InputError(f"velocities must be 'auto', an array name, an (n, 3) array or None, got {velocities!r}")
+
+
+def _primvar_option(primvars) -> Union[str, None, List[str]]:
+    if primvars is None or (isinstance(primvars, str) and primvars == "auto"):
+        return primvars
+    if isinstance(primvars, str):
+        return [primvars]
+    return list(primvars)
+
+
+def make_job(iso, extract_options, velocities, primvars, settings: StageSettings) -> Job:
+    if extract_options.get("h") is not None and extract_options.get("h_array") is not None:
+        raise InputError("give either h or h_array, not both")
+    return Job(
+        iso=_isovalues(iso),
+        options=check_extract_options(extract_options),
+        velocities=_velocity_option(velocities),
+        primvars=_primvar_option(primvars),
+        settings=settings,
+    )
+
+
+# -- one frame ------------------------------------------------------------------------
+
+
+def _is_path(item) -> bool:
+    return isinstance(item, (str, os.PathLike))
+
+
+def _label(item) -> str:
+    if _is_path(item):
+        return os.fspath(item)
+    name = type(item).__name__
+    return f"in-memory {name}"
+
+
+def extract_file(path: PathLike, job: Job) -> FrameMesh:
+    """Reads a particle file, extracts the isosurface, converts it for USD."""
+    import isobar
+
+    path = os.fspath(path)
+    if job.iso is None:
+        raise InputError("iso is needed to extract a surface from particle files")
+    if not os.path.exists(path):
+        raise InputError(f"no such particle file: {path}")
+    if not os.path.isfile(path):
+        raise InputError(f"not a file: {path}")
+    particles = isobar.Particles.read(path)
+    try:
+        infos = dict(particles.infos())
+        options = dict(job.options)
+        attributes = list(options.pop("attributes", None) or [])
+        velocity = None
+        if job.velocities is not None and not isinstance(job.velocities, str):
+            raise InputError("a velocities array applies to in-memory surfaces, not to particle files")
+        if job.velocities == "auto":
+            velocity = VELOCITY_ARRAY if infos.get(VELOCITY_ARRAY) == 3 else None
+        elif job.velocities is not None:
+            if job.velocities not in infos:
+                raise InputError(
+                    f"no particle array '{job.velocities}' for velocities "
+                    f"(arrays: {', '.join(infos) or 'none'})"
+                )
+            if infos[job.velocities] != 3:
+                raise InputError(
+                    f"particle array '{job.velocities}' has {infos[job.velocities]} components; "
+                    "velocities need 3"
+                )
+            velocity = job.velocities
+        if job.primvars == "auto":
+            primvars = list(attributes) + (["Isovalue"] if len(job.iso) > 1 else [])
+        elif job.primvars is None:
+            primvars = []
+        else:
+            primvars = list(job.primvars)
+        wanted = list(attributes)
+        for name in primvars + ([velocity] if velocity else []):
+            if name not in wanted and name not in CORE_ATTRIBUTES:
+                wanted.append(name)
+        try:
+            surface = isobar.extract(
+                particles, job.iso, attributes=wanted, progress=lambda _f, _p: not _STOP.is_set(), **options
+            )
+        except isobar.Cancelled:
+            _check_stop()
+            raise
+    finally:
+        particles.close()
+    try:
+        return to_mesh(surface, primvars=primvars, velocities=velocity)
+    finally:
+        surface.release()
+
+
+def produce(item, job: Job) -> FrameMesh:
+    """A FrameMesh from a particle file (extracting it) or an in-memory surface."""
+    if _is_path(item):
+        return extract_file(item, job)
+    return to_mesh(item, primvars=job.primvars if job.primvars is not None else (), velocities=job.velocities)
+
+
+def _frame_info(item, job: Job, mesh: FrameMesh) -> Dict[str, Any]:
+    info: Dict[str, Any] = {"source": _label(item), "points": mesh.n_points, "triangles": mesh.n_triangles}
+    if _is_path(item):
+        info["extraction"] = job.describe()
+    return info
+
+
+def write_clip(frame: int, item, staged: PathLike, job: Job) -> Dict[str, Any]:
+    """Extracts/converts one frame and writes its layer to `staged` (not atomically:
+    `staged` is itself a staging file). Returns a summary."""
+    t0 = time.perf_counter()
+    mesh = produce(item, job)
+    info = _frame_info(item, job, mesh)
+    layer = MeshLayer(job.settings, info)
+    try:
+        layer.add(mesh, frame)
+        del mesh
+        layer.export(Path(staged), atomic=False)
+    finally:
+        layer.release()
+    info["seconds"] = time.perf_counter() - t0
+    return info
+
+
+def _worker_init(jobs: int) -> None:
+    # Ctrl-C reaches the whole process group: the parent stops the pool, workers must not
+    # die half way through a task on their own (the pool would wait for it forever).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Each worker extracts with the core's threads (rayon); share the cores between them.
+    if "RAYON_NUM_THREADS" not in os.environ and jobs > 1:
+        os.environ["RAYON_NUM_THREADS"] = str(max(1, (os.cpu_count() or 1) // jobs))
+
+
+def _pool_task(task):
+    frame, item, staged, job = task
+    try:
+        return frame, write_clip(frame, item, staged, job), None
+    except Exception as e:  # noqa: BLE001 - sent back to the parent, which raises it
+        _atomic.discard(Path(staged))
+        try:
+            import pickle
+
+            pickle.loads(pickle.dumps(e))
+            return frame, None, e
+        except Exception:  # noqa: BLE001
+            return frame, None, Error(f"{type(e).__name__}: {e}")
+
+
+# -- frame sources --------------------------------------------------------------------
+
+
+@dataclass
+class FrameEntry:
+    number: int
+    item: Any
+
+
+def _frame_entries(source) -> Tuple[Iterator[FrameEntry], Optional[int], str]:
+    """(entries, count or None, description) for a pattern, a list of files, a mapping
+    frame -> item or an iterable of (frame, item) pairs."""
+    if _is_path(source):
+        text = os.fspath(source)
+        if not text:
+            raise InputError("empty frame pattern")
+        if not is_pattern(text) and not os.path.exists(text):
+            raise InputError(f"no such particle file: {text}")
+        paths = expand_sequence(text)
+        numbers = [frame_number(p) for p in paths]
+        if len(paths) == 1 and numbers[0] is None:
+            numbers = [0]
+        return _numbered(paths, numbers, text), len(paths), text
+    if isinstance(source, Mapping):
+        entries = [FrameEntry(_as_frame(k), v) for k, v in source.items()]
+        _no_duplicates(e.number for e in entries)
+        entries.sort(key=lambda e: e.number)
+        return iter(entries), len(entries), f"{len(entries)} frames"
+    if isinstance(source, (list, tuple)) and all(_is_path(p) for p in source):
+        if not source:
+            raise InputError("no frames given (an empty list)")
+        missing = [os.fspath(p) for p in source if not os.path.isfile(p)]
+        if missing:
+            more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+            raise InputError(f"no such particle file: {missing[0]}{more}")
+        numbers = [frame_number(p) for p in source]
+        return _numbered(list(source), numbers, "file list"), len(source), f"{len(source)} files"
+    if isinstance(source, (str, bytes)) or not isinstance(source, Iterable):
+        raise InputError(
+            f"frames must be a pattern, a list of files, a mapping frame -> surface or (frame, surface) pairs, "
+            f"got {type(source).__name__}"
+        )
+    count = len(source) if hasattr(source, "__len__") else None
+
+    def pairs():
+        for pair in source:
+            if not (isinstance(pair, tuple) and len(pair) == 2):
+                raise InputError("an iterable of frames must yield (frame number, surface or file) pairs")
+            yield FrameEntry(_as_frame(pair[0]), pair[1])
+
+    return pairs(), count, "frames"
+
+
+def _as_frame(value) -> int:
+    if isinstance(value, bool):
+        raise InputError(f"frame number must be an integer, got {value!r}")
+    try:
+        number = int(value)
+    except (TypeError, ValueError):
+        raise InputError(f"frame number must be an integer, got {value!r}") from None
+    if number != value:
+        raise InputError(f"frame number must be an integer, got {value!r}")
+    return number
+
+
+def _no_duplicates(numbers: Iterable[int]) -> None:
+    seen = set()
+    for n in numbers:
+        if n in seen:
+            raise InputError(f"frame {n} is given twice")
+        seen.add(n)
+
+
+def _numbered(paths, numbers, what) -> Iterator[FrameEntry]:
+    if any(n is None for n in numbers) or len(set(numbers)) != len(numbers):
+        if len(paths) > 1 and all(n is not None for n in numbers):
+            counts: Dict[int, List[str]] = {}
+            for p, n in zip(paths, numbers):
+                counts.setdefault(n, []).append(os.fspath(p))
+            dup = next((n, ps) for n, ps in counts.items() if len(ps) > 1)
+            raise InputError(f"{what}: files {' and '.join(dup[1])} both have frame number {dup[0]}")
+        numbers = list(range(len(paths)))  # names without numbers: their order
+    return iter([FrameEntry(n, p) for n, p in zip(numbers, paths)])
+
+
+# -- results --------------------------------------------------------------------------
+
+
+@dataclass
+class FrameProgress:
+    """Passed to a progress callback after each frame."""
+
+    done: int
+    total: Optional[int]
+    frame: int
+    source: str
+    points: int
+    triangles: int
+    seconds: float
+
+
+@dataclass
+class FrameResult:
+    """What :func:`write_frame` wrote."""
+
+    path: Path
+    frame: int
+    points: int
+    triangles: int
+    schema: List[SchemaEntry]
+
+
+@dataclass
+class SequenceResult:
+    """What :func:`write_sequence` or :func:`stitch` did.
+
+    Attributes:
+        output: the stage's root file.
+        layout: "clips" or "flat".
+        written: frame numbers written by this call.
+        frames: frame numbers the stage holds now.
+        clips: the clips folder (clips layout).
+        schema: the time-sampled attributes (name, type, interpolation, elementSize).
+        seconds: wall time.
+    """
+
+    output: Path
+    layout: str
+    written: List[int] = field(default_factory=list)
+    frames: List[int] = field(default_factory=list)
+    clips: Optional[Path] = None
+    schema: List[SchemaEntry] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+# -- public API -----------------------------------------------------------------------
+
+
+def _settings(fps, meters_per_unit, up_axis, prim, mesh) -> StageSettings:
+    return StageSettings(fps=fps, meters_per_unit=meters_per_unit, up_axis=up_axis, prim=prim, mesh=mesh).checked()
+
+
+def write_frame(
+    source,
+    path: PathLike,
+    iso=None,
+    *,
+    time: Optional[int] = None,
+    fps: float = 24.0,
+    meters_per_unit: float = 1.0,
+    up_axis: str = "Y",
+    prim: str = "Fluid",
+    mesh: str = "Surface",
+    velocities="auto",
+    primvars="auto",
+    **extract_options,
+) -> FrameResult:
+    """Writes one frame as a complete single-layer stage, atomically.
+
+    Args:
+        source: a particle file (extracted with `iso` and `extract_options`, as
+            :func:`isobar.extract` takes them), an :class:`isobar.Surface`, a mapping of
+            arrays (``points``, ``triangles``, optional ``normals``, ``velocities``,
+            ``attributes``) or a tuple ``(points, triangles[, normals[, attributes]])``.
+        path: the .usd/.usda/.usdc file to write. Write ``clip_path(seq, frame)`` to
+            (re)write a frame of the sequence ``seq``, then call :func:`stitch`.
+        time: the time code of the samples (default: the file's frame number, else 0).
+        velocities: "auto" (the 3-component particle array ``velocity`` when there is
+            one), an array name, an (n, 3) array (in-memory frames), or None.
+        primvars: attribute names written as vertex primvars; "auto": for particle files
+            the extracted ``attributes`` (plus ``Isovalue`` for several isovalues), for
+            surfaces every attribute but ``SumOfWeights``/``Isovalue``/the velocities.
+
+    Raises:
+        InputError: bad input (missing file or array, wrong shapes, bad option).
+        FrameError: the extraction failed (``.cause`` is the isobar error).
+    """
+    settings = _settings(fps, meters_per_unit, up_axis, prim, mesh)
+    path = check_output_path(Path(path))
+    job = make_job(iso, extract_options, velocities, primvars, settings)
+    if time is None:
+        time = (frame_number(source) if _is_path(source) else None) or 0
+    frame = _as_frame(time)
+    try:
+        frame_mesh = produce(source, job)
+    except InputError:
+        raise
+    except Exception as e:
+        raise frame_error(frame, _label(source), e) from e
+    layer = MeshLayer(settings, _frame_info(source, job, frame_mesh))
+    try:
+        entries = layer.add(frame_mesh, frame)
+        layer.export(path)
+    finally:
+        layer.release()
+    return FrameResult(path, frame, frame_mesh.n_points, frame_mesh.n_triangles, entries)
+
+
+def write_sequence(
+    source,
+    output: PathLike,
+    iso=None,
+    *,
+    frames=None,
+    jobs: Optional[int] = 1,
+    layout: str = "auto",
+    replace: Optional[bool] = None,
+    stitch: bool = True,
+    fps: float = 24.0,
+    meters_per_unit: float = 1.0,
+    up_axis: str = "Y",
+    prim: str = "Fluid",
+    mesh: str = "Surface",
+    velocities="auto",
+    primvars="auto",
+    progress: Optional[Callable[[FrameProgress], Any]] = None,
+    **extract_options,
+) -> SequenceResult:
+    """Writes a sequence of frames as one USD stage.
+
+    Layout "clips" (the default for more than one frame): one layer per frame in
+    ``<output stem>.clips/`` joined by value clips in the root file `output`, plus a clip
+    manifest; one frame is in memory at a time (per process), so sequences of any length
+    fit. Layout "flat": every frame's time samples in the one file `output` (all frames
+    are held in memory until it is written; for short sequences). "auto": flat for a
+    single frame, clips otherwise.
+
+    Nothing changes on disk until every selected frame has been written: frames are
+    staged under hidden names, then renamed into place and the root restitched under a
+    lock. An error, Ctrl-C or a killed process leaves the previous stage as it was.
+
+    Args:
+        source: a frame pattern (``frames/frame_####.vtk``, ``{}``, ``%04d``, or one
+            frame standing for its numbered siblings), a list of particle files, a mapping
+            frame number -> (file | isobar.Surface | arrays), or an iterable of
+            (frame number, file | surface) pairs (streamed: a generator can produce
+            surfaces one at a time).
+        output: the root .usd/.usda/.usdc file.
+        iso: isovalue(s) for particle files.
+        frames: only these frame numbers ("10-20", "1-5,9", an int, an iterable).
+        jobs: processes writing frames in parallel (particle files only; None or 0:
+            one per core).
+        replace: remove the sequence's frame layers that this call did not write
+            (default: True when `frames` is not given, i.e. the call writes the whole
+            sequence; False for a partial rewrite).
+        stitch: rewrite the root and manifest after committing the frames (False for
+            separate invocations that run side by side; run :func:`stitch` after them).
+        fps, meters_per_unit, up_axis, prim, mesh: stage settings (see StageSettings).
+        velocities, primvars: as in :func:`write_frame`.
+        progress: called with a :class:`FrameProgress` after each frame; raise to stop.
+        **extract_options: passed to :func:`isobar.extract` (field, h, h_array, kernel,
+            h_scale, grid_factor, correct, tolerance, trim, attributes, ...).
+
+    Raises:
+        InputError, FrameError, StitchError (all :class:`isobar_usd.Error`).
+    """
+    t0 = time.perf_counter()
+    settings = _settings(fps, meters_per_unit, up_axis, prim, mesh)
+    output = check_output_path(Path(output))
+    job = make_job(iso, extract_options, velocities, primvars, settings)
+    selected = parse_frame_selection(frames)
+    entries, total, what = _frame_entries(source)
+    if selected is not None:
+        entries = [e for e in entries if selected(e.number)]
+        if not entries:
+            raise InputError(f"frame selection {frames!r} matches none of the frames of {what}")
+        total = len(entries)
+    if jobs is None or jobs == 0:
+        jobs = os.cpu_count() or 1
+    jobs = int(jobs)
+    if jobs < 0:
+        raise InputError(f"jobs must be >= 0, got {jobs}")
+    if layout not in ("auto", "clips", "flat"):
+        raise InputError(f"layout must be 'auto', 'clips' or 'flat', got '{layout}'")
+    if layout == "auto":
+        layout = "flat" if total == 1 and selected is None else "clips"
+    if layout == "flat":
+        if jobs > 1:
+            raise InputError("jobs > 1 needs the clips layout (a flat file is written by one process)")
+        return _write_flat(entries, total, output, job, progress, t0)
+    if replace is None:
+        replace = selected is None
+    return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0)
+
+
+def _report(progress, done, total, frame, item, info) -> None:
+    if progress is not None:
+        progress(
+            FrameProgress(
+                done=done,
+                total=total,
+                frame=frame,
+                source=info.get("source", _label(item)),
+                points=int(info.get("points", 0)),
+                triangles=int(info.get("triangles", 0)),
+                seconds=float(info.get("seconds", 0.0)),
+            )
+        )
+
+
+def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> SequenceResult:
+    _atomic.sweep(output.parent if str(output.parent) else Path("."))
+    layer = MeshLayer(job.settings, {"layout": "flat"})
+    seen = set()
+    try:
+        for done, entry in enumerate(entries, 1):
+            _check_stop()
+            if entry.number in seen:
+                raise InputError(f"frame {entry.number} is given twice")
+            seen.add(entry.number)
+            t = time.perf_counter()
+            try:
+                frame_mesh = produce(entry.item, job)
+                layer.add(frame_mesh, entry.number)
+            except Exception as e:
+                raise frame_error(entry.number, _label(entry.item), e) from e
+            info = _frame_info(entry.item, job, frame_mesh)
+            info["seconds"] = time.perf_counter() - t
+            del frame_mesh
+            _report(progress, done, total, entry.number, entry.item, info)
+        if not layer.frames:
+            raise InputError("no frames to write")
+        _check_stop()
+        layer.export(output)
+        schema = sorted(layer.schema.values())
+        frames = sorted(layer.frames)
+    finally:
+        layer.release()
+    return SequenceResult(output, "flat", frames, frames, None, schema, time.perf_counter() - t0)
+
+
+def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0) -> SequenceResult:
+    folder = clips_folder(output)
+    created = not folder.exists()
+    folder.mkdir(exist_ok=True)
+    _atomic.sweep(folder)
+    _atomic.sweep(output.parent if str(output.parent) else Path("."))
+    staged: Dict[int, Tuple[Path, Path]] = {}
+    try:
+        if jobs > 1:
+            entries = list(entries)
+            total = len(entries)
+            for e in entries:
+                if not _is_path(e.item):
+                    raise InputError("jobs > 1 needs particle files; in-memory frames are written by one process")
+            _no_duplicates(e.number for e in entries)
+            tasks = []
+            for e in entries:
+                final = clip_path(output, e.number)
+                staged[e.number] = (_atomic.staging_path(final), final)
+                tasks.append((e.number, os.fspath(e.item), os.fspath(staged[e.number][0]), job))
+            labels = {e.number: _label(e.item) for e in entries}
+            ctx = multiprocessing.get_context("spawn")
+            with ctx.Pool(processes=min(jobs, max(1, len(tasks))), initializer=_worker_init, initargs=(jobs,)) as pool:
+                done = 0
+                results = pool.imap_unordered(_pool_task, tasks)
+                while True:
+                    try:
+                        frame, info, err = results.next(timeout=0.25)
+                    except multiprocessing.TimeoutError:
+                        _check_stop()
+                        continue
+                    except StopIteration:
+                        break
+                    _check_stop()
+                    if err is not None:
+                        raise frame_error(frame, labels[frame], err)
+                    done += 1
+                    _report(progress, done, total, frame, labels[frame], info)
+        else:
+            for done, entry in enumerate(entries, 1):
+                _check_stop()
+                if entry.number in staged:
+                    raise InputError(f"frame {entry.number} is given twice")
+                final = clip_path(output, entry.number)
+                staged[entry.number] = (_atomic.staging_path(final), final)
+                try:
+                    info = write_clip(entry.number, entry.item, staged[entry.number][0], job)
+                except Exception as e:
+                    raise frame_error(entry.number, _label(entry.item), e) from e
+                _report(progress, done, total, entry.number, entry.item, info)
+        if not staged:
+            raise InputError("no frames to write")
+
+        _check_stop()
+        # Commit: rename the staged frames into place and restitch, under the lock.
+        with _atomic.locked(folder / _LOCK):
+            for frame in sorted(staged):
+                tmp, final = staged[frame]
+                _atomic.replace(tmp, final)
+            written = sorted(staged)
+            staged.clear()
+            if replace:
+                keep = set(written)
+                for frame, path in _committed_clips(output).items():
+                    if frame not in keep:
+                        _atomic.discard(path)
+            if stitch_after:
+                result = _stitch_locked(output, job.settings)
+                result.written = written
+                result.seconds = time.perf_counter() - t0
+                return result
+            return SequenceResult(output, "clips", written, sorted(_committed_clips(output)), folder, [], time.perf_counter() - t0)
+    except BaseException:
+        for tmp, _ in staged.values():
+            _atomic.discard(tmp)
+        if created:
+            try:
+                folder.rmdir()  # only when this call made it and nothing is in it
+            except OSError:
+                pass
+        raise
+
+
+def stitch(
+    output: PathLike,
+    *,
+    fps: Optional[float] = None,
+    meters_per_unit: Optional[float] = None,
+    up_axis: Optional[str] = None,
+) -> SequenceResult:
+    """(Re)writes the root layer and clip manifest of the sequence `output` from the frame
+    layers in its clips folder (after frames were written separately, e.g. by
+    ``write_sequence(..., stitch=False)`` or :func:`write_frame` to :func:`clip_path`).
+
+    Stage settings come from the frame layers (which must agree); `fps` may override
+    theirs. `meters_per_unit` and `up_axis`, when given, must match the frames.
+
+    Raises:
+        StitchError: no frame layers, frames with conflicting attributes or settings.
+    """
+    t0 = time.perf_counter()
+    output = check_output_path(Path(output))
+    folder = clips_folder(output)
+    if not folder.is_dir():
+        raise StitchError(f"no clips folder {folder}: write frames first")
+    with _atomic.locked(folder / _LOCK):
+        result = _stitch_locked(output, None, fps=fps, meters_per_unit=meters_per_unit, up_axis=up_axis)
+    result.seconds = time.perf_counter() - t0
+    return result
+
+
+def _stitch_locked(
+    output: Path,
+    settings: Optional[StageSettings],
+    fps: Optional[float] = None,
+    meters_per_unit: Optional[float] = None,
+    up_axis: Optional[str] = None,
+) -> SequenceResult:
+    folder = clips_folder(output)
+    clips = _committed_clips(output)
+    if not clips:
+        raise StitchError(f"no frame layers ({output.stem}.NNNN.usdc) in {folder}")
+    schema: Dict[str, SchemaEntry] = {}
+    where: Dict[str, str] = {}
+    chosen = settings
+    chosen_from = "this run" if settings is not None else None
+    for frame in sorted(clips):
+        path = clips[frame]
+        record = read_record(path)
+        if record.frames != [frame]:
+            raise StitchError(f"{path} holds frame(s) {record.frames}, not frame {frame} (renamed by hand?)")
+        merge_schema(schema, record.schema, f"frame {frame}", where)
+        theirs = record.settings
+        if theirs is None:
+            raise StitchError(f"{path} records no stage settings")
+        if chosen is None:
+            chosen, chosen_from = theirs, f"frame {frame}"
+            continue
+        for name, label in (("meters_per_unit", "metersPerUnit"), ("up_axis", "upAxis"), ("prim", "prim"), ("mesh", "mesh")):
+            if getattr(theirs, name) != getattr(chosen, name):
+                raise StitchError(
+                    f"frame {frame} was written with {label} {getattr(theirs, name)!r} but {chosen_from} "
+                    f"with {getattr(chosen, name)!r}; rewrite the frames with the same settings"
+                )
+        if settings is None and fps is None and theirs.fps != chosen.fps:
+            raise StitchError(
+                f"frame {frame} was written at {theirs.fps} fps but {chosen_from} at {chosen.fps}; pass fps to choose"
+            )
+    assert chosen is not None
+    overrides = {"fps": fps, "meters_per_unit": meters_per_unit, "up_axis": up_axis}
+    for name in ("meters_per_unit", "up_axis"):
+        value = overrides[name]
+        if value is not None and StageSettings(**{**chosen.__dict__, name: value}).checked() != chosen:
+            raise StitchError(
+                f"{name} {value!r} differs from the frames' {getattr(chosen, name)!r}; rewrite the frames instead"
+            )
+    if fps is not None:
+        chosen = StageSettings(**{**chosen.__dict__, "fps": fps}).checked()
+    entries = sorted(schema.values())
+    write_manifest(folder / MANIFEST, chosen, entries)
+    rel = f"./{folder.name}"
+    info = {"frames_count": len(clips)}
+    write_clips_root(
+        output,
+        chosen,
+        entries,
+        [(f, f"{rel}/{clips[f].name}") for f in sorted(clips)],
+        f"{rel}/{MANIFEST}",
+        info,
+    )
+    frames = sorted(clips)
+    return SequenceResult(output, "clips", [], frames, folder, entries)
+
+
+__all__ = [
+    "FrameProgress",
+    "FrameResult",
+    "SequenceResult",
+    "clip_path",
+    "clips_folder",
+    "request_stop",
+    "stitch",
+    "write_frame",
+    "write_sequence",
+]
