@@ -7,7 +7,7 @@ use crate::correctors::cache::{NodeSample, NodeValues};
 use crate::correctors::vertices::Placement;
 use crate::correctors::{clip_cells, surface, virtual_grid, Extraction, Params, Stats};
 use crate::error::{Error, Result};
-use crate::field::particles::{Attribute, ParticleData};
+use crate::field::particles::ParticleData;
 use crate::field::sph::SphField;
 use crate::mc::{case_index, ActiveCell, VirtualGrid};
 use crate::mesh::Mesh;
@@ -99,7 +99,7 @@ pub fn extract(
             .collect();
         clip_cells(&grid, &mut active, params);
         stats.cells_used += active.len() as u64;
-        let mut part = surface::build(
+        let part = surface::build(
             field,
             &grid,
             &dense,
@@ -112,12 +112,7 @@ pub fn extract(
             (0.5 + 0.5 * k as f64 / n, 0.5 + 0.5 * (k as f64 + 1.0) / n),
             &mut stats,
         )?;
-        if params.isovalues.len() > 1 {
-            let nv = part.vertex_count();
-            part.attributes
-                .push(Attribute::scalar("Isovalue", vec![iso; nv]));
-        }
-        mesh.append(part);
+        surface::append_surface(&mut mesh, part, iso, params);
     }
     stats.vertices = mesh.vertex_count() as u64;
     stats.triangles = mesh.triangles.len() as u64;

@@ -32,15 +32,25 @@ impl IsobarParticles {
     }
 }
 
-fn create(positions: Vec<DVec3>, out: *mut *mut IsobarParticles) -> Result<(), crate::Error> {
-    put(
-        out,
-        Box::into_raw(IsobarParticles::new(ParticleData {
-            positions,
-            attributes: vec![],
-        })),
-        "out",
-    )
+/// Copies `count` xyz triples of any float type into a new particle handle.
+fn create<T: Copy + Into<f64>>(
+    positions: *const T,
+    count: usize,
+    out: *mut *mut IsobarParticles,
+) -> Result<(), crate::Error> {
+    let len = count
+        .checked_mul(3)
+        .ok_or_else(|| invalid("count", "too large"))?;
+    let xyz = slice(positions, len, "positions")?;
+    let positions = xyz
+        .chunks_exact(3)
+        .map(|c| DVec3::new(c[0].into(), c[1].into(), c[2].into()))
+        .collect();
+    let data = ParticleData {
+        positions,
+        attributes: vec![],
+    };
+    put(out, Box::into_raw(IsobarParticles::new(data)), "out")
 }
 
 /// Creates a particle set from `count` xyz triples of f64 (copied). NaN or infinite
@@ -51,18 +61,7 @@ pub extern "C" fn isobar_particles_create(
     count: usize,
     out: *mut *mut IsobarParticles,
 ) -> IsobarStatus {
-    guard(|| {
-        let len = count
-            .checked_mul(3)
-            .ok_or_else(|| invalid("count", "too large"))?;
-        let xyz = slice(positions, len, "positions")?;
-        create(
-            xyz.chunks_exact(3)
-                .map(|c| DVec3::new(c[0], c[1], c[2]))
-                .collect(),
-            out,
-        )
-    })
+    guard(|| create(positions, count, out))
 }
 
 /// As `isobar_particles_create`, from f32 triples.
@@ -72,18 +71,7 @@ pub extern "C" fn isobar_particles_create_f32(
     count: usize,
     out: *mut *mut IsobarParticles,
 ) -> IsobarStatus {
-    guard(|| {
-        let len = count
-            .checked_mul(3)
-            .ok_or_else(|| invalid("count", "too large"))?;
-        let xyz = slice(positions, len, "positions")?;
-        create(
-            xyz.chunks_exact(3)
-                .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
-                .collect(),
-            out,
-        )
-    })
+    guard(|| create(positions, count, out))
 }
 
 fn add(

@@ -295,7 +295,7 @@ pub fn extract(
         } else {
             Placement::Linear
         };
-        let mut part = surface::build(
+        let part = surface::build(
             field,
             &grid,
             &cache,
@@ -308,15 +308,7 @@ pub fn extract(
             (at(0.5), at(1.0)),
             &mut stats,
         )?;
-        if params.isovalues.len() > 1 {
-            let nv = part.vertex_count();
-            part.attributes
-                .push(crate::field::particles::Attribute::scalar(
-                    "Isovalue",
-                    vec![iso; nv],
-                ));
-        }
-        mesh.append(part);
+        surface::append_surface(&mut mesh, part, iso, params);
     }
     stats.node_lookups = cache.lookups;
     stats.node_evaluations = cache.evaluations;

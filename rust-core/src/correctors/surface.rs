@@ -51,6 +51,17 @@ impl AttributeSource {
     }
 }
 
+/// Appends one isovalue's surface to the extraction's mesh, tagging its vertices with an
+/// `Isovalue` array when there are several.
+pub fn append_surface(mesh: &mut Mesh, mut part: Mesh, iso: f64, params: &Params) {
+    if params.isovalues.len() > 1 {
+        let n = part.vertex_count();
+        part.attributes
+            .push(Attribute::scalar("Isovalue", vec![iso; n]));
+    }
+    mesh.append(part);
+}
+
 /// Builds the mesh of `active` cells for `iso`, reporting within `span` of the run.
 #[allow(clippy::too_many_arguments)]
 pub fn build(
