@@ -203,3 +203,52 @@ fn bad_input_gets_a_clear_error_and_no_output() {
     );
     assert!(!out.exists(), "a failed run must not leave an output file");
 }
+
+#[test]
+fn comma_separated_options_parse_as_documented() {
+    let out = temp("options.ply");
+    let frame = shared("double_dam_break_frame_26_4732_particles.vtk");
+    let run = isobar()
+        .args([
+            "sph",
+            &frame,
+            "--field",
+            "SumOfWeights",
+            "--iso",
+            "0.5,0.6",
+            "--h",
+            "0.05",
+        ])
+        .args([
+            "--trim",
+            "0.1,0.3",
+            "--lattice",
+            "0,0,0,0.02",
+            "--clip",
+            "-9,-9,-9,0.5,9,9",
+        ])
+        .args(["--quiet", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    fails_with(
+        &[
+            "sph",
+            &frame,
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "--lattice",
+            "0,0,0",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &["lattice", "4"],
+    );
+}

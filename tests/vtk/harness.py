@@ -32,6 +32,9 @@ BUNNY = os.path.join(DATA, "bunny_frame_14_7705_particles.vtk")
 H = 0.05
 GRID_FACTOR = 0.375
 ISO = 0.6
+# A lattice off the data's own grid (Fixed Lattice / the CLI's --lattice).
+LATTICE_ORIGIN = (-0.013, 0.002, 0.007)
+LATTICE_CELL = 0.01875
 
 _tests = []
 
@@ -107,14 +110,18 @@ def point_array(pd, name):
     return vtk_to_numpy(a)
 
 
-def sorted_rows(a):
+def sorted_rows(a, quantum=0.0):
+    """Rows of `a` in lexicographic order. With quantum > 0 the order is that of the rows
+    rounded to multiples of `quantum`, so that values equal but for rounding noise (a
+    vertex made on two ranks) sort alike; the rows themselves are returned unrounded."""
     a = np.asarray(a, dtype=np.float64).reshape(len(a), -1)
     if len(a) == 0:
         return a
-    return a[np.lexsort(a.T[::-1])]
+    keys = np.round(a / quantum) if quantum > 0 else a
+    return a[np.lexsort(keys.T[::-1])]
 
 
-def canonical_triangles(pts, tris):
+def canonical_triangles(pts, tris, quantum=0.0):
     """Each triangle as its three vertex positions in sorted order (9 numbers), rows
     sorted: independent of vertex numbering and triangle order."""
     if len(tris) == 0:
@@ -123,7 +130,7 @@ def canonical_triangles(pts, tris):
     tri_id = np.repeat(np.arange(len(tris)), 3)
     order = np.lexsort((corners[:, 2], corners[:, 1], corners[:, 0], tri_id))
     out = corners[order].reshape(-1, 9)
-    return sorted_rows(out)
+    return sorted_rows(out, quantum)
 
 
 def assert_same_surface(a, b, tol=1e-9, what="surface"):
@@ -133,9 +140,11 @@ def assert_same_surface(a, b, tol=1e-9, what="surface"):
     pb, tb = arrays(b)
     assert len(ta) == len(tb), f"{what}: {len(ta)} vs {len(tb)} triangles"
     assert len(pa) == len(pb), f"{what}: {len(pa)} vs {len(pb)} vertices"
-    dv = np.max(np.abs(sorted_rows(pa) - sorted_rows(pb))) if len(pa) else 0.0
+    q = 10.0 * tol
+    dv = np.max(np.abs(sorted_rows(pa, q) - sorted_rows(pb, q))) if len(pa) else 0.0
     assert dv <= tol, f"{what}: vertex sets differ by {dv:.3e}"
-    dt = np.max(np.abs(canonical_triangles(pa, ta) - canonical_triangles(pb, tb))) if len(ta) else 0.0
+    dt = (np.max(np.abs(canonical_triangles(pa, ta, q) - canonical_triangles(pb, tb, q)))
+          if len(ta) else 0.0)
     assert dt <= tol, f"{what}: triangles differ by {dt:.3e}"
     return len(ta)
 
@@ -146,6 +155,28 @@ def duplicate_triangles(pd):
     if len(c) < 2:
         return 0
     return int(np.sum(np.all(np.abs(np.diff(c, axis=0)) <= 1e-12, axis=1)))
+
+
+def assert_same_point_data(a, b, names, tol=1e-9, what="surface"):
+    """Each vertex of `a` has a vertex of `b` within `tol` whose arrays `names` agree
+    within `tol` relative to each array's largest magnitude (any vertex order)."""
+    from vtkmodules.vtkCommonDataModel import vtkStaticPointLocator
+
+    pa, pb = arrays(a)[0], arrays(b)[0]
+    assert len(pa) == len(pb), f"{what}: {len(pa)} vs {len(pb)} vertices"
+    loc = vtkStaticPointLocator()
+    loc.SetDataSet(b)
+    loc.BuildLocator()
+    match = np.array([loc.FindClosestPoint(p) for p in pa], dtype=np.int64)
+    d = np.max(np.abs(pa - pb[match])) if len(pa) else 0.0
+    assert d <= tol, f"{what}: vertices {d:.3e} apart"
+    assert len(np.unique(match)) == len(pb), f"{what}: vertices matched twice"
+    for name in names:
+        va = np.asarray(point_array(a, name), dtype=np.float64).reshape(len(pa), -1)
+        vb = np.asarray(point_array(b, name), dtype=np.float64).reshape(len(pb), -1)[match]
+        scale = max(1.0, float(np.max(np.abs(vb)))) if len(vb) else 1.0
+        dv = np.max(np.abs(va - vb)) if len(va) else 0.0
+        assert dv <= tol * scale, f"{what}: {name} differs by {dv:.3e}"
 
 
 def volume(pd):

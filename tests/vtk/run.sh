@@ -3,7 +3,7 @@
 # Debian packages it needs), then runs the VTK/ParaView tests:
 #   - test_vtk_module.py with Debian's /usr/bin/python3 (python3-vtk9, VTK 9.1);
 #   - test_paraview.py with pvbatch (ParaView 5.11) under xvfb-run, which also runs the
-#     bad-input script and the 1-rank / 2-rank MPI comparison as child processes.
+#     bad-input script and the 1-, 2- and 3-rank MPI comparisons as child processes.
 # Ends with one line: `vtk: N passed, M failed`.
 set -uo pipefail
 here=$(cd "$(dirname "$0")" && pwd)

@@ -153,6 +153,9 @@ ROUND_TRIP = {
     "Shepard": (1, "1"),
     "MemoryBudget": (2.5, "2.5"),
     "FullGrid": (1, "1"),
+    "FixedLattice": (1, "1"),
+    "LatticeOrigin": ([0.5, -0.25, 0.125], "0.5 -0.25 0.125"),
+    "LatticeCellSize": (0.03125, "0.03125"),
 }
 
 
@@ -198,7 +201,7 @@ def test_filter_is_in_the_isobar_menu_category():
     menu = f.SMProxy.GetHints().FindNestedElementByName("ShowInMenu")
     assert menu is not None and menu.GetAttribute("category") == "isobar"
     for name in ("HScale", "Tolerance", "Trim", "TrimNode", "TrimVertex", "Shepard",
-                 "MemoryBudget", "FullGrid"):
+                 "MemoryBudget", "FullGrid", "FixedLattice", "LatticeOrigin", "LatticeCellSize"):
         assert f.GetProperty(name).SMProperty.GetPanelVisibility() == "advanced", name
 
 
@@ -294,33 +297,147 @@ def clean_env(**extra):
     return env
 
 
-def run_mpi(ranks, out):
+def run_mpi(ranks):
+    """Runs pv_mpi.py under `mpiexec -n ranks` once; returns (prefix, {case: info}, log)."""
+    if ranks in _mpi_runs:
+        return _mpi_runs[ranks]
     env = clean_env(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                     OMPI_MCA_rmaps_base_oversubscribe="1")
-    cmd = ["mpiexec", "-n", str(ranks), PVBATCH, os.path.join(h.HERE, "pv_mpi.py"), out]
+    prefix = os.path.join(TMP, f"mpi_{ranks}")
+    cmd = ["mpiexec", "-n", str(ranks), PVBATCH, os.path.join(h.HERE, "pv_mpi.py"), prefix]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
     assert p.returncode == 0, f"{ranks} ranks: exit {p.returncode}\n{p.stdout[-2000:]}\n{p.stderr[-3000:]}"
-    return p.stdout
+    cases = {}
+    for ln in p.stdout.splitlines():
+        if ln.startswith("CASE "):
+            _, name, info = ln.split(" ", 2)
+            cases[name] = json.loads(info)
+    assert set(cases) == {"auto", "reader", "fixed", "frame01", "varied"}, p.stdout[-2000:]
+    # Bad settings: empty everywhere, no rank hung (the run ended).
+    for bad in ("bad input", "bad nan", "bad budget"):
+        assert f"{bad}: 0 cells" in p.stdout, f"{ranks} ranks, {bad}: {p.stdout[-2000:]}"
+    assert "non-finite position" in p.stderr, p.stderr[-3000:]
+    _mpi_runs[ranks] = (prefix, cases, p.stdout)
+    return _mpi_runs[ranks]
+
+
+_mpi_runs = {}
+
+
+def merge_points(pd, tol):
+    """`pd` with points closer than `tol` (absolute) merged, cells kept as they are."""
+    from vtkmodules.vtkFiltersCore import vtkCleanPolyData
+
+    c = vtkCleanPolyData()
+    c.SetInputData(pd)
+    c.PointMergingOn()
+    c.ToleranceIsAbsoluteOn()
+    c.SetAbsoluteTolerance(tol)
+    c.ConvertPolysToLinesOff()
+    c.ConvertLinesToPointsOff()
+    c.ConvertStripsToPolysOff()
+    c.Update()
+    return c.GetOutput()
+
+
+def check_pieces(ranks, case, reference, arrays=("SumOfWeights",), least=1000):
+    """The `ranks`-rank surface of `case` against `reference` (a vtkPolyData): every rank
+    made triangles, the pieces together have exactly the reference's triangles (1e-9), no
+    duplicates, and merging the vertices that adjacent pieces both made gives the
+    reference's vertices, the reference's open edges (none for a closed surface) and its
+    point `arrays` (1e-9 relative; Normals are floats: 1e-6)."""
+    prefix, cases, _log = run_mpi(ranks)
+    info = cases[case]
+    assert len(info["triangles"]) == ranks, info
+    assert min(info["triangles"]) > least, f"{ranks} ranks, {case}: a rank made no surface: {info}"
+    joined = h.read_vtp(f"{prefix}_{case}.vtp")
+    ref_points, ref_tris = h.arrays(reference)
+    assert joined.GetNumberOfCells() == len(ref_tris), (joined.GetNumberOfCells(), len(ref_tris))
+    assert h.duplicate_triangles(joined) == 0, "duplicate triangles"
+    # Vertices on a cut are made by both adjacent ranks, from sums over the particles in
+    # a different order: equal to the last bits or so, hence a merge tolerance far below
+    # any edge length (the merged vertex count must still equal the reference's exactly).
+    merged = merge_points(joined, 1e-12)
+    assert merged.GetNumberOfPoints() == len(ref_points), (
+        f"{merged.GetNumberOfPoints()} merged vertices vs {len(ref_points)}")
+    assert h.open_edges(reference) == 0 or case == "varied", "the reference is not closed"
+    assert h.open_edges(merged) == h.open_edges(reference), (
+        f"seams: {h.open_edges(merged)} open edges in the merged pieces, "
+        f"{h.open_edges(reference)} in the reference")
+    what = f"{ranks} ranks, {case}"
+    h.assert_same_surface(merged, reference, 1e-9, what)
+    h.assert_same_point_data(merged, reference, arrays, 1e-9, what)
+    h.assert_same_point_data(merged, reference, ["Normals"], 1e-6, what)
+    return info
 
 
 @test
-def test_mpi_two_ranks_equal_one_rank():
-    one = os.path.join(TMP, "mpi_1.vtp")
-    two = os.path.join(TMP, "mpi_2.vtp")
-    log1 = run_mpi(1, one)
-    log2 = run_mpi(2, two)
-    assert "particles per rank: [4732]" in log1, log1
-    assert "bad input: 0 cells" in log1 and "bad input: 0 cells" in log2, log2
-    # The particles really were split over both ranks before the filter.
-    line = [ln for ln in log2.splitlines() if ln.startswith("particles per rank:")][0]
-    per_rank = json.loads(line.split(":", 1)[1])
-    assert len(per_rank) == 2 and min(per_rank) > 1000 and sum(per_rank) == 4732, line
-    a, b = h.read_vtp(one), h.read_vtp(two)
-    n = h.assert_same_surface(b, a, 1e-9, "2 ranks vs 1 rank")
-    assert h.duplicate_triangles(b) == 0, "duplicate triangles"
-    assert h.open_edges(b) == 0, "seams: boundary edges in the merged 2-rank surface"
+def test_mpi_two_ranks_each_extract_a_piece_of_the_one_rank_surface():
+    prefix1, cases1, _ = run_mpi(1)
+    assert cases1["auto"]["particles"] == [4732], cases1
+    one = h.read_vtp(f"{prefix1}_auto.vtp")
+    # One rank is the plain single-process filter: the CLI's surface.
+    h.assert_same_surface(one, cli_reference(h.FRAME_26, "ref26.vtp"), 1e-12, "1 rank vs CLI")
+    _, cases2, _ = run_mpi(2)
+    # RedistributeDataSet really split the particles before the filter ...
+    per_rank = cases2["auto"]["particles"]
+    assert len(per_rank) == 2 and min(per_rank) > 1000 and sum(per_rank) == 4732, per_rank
+    info = check_pieces(2, "auto", one)
+    piece = cases2["auto"]["rank0_piece"]
+    assert piece["axis"] in (0, 1, 2) and piece["slab"][0] < -1e300 < piece["slab"][1], piece
+    assert per_rank[0] < piece["particles"] < 4732, f"rank 0 has no halo or everything: {piece}"
+    # ... and from a reader that hands every particle to rank 0 the filter splits them.
+    assert cases2["reader"]["particles"] == [4732, 0], cases2["reader"]
+    check_pieces(2, "reader", one)
+    print(f"  2 ranks: triangles per rank {info['triangles']}, total {sum(info['triangles'])}; "
+          f"rank 0: slab {piece['slab']} along axis {piece['axis']}, "
+          f"{piece['particles']} particles with its halo", flush=True)
+
+
+@test
+def test_mpi_three_ranks_each_extract_a_piece_of_the_one_rank_surface():
+    prefix1, _, _ = run_mpi(1)
+    one = h.read_vtp(f"{prefix1}_auto.vtp")
+    info = check_pieces(3, "auto", one)
+    check_pieces(3, "reader", one)
+    # Particles on a regular lattice (frame 1): many lie exactly on a cut.
+    one01 = h.read_vtp(f"{prefix1}_frame01.vtp")
+    for ranks in (2, 3):
+        check_pieces(ranks, "frame01", one01)
+    print(f"  3 ranks: triangles per rank {info['triangles']}, total {sum(info['triangles'])}",
+          flush=True)
+
+
+@test
+def test_mpi_varied_h_quintic_point_array_field_and_carried_arrays():
+    """Per-particle h, quintic kernel (support 3h), H Scale 0.75, velocity magnitude with
+    Shepard and trimming (an open surface), carried velocity and id: the halo and the
+    lattice follow the settings, the pieces are still the one-rank surface."""
+    prefix1, _, _ = run_mpi(1)
+    one = h.read_vtp(f"{prefix1}_varied.vtp")
+    assert one.GetNumberOfCells() > 5000, one.GetNumberOfCells()
+    for ranks in (2, 3):
+        check_pieces(ranks, "varied", one, arrays=("SumOfWeights", "velocity", "id"),
+                     least=500)
+
+
+@test
+def test_fixed_lattice_matches_cli_lattice_in_one_and_several_ranks():
+    ref = h.read_vtp(h.cli_surface(
+        h.FRAME_26, os.path.join(TMP, "ref26_lattice.vtp"), "--iso", h.ISO, "--h", h.H,
+        "--lattice", ",".join(str(v) for v in (*h.LATTICE_ORIGIN, h.LATTICE_CELL))))
+    # In this process (builtin session, one rank).
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = free_surface(r, FixedLattice=1, LatticeOrigin=list(h.LATTICE_ORIGIN),
+                     LatticeCellSize=h.LATTICE_CELL)
+    n = h.assert_same_surface(sm.Fetch(f), ref, 1e-12, "Fixed Lattice vs CLI --lattice")
     assert n > 100000, n
-    print(f"  {[ln for ln in log2.splitlines() if 'rank(s)' in ln][0]}", flush=True)
+    plain = sm.Fetch(free_surface(r))
+    assert plain.GetNumberOfCells() != n, "the lattice changed nothing"
+    prefix1, _, _ = run_mpi(1)
+    h.assert_same_surface(h.read_vtp(f"{prefix1}_fixed.vtp"), ref, 1e-12, "1 rank, fixed")
+    for ranks in (2, 3):
+        check_pieces(ranks, "fixed", ref)
 
 
 if __name__ == "__main__":

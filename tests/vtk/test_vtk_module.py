@@ -269,6 +269,10 @@ def test_defaults_come_from_the_core_and_match_the_xml():
         elif name == "Isovalues":
             assert [f.GetIsovalue(i) for i in range(f.GetNumberOfIsovalues())] == [
                 float(x) for x in attrs["default_values"].split()]
+        elif int(attrs.get("number_of_elements", "1")) > 1:
+            value = list(getattr(f, "Get" + command[3:])())
+            assert value == [float(x) for x in attrs["default_values"].split()], (
+                name, value, attrs["default_values"])
         else:
             value = getattr(f, "Get" + command[3:])()
             assert math.isclose(float(value), float(attrs["default_values"]), rel_tol=1e-12), (
@@ -278,6 +282,38 @@ def test_defaults_come_from_the_core_and_match_the_xml():
     # Every setter the XML names exists on the class.
     for name, (_tag, attrs, _el) in props.items():
         assert hasattr(f, attrs["command"]), (name, attrs["command"])
+
+
+@test
+def test_fixed_lattice_matches_cli_lattice():
+    ref = h.read_vtp(h.cli_surface(
+        h.FRAME_26, os.path.join(TMP, "ref_lattice.vtp"), "--iso", h.ISO, "--h", h.H,
+        "--lattice", ",".join(str(v) for v in (*h.LATTICE_ORIGIN, h.LATTICE_CELL))))
+    f = free_surface_filter(reader(h.FRAME_26), FixedLattice=1,
+                            LatticeOrigin=h.LATTICE_ORIGIN, LatticeCellSize=h.LATTICE_CELL)
+    f.Update()
+    assert f.GetErrorMessage() == "", f.GetErrorMessage()
+    assert f.GetPieceAxis() == -1, "a single process cuts nothing"
+    n = h.assert_same_surface(f.GetOutput(), ref, 1e-12, "Fixed Lattice vs CLI --lattice")
+    assert h.open_edges(f.GetOutput()) == 0
+    # Cell size 0: Grid Factor x the smallest h, on the same origin.
+    g = free_surface_filter(reader(h.FRAME_26), FixedLattice=1, LatticeOrigin=h.LATTICE_ORIGIN)
+    g.Update()
+    h.assert_same_surface(g.GetOutput(), f.GetOutput(), 1e-12, "cell size 0 = 0.375 x 0.05")
+    # A lattice whose origin is the data's own first grid node reproduces the default.
+    r = reader(h.FRAME_26)
+    pts = vtk_to_numpy(r.GetOutput().GetPoints().GetData()).astype(np.float64)
+    cell = h.GRID_FACTOR * h.H
+    origin = pts.min(axis=0) - (2.0 * h.H + cell)
+    d = free_surface_filter(r)
+    d.Update()
+    k = free_surface_filter(r, FixedLattice=1, LatticeOrigin=tuple(origin), LatticeCellSize=cell)
+    k.Update()
+    h.assert_same_surface(k.GetOutput(), d.GetOutput(), 1e-12, "lattice of the data's own grid")
+    assert n != d.GetOutput().GetNumberOfCells()
+    # A bad cell size is an error, not a hang or a crash.
+    bad = free_surface_filter(reader(h.FRAME_26), FixedLattice=1, GridFactor=0.0)
+    expect_error(bad, "cell size")
 
 
 @test

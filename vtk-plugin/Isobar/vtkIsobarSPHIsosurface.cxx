@@ -2,6 +2,7 @@
 
 #include "vtkCellArray.h"
 #include "vtkCommand.h"
+#include "vtkCommunicator.h"
 #include "vtkDataArray.h"
 #include "vtkDataArraySelection.h"
 #include "vtkDataObject.h"
@@ -25,6 +26,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <sstream>
 
 vtkStandardNewMacro(vtkIsobarSPHIsosurface);
@@ -194,13 +196,31 @@ std::string CollectLocal(
   return std::string();
 }
 
-/// Gathers every rank's particles on rank 0 (all ranks must call it). On rank 0, `local`
-/// becomes the concatenation in rank order; the return value is an error message or "".
-std::string GatherToRoot(vtkMultiProcessController* controller, const std::string& localError,
-  const std::vector<Request>& requests, ParticleBuffers& local)
+/// A message naming this rank's first particle with a non-finite position, or "".
+std::string NonFinitePosition(const ParticleBuffers& particles, int rank)
+{
+  for (vtkIdType i = 0; i < particles.Count; ++i)
+  {
+    const double* p = &particles.Positions[3 * i];
+    if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+    {
+      std::ostringstream msg;
+      msg << "particle " << i << " of rank " << rank << " (ghost points skipped) has a "
+          << "non-finite position (" << p[0] << ", " << p[1] << ", " << p[2] << ")";
+      return msg.str();
+    }
+  }
+  return std::string();
+}
+
+/// Makes every rank agree on the particle arrays (all ranks must call it). Afterwards each
+/// array of `local` has the components every rank with particles has (-1: absent
+/// everywhere), also on ranks without particles; `total` is the particle count over all
+/// ranks. Returns an error message, "" on every rank or non-empty on every rank.
+std::string AgreeOnArrays(vtkMultiProcessController* controller, const std::string& localError,
+  const std::vector<Request>& requests, ParticleBuffers& local, long long& total)
 {
   const int nproc = controller->GetNumberOfProcesses();
-  const int rank = controller->GetLocalProcessId();
   const size_t k = requests.size();
   // Header: error flag, particle count, components of each requested array.
   const size_t hlen = 2 + k;
@@ -211,109 +231,231 @@ std::string GatherToRoot(vtkMultiProcessController* controller, const std::strin
   {
     header[2 + a] = local.Arrays[a].Components;
   }
-  std::vector<long long> headers(rank == 0 ? hlen * nproc : hlen);
-  controller->Gather(header.data(), headers.data(), static_cast<vtkIdType>(hlen), 0);
-
-  // Payload: positions, then each present array.
-  std::vector<double> payload;
-  if (localError.empty())
-  {
-    payload = local.Positions;
-    for (const auto& a : local.Arrays)
-    {
-      if (a.Components > 0)
-      {
-        payload.insert(payload.end(), a.Data.begin(), a.Data.end());
-      }
-    }
-  }
-  std::vector<vtkIdType> lengths(nproc, 0), offsets(nproc, 0);
-  vtkIdType total = 0;
-  if (rank == 0)
-  {
-    for (int p = 0; p < nproc; ++p)
-    {
-      const long long* h = &headers[p * hlen];
-      vtkIdType items = 3;
-      for (size_t a = 0; a < k; ++a)
-      {
-        items += h[2 + a] > 0 ? h[2 + a] : 0;
-      }
-      lengths[p] = static_cast<vtkIdType>(h[1]) * items;
-      offsets[p] = total;
-      total += lengths[p];
-    }
-  }
-  std::vector<double> all(rank == 0 ? std::max<vtkIdType>(total, 1) : 1);
-  controller->GatherV(payload.data(), all.data(), static_cast<vtkIdType>(payload.size()),
-    lengths.data(), offsets.data(), 0);
-  if (rank != 0)
+  std::vector<long long> headers(hlen * nproc);
+  controller->AllGather(header.data(), headers.data(), static_cast<vtkIdType>(hlen));
+  if (!localError.empty())
   {
     return localError;
   }
-
-  // Rank 0: check agreement, then unpack rank after rank.
+  total = 0;
   for (int p = 0; p < nproc; ++p)
   {
     if (headers[p * hlen] != 0)
     {
       std::ostringstream msg;
-      msg << "rank " << p << " could not collect its particles"
-          << (p == 0 ? ": " + localError : std::string(" (see its error message)"));
+      msg << "rank " << p << " could not use its particles (see its error message)";
       return msg.str();
     }
+    total += headers[p * hlen + 1];
   }
-  ParticleBuffers merged;
-  merged.Arrays.resize(k);
   for (size_t a = 0; a < k; ++a)
   {
-    merged.Arrays[a].Name = requests[a].Name;
+    int components = -1;
     for (int p = 0; p < nproc; ++p)
     {
       const long long* h = &headers[p * hlen];
-      if (h[1] == 0)
+      if (h[1] > 0 && h[2 + a] > 0)
       {
-        continue;
-      }
-      const int c = static_cast<int>(h[2 + a]);
-      if (merged.Arrays[a].Components == -1 && c > 0)
-      {
-        merged.Arrays[a].Components = c;
+        components = static_cast<int>(h[2 + a]);
+        break;
       }
     }
     for (int p = 0; p < nproc; ++p)
     {
       const long long* h = &headers[p * hlen];
-      if (h[1] > 0 && h[2 + a] != merged.Arrays[a].Components)
+      if (h[1] > 0 && h[2 + a] != components)
       {
         std::ostringstream msg;
         msg << "point array '" << requests[a].Name << "' has " << h[2 + a]
-            << " components on rank " << p << " but " << merged.Arrays[a].Components
+            << " components on rank " << p << " but " << components
             << " elsewhere (-1: absent)";
         return msg.str();
       }
     }
+    local.Arrays[a].Components = components;
   }
-  for (int p = 0; p < nproc; ++p)
+  return std::string();
+}
+
+/// Smallest and largest smoothing length of `particles` (constant `h` when `hArray` is
+/// empty); `bad` counts values that are not positive and finite.
+void SmoothingLengthRange(const ParticleBuffers& particles, const std::string& hArray, double h,
+  double& minH, double& maxH, double& bad)
+{
+  minH = std::numeric_limits<double>::infinity();
+  maxH = 0.0;
+  bad = 0.0;
+  if (particles.Count == 0)
   {
-    const long long* h = &headers[p * hlen];
-    const vtkIdType n = static_cast<vtkIdType>(h[1]);
-    const double* src = all.data() + offsets[p];
-    merged.Positions.insert(merged.Positions.end(), src, src + 3 * n);
-    src += 3 * n;
-    for (size_t a = 0; a < k; ++a)
+    return;
+  }
+  const ParticleArray* a = hArray.empty() ? nullptr : particles.Find(hArray);
+  if (!a)
+  {
+    minH = maxH = h;
+    bad = (h > 0.0 && std::isfinite(h)) ? 0.0 : 1.0;
+    return;
+  }
+  for (vtkIdType i = 0; i < particles.Count; ++i)
+  {
+    const double v = a->Data[i * a->Components];
+    if (!(v > 0.0 && std::isfinite(v)))
     {
-      if (h[2 + a] > 0)
+      bad += 1.0;
+      continue;
+    }
+    minH = std::min(minH, v);
+    maxH = std::max(maxH, v);
+  }
+}
+
+/// Cut positions along `axis` splitting the particles of all ranks into `nproc` slabs of
+/// about equal particle counts (a global histogram of 64 bins per rank, at least 4096,
+/// cuts on bin edges). Returns nproc + 1 values, the first -inf and the last +inf.
+std::vector<double> EqualCountCuts(vtkMultiProcessController* controller,
+  const ParticleBuffers& particles, int axis, double lo, double hi, long long total)
+{
+  const int nproc = controller->GetNumberOfProcesses();
+  const int bins = std::max(4096, 64 * nproc);
+  const double width = hi - lo;
+  std::vector<long long> local(bins, 0), global(bins, 0);
+  if (width > 0.0)
+  {
+    for (vtkIdType i = 0; i < particles.Count; ++i)
+    {
+      const double t = (particles.Positions[3 * i + axis] - lo) / width * bins;
+      const int b = std::min(bins - 1, std::max(0, static_cast<int>(t)));
+      ++local[b];
+    }
+  }
+  controller->AllReduce(local.data(), global.data(), bins, vtkCommunicator::SUM_OP);
+  std::vector<double> cuts(nproc + 1);
+  cuts.front() = -std::numeric_limits<double>::infinity();
+  cuts.back() = std::numeric_limits<double>::infinity();
+  long long below = 0;
+  int b = 0;
+  for (int r = 1; r < nproc; ++r)
+  {
+    // The first bin edge with at least r/nproc of the particles below it.
+    const long double target = static_cast<long double>(total) * r / nproc;
+    while (b < bins && below + global[b] <= target)
+    {
+      below += global[b];
+      ++b;
+    }
+    // Edge b (below it: `below` particles, <= target) or b + 1, whichever is nearer.
+    int edge = b;
+    if (b < bins && target - below > below + global[b] - target)
+    {
+      edge = b + 1;
+    }
+    cuts[r] = width > 0.0 ? lo + width * edge / bins : lo;
+    cuts[r] = std::max(cuts[r], cuts[r - 1]);
+  }
+  return cuts;
+}
+
+/// Sends every rank the particles within its slab [cuts[r] - halo, cuts[r + 1] + halo]
+/// along `axis` (all ranks must call it, with the same cuts and halo). Returns this rank's
+/// particles: its slab plus the halo, from every rank, in rank order.
+ParticleBuffers Redistribute(vtkMultiProcessController* controller, const ParticleBuffers& local,
+  int axis, const std::vector<double>& cuts, double halo)
+{
+  const int nproc = controller->GetNumberOfProcesses();
+  const int rank = controller->GetLocalProcessId();
+  // One row per particle: position, then the components of each present array.
+  size_t row = 3;
+  for (const auto& a : local.Arrays)
+  {
+    row += a.Components > 0 ? static_cast<size_t>(a.Components) : 0;
+  }
+  auto wanted = [&](int dest, vtkIdType i) {
+    const double x = local.Positions[3 * i + axis];
+    return x >= cuts[dest] - halo && x <= cuts[dest + 1] + halo;
+  };
+  std::vector<long long> counts(nproc, 0), allCounts(static_cast<size_t>(nproc) * nproc, 0);
+  for (int dest = 0; dest < nproc; ++dest)
+  {
+    for (vtkIdType i = 0; i < local.Count; ++i)
+    {
+      counts[dest] += wanted(dest, i) ? 1 : 0;
+    }
+  }
+  controller->AllGather(counts.data(), allCounts.data(), nproc);
+
+  ParticleBuffers mine;
+  mine.Arrays.resize(local.Arrays.size());
+  for (size_t a = 0; a < local.Arrays.size(); ++a)
+  {
+    mine.Arrays[a].Name = local.Arrays[a].Name;
+    mine.Arrays[a].Components = local.Arrays[a].Components;
+  }
+  std::vector<double> rows;
+  for (int dest = 0; dest < nproc; ++dest)
+  {
+    // What this rank sends to `dest`, packed row by row.
+    std::vector<double> send;
+    send.reserve(static_cast<size_t>(counts[dest]) * row);
+    for (vtkIdType i = 0; i < local.Count; ++i)
+    {
+      if (!wanted(dest, i))
       {
-        const vtkIdType len = n * h[2 + a];
-        merged.Arrays[a].Data.insert(merged.Arrays[a].Data.end(), src, src + len);
-        src += len;
+        continue;
+      }
+      send.insert(send.end(), &local.Positions[3 * i], &local.Positions[3 * i] + 3);
+      for (const auto& a : local.Arrays)
+      {
+        if (a.Components > 0)
+        {
+          const double* v = &a.Data[static_cast<size_t>(i) * a.Components];
+          send.insert(send.end(), v, v + a.Components);
+        }
       }
     }
-    merged.Count += n;
+    std::vector<vtkIdType> lengths(nproc, 0), offsets(nproc, 0);
+    vtkIdType received = 0;
+    for (int p = 0; p < nproc; ++p)
+    {
+      lengths[p] = static_cast<vtkIdType>(allCounts[static_cast<size_t>(p) * nproc + dest] * row);
+      offsets[p] = received;
+      received += lengths[p];
+    }
+    if (dest == rank)
+    {
+      rows.assign(std::max<vtkIdType>(received, 1), 0.0);
+    }
+    double dummy = 0.0;
+    controller->GatherV(send.empty() ? &dummy : send.data(), dest == rank ? rows.data() : &dummy,
+      static_cast<vtkIdType>(send.size()), lengths.data(), offsets.data(), dest);
+    if (dest == rank)
+    {
+      mine.Count = static_cast<vtkIdType>(received / static_cast<vtkIdType>(row));
+    }
   }
-  local = std::move(merged);
-  return std::string();
+  // Unpack the rows into positions and arrays.
+  mine.Positions.resize(3 * static_cast<size_t>(mine.Count));
+  for (auto& a : mine.Arrays)
+  {
+    if (a.Components > 0)
+    {
+      a.Data.resize(static_cast<size_t>(mine.Count) * a.Components);
+    }
+  }
+  for (vtkIdType i = 0; i < mine.Count; ++i)
+  {
+    const double* src = &rows[static_cast<size_t>(i) * row];
+    std::copy_n(src, 3, &mine.Positions[3 * i]);
+    src += 3;
+    for (auto& a : mine.Arrays)
+    {
+      if (a.Components > 0)
+      {
+        std::copy_n(src, a.Components, &a.Data[static_cast<size_t>(i) * a.Components]);
+        src += a.Components;
+      }
+    }
+  }
+  return mine;
 }
 
 std::string CoreError(const char* what, IsobarStatus status)
@@ -458,6 +600,12 @@ vtkIsobarSPHIsosurface::vtkIsobarSPHIsosurface()
   this->ComputeNormals = defaults.normals != 0;
   this->MemoryBudget = static_cast<double>(defaults.memory_budget) / (1024.0 * 1024.0 * 1024.0);
   this->FullGrid = defaults.full_grid != 0;
+  this->FixedLattice = defaults.fixed_lattice != 0;
+  std::copy_n(defaults.lattice_origin, 3, this->LatticeOrigin);
+  this->LatticeCellSize = defaults.lattice_cell_size;
+  this->PieceAxis = -1;
+  this->PieceBounds[0] = this->PieceBounds[1] = 0.0;
+  this->PieceParticles = 0;
   this->CarriedArraySelection = vtkDataArraySelection::New();
   this->Controller = nullptr;
   this->SetController(vtkMultiProcessController::GetGlobalController());
@@ -603,6 +751,9 @@ int vtkIsobarSPHIsosurface::RequestData(
   output->Initialize();
   this->ErrorMessage.clear();
   this->LastProgress = -1.0;
+  this->PieceAxis = -1;
+  this->PieceBounds[0] = this->PieceBounds[1] = 0.0;
+  this->PieceParticles = 0;
 
   // 1. The particle arrays to collect, in an order every rank shares. Errors found from
   // the settings alone happen alike on every rank, so no rank skips a collective call.
@@ -643,34 +794,37 @@ int vtkIsobarSPHIsosurface::RequestData(
     requests.push_back({ name, true });
   }
 
-  // 2. This rank's particles; in a parallel run, everybody's on rank 0.
+  // 2. This rank's particles. In a parallel run every rank takes part in every collective
+  // call below; errors are agreed on first, so that all ranks return at the same point.
   ParticleBuffers particles;
   std::string error = CollectLocal(input, requests, particles);
   vtkMultiProcessController* controller = this->Controller;
-  if (controller && controller->GetNumberOfProcesses() > 1)
+  const bool parallel = controller && controller->GetNumberOfProcesses() > 1;
+  const int nproc = parallel ? controller->GetNumberOfProcesses() : 1;
+  const int rank = parallel ? controller->GetLocalProcessId() : 0;
+  long long total = particles.Count;
+  if (parallel)
   {
-    if (!error.empty())
+    if (error.empty())
     {
-      this->Fail(error);
+      // Partitioning sorts particles by position: a NaN would silently go nowhere.
+      error = NonFinitePosition(particles, rank);
     }
-    error = GatherToRoot(controller, error, requests, particles);
-    if (controller->GetLocalProcessId() != 0)
-    {
-      return 1; // rank 0 extracts the whole surface; this piece stays empty
-    }
+    error = AgreeOnArrays(controller, error, requests, particles, total);
   }
   if (!error.empty())
   {
     this->Fail(error);
     return 1;
   }
-  if (particles.Count == 0)
+  if (total == 0)
   {
     vtkDebugMacro(<< "No particles: empty output");
     return 1;
   }
 
-  // 3. What the data decides: the smoothing-length array, the field string.
+  // 3. What the data decides: the smoothing-length array, the field string. In a
+  // parallel run the arrays' components were agreed on, so every rank decides alike.
   std::string hArray = hFromArray ? std::string(this->SmoothingLengthArrayName) : std::string();
   for (const char* name : AutoSmoothingLengthArrays)
   {
@@ -695,41 +849,184 @@ int vtkIsobarSPHIsosurface::RequestData(
     return 1;
   }
   const std::string field = this->FieldString(fieldArray.c_str(), fieldComponents);
-
-  // 4. The core does the rest.
-  ParticlesHandle handle;
-  error = MakeParticles(particles, handle);
-  particles = ParticleBuffers(); // the particle set owns copies now
-  if (!error.empty())
-  {
-    this->Fail(error);
-    return 1;
-  }
   std::vector<const char*> carriedNames;
   for (const auto& name : carried)
   {
     carriedNames.push_back(name.c_str());
   }
-  const IsobarSphParams params = this->MakeParams(field, hArray, carriedNames);
-  SurfaceHandle surface;
-  this->UpdateProgress(0.0);
-  const IsobarStatus status = isobar_sph_extract(
-    handle.Ptr, &params, &vtkIsobarSPHIsosurfaceProgress::Call, this, &surface.Ptr);
-  if (status == ISOBAR_STATUS_CANCELLED)
+  IsobarSphParams params = this->MakeParams(field, hArray, carriedNames);
+
+  // 4. The virtual grid. Single process: the data's own grid (as the CLI) unless Fixed
+  // Lattice is on. Parallel: a lattice all ranks share, by default the one a single
+  // process would use on all particles (first node at the global minimum corner minus
+  // the largest support and one cell, cells of Grid Factor x the global smallest h), so
+  // the pieces together are the single-process surface.
+  bool extract = true;
+  if (parallel || this->FixedLattice)
   {
-    this->ErrorMessage = "cancelled";
+    if (!hArray.empty() && particles.Find(hArray)->Components != 1)
+    {
+      this->Fail("smoothing length array '" + hArray + "' must have one component");
+      return 1;
+    }
+    double minH, maxH, bad;
+    SmoothingLengthRange(particles, hArray, this->SmoothingLength, minH, maxH, bad);
+    // MIN over ranks of: bounds (max as -max), smallest h, -largest h, -bad count.
+    double mins[9] = { std::numeric_limits<double>::infinity(),
+      std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+      std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+      std::numeric_limits<double>::infinity(), minH, -maxH, -bad };
+    for (vtkIdType i = 0; i < particles.Count; ++i)
+    {
+      for (int a = 0; a < 3; ++a)
+      {
+        const double x = particles.Positions[3 * i + a];
+        mins[a] = std::min(mins[a], x);
+        mins[3 + a] = std::min(mins[3 + a], -x);
+      }
+    }
+    if (parallel)
+    {
+      double local[9];
+      std::copy_n(mins, 9, local);
+      controller->AllReduce(local, mins, 9, vtkCommunicator::MIN_OP);
+    }
+    const double lo[3] = { mins[0], mins[1], mins[2] };
+    const double hi[3] = { -mins[3], -mins[4], -mins[5] };
+    minH = mins[6];
+    maxH = -mins[7];
+    if (mins[8] < 0.0)
+    {
+      std::ostringstream msg;
+      msg << "smoothing lengths must be positive and finite: " << -mins[8]
+          << " particle(s) have one that is not";
+      this->Fail(msg.str());
+      return 1;
+    }
+    if (!(this->HScale > 0.0))
+    {
+      this->Fail("H Scale must be positive");
+      return 1;
+    }
+    const double cell =
+      this->LatticeCellSize > 0.0 ? this->LatticeCellSize : this->GridFactor * minH;
+    if (!(cell > 0.0 && std::isfinite(cell)))
+    {
+      std::ostringstream msg;
+      msg << "the virtual cell size must be positive and finite, got " << cell
+          << " (Lattice Cell Size, or Grid Factor x smallest h)";
+      this->Fail(msg.str());
+      return 1;
+    }
+    // As the core: supports from the scaled h, the grid from the unscaled h.
+    const double supportFactor = this->Kernel == QUINTIC ? 3.0 : 2.0;
+    const double maxSupport = maxH * this->HScale * supportFactor;
+    params.fixed_lattice = 1;
+    params.lattice_cell_size = cell;
+    for (int a = 0; a < 3; ++a)
+    {
+      params.lattice_origin[a] =
+        this->FixedLattice ? this->LatticeOrigin[a] : lo[a] - (maxSupport + cell);
+    }
+
+    if (parallel)
+    {
+      // One slab per rank along the longest axis, about equal particle counts; each rank
+      // gets its slab's particles plus a halo of two supports and one cell (the computed
+      // volumes of the particles that shape the field need their own neighbours) and
+      // keeps the surface of the cells whose lowest corner lies in its slab.
+      int axis = 0;
+      for (int a = 1; a < 3; ++a)
+      {
+        if (hi[a] - lo[a] > hi[axis] - lo[axis])
+        {
+          axis = a;
+        }
+      }
+      const std::vector<double> cuts =
+        EqualCountCuts(controller, particles, axis, lo[axis], hi[axis], total);
+      const double halo = 2.0 * maxSupport + cell;
+      particles = Redistribute(controller, particles, axis, cuts, halo);
+      const double huge = std::numeric_limits<double>::max();
+      params.clip = 1;
+      for (int a = 0; a < 3; ++a)
+      {
+        params.clip_min[a] = -huge;
+        params.clip_max[a] = huge;
+      }
+      if (rank > 0)
+      {
+        params.clip_min[axis] = cuts[rank];
+      }
+      if (rank < nproc - 1)
+      {
+        params.clip_max[axis] = cuts[rank + 1];
+      }
+      this->PieceAxis = axis;
+      this->PieceBounds[0] = params.clip_min[axis];
+      this->PieceBounds[1] = params.clip_max[axis];
+      this->PieceParticles = particles.Count;
+      // An empty slab (all particles on one side of a cut) or no particles near it:
+      // nothing to extract here.
+      extract = particles.Count > 0 && params.clip_min[axis] < params.clip_max[axis];
+    }
+  }
+
+  // 5. The core does the rest.
+  std::string failure; // this rank's error ("cancelled" for an abort)
+  SurfaceHandle surface;
+  if (extract)
+  {
+    ParticlesHandle handle;
+    failure = MakeParticles(particles, handle);
+    particles = ParticleBuffers(); // the particle set owns copies now
+    if (failure.empty())
+    {
+      this->UpdateProgress(0.0);
+      const IsobarStatus status = isobar_sph_extract(
+        handle.Ptr, &params, &vtkIsobarSPHIsosurfaceProgress::Call, this, &surface.Ptr);
+      if (status == ISOBAR_STATUS_CANCELLED)
+      {
+        failure = "cancelled";
+      }
+      else if (status != ISOBAR_STATUS_OK)
+      {
+        failure = CoreError("isobar_sph_extract", status);
+      }
+    }
+    if (failure.empty())
+    {
+      failure = SurfaceToPolyData(surface.Ptr, output);
+    }
+  }
+  if (parallel)
+  {
+    // All pieces or none: a rank that failed empties every rank's output.
+    std::vector<int> states(nproc, 0);
+    const int state = failure.empty() ? 0 : (failure == "cancelled" ? 2 : 1);
+    controller->AllGather(&state, states.data(), 1);
+    for (int p = 0; p < nproc && failure.empty(); ++p)
+    {
+      if (states[p] != 0)
+      {
+        std::ostringstream msg;
+        msg << "rank " << p
+            << (states[p] == 2 ? " was cancelled" : " failed (see its error message)");
+        failure = msg.str();
+      }
+    }
+  }
+  if (failure == "cancelled")
+  {
+    output->Initialize();
+    this->ErrorMessage = failure;
     vtkDebugMacro(<< "Extraction cancelled: empty output");
     return 1;
   }
-  if (status != ISOBAR_STATUS_OK)
+  if (!failure.empty())
   {
-    this->Fail(CoreError("isobar_sph_extract", status));
-    return 1;
-  }
-  error = SurfaceToPolyData(surface.Ptr, output);
-  if (!error.empty())
-  {
-    this->Fail(error);
+    output->Initialize();
+    this->Fail(failure);
     return 1;
   }
   this->UpdateProgress(1.0);
@@ -814,6 +1111,13 @@ void vtkIsobarSPHIsosurface::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "ComputeNormals: " << this->ComputeNormals << "\n";
   os << indent << "MemoryBudget: " << this->MemoryBudget << "\n";
   os << indent << "FullGrid: " << this->FullGrid << "\n";
+  os << indent << "FixedLattice: " << this->FixedLattice << "\n";
+  os << indent << "LatticeOrigin: " << this->LatticeOrigin[0] << " " << this->LatticeOrigin[1]
+     << " " << this->LatticeOrigin[2] << "\n";
+  os << indent << "LatticeCellSize: " << this->LatticeCellSize << "\n";
+  os << indent << "PieceAxis: " << this->PieceAxis << "\n";
+  os << indent << "PieceBounds: " << this->PieceBounds[0] << " " << this->PieceBounds[1] << "\n";
+  os << indent << "PieceParticles: " << this->PieceParticles << "\n";
   os << indent << "CarriedArrays:";
   for (int i = 0; i < this->CarriedArraySelection->GetNumberOfArrays(); ++i)
   {

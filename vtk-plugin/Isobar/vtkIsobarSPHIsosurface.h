@@ -18,11 +18,15 @@
  * SetInputArrayToProcess(0, ...): a scalar as is, a vector as its magnitude
  * (FieldComponent = -1) or one component (FieldComponent = k).
  *
- * Parallel runs: with a multi-process controller (pvbatch/pvserver under MPI) each rank
- * sends its particles (ghost points skipped) to rank 0, which extracts the whole
- * surface; the other ranks output empty pieces. The result is the single-process surface
- * exactly, with no seams or duplicate triangles, at the cost of rank 0 holding all
- * particles.
+ * Parallel runs: with a multi-process controller of more than one process (pvbatch or
+ * pvserver under MPI) the ranks agree on the particles' global bounds and smallest and
+ * largest h, cut space into one slab per rank along the longest axis (about equal
+ * particle counts), send each rank the particles of its slab plus a halo of two kernel
+ * supports and one cell (ghost points skipped), and extract on a lattice they share,
+ * each keeping the surface of the cells whose lowest corner lies in its slab. By default
+ * the lattice is the grid a single process would use on all particles, so the pieces
+ * together are the single-process surface (vertex positions to rounding), with no
+ * duplicate triangles; vertices on the cuts appear once in each adjacent piece.
  */
 
 #ifndef vtkIsobarSPHIsosurface_h
@@ -185,6 +189,30 @@ public:
   vtkBooleanMacro(FullGrid, vtkTypeBool);
   ///@}
 
+  ///@{
+  /// Put the virtual grid on the lattice LatticeOrigin + (i, j, k) x cell for integers
+  /// i, j, k, with cell = LatticeCellSize, or Grid Factor x the smallest h when that is 0
+  /// (default off: a single process uses the data's own grid, as the CLI; a parallel run
+  /// uses the lattice of that grid over all ranks' particles). A lattice fixed across
+  /// frames keeps the grid still in time.
+  vtkSetMacro(FixedLattice, vtkTypeBool);
+  vtkGetMacro(FixedLattice, vtkTypeBool);
+  vtkBooleanMacro(FixedLattice, vtkTypeBool);
+  vtkSetVector3Macro(LatticeOrigin, double);
+  vtkGetVector3Macro(LatticeOrigin, double);
+  vtkSetClampMacro(LatticeCellSize, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(LatticeCellSize, double);
+  ///@}
+
+  ///@{
+  /// This rank's piece in the last parallel execution: the slab axis (-1 in a
+  /// single-process run), the slab [PieceBounds[0], PieceBounds[1]) along it (+-DBL_MAX
+  /// on the outer sides) and the particles it extracted from (own slab plus halo).
+  vtkGetMacro(PieceAxis, int);
+  vtkGetVector2Macro(PieceBounds, double);
+  vtkGetMacro(PieceParticles, vtkIdType);
+  ///@}
+
   /// Point arrays interpolated onto the surface: enable them by name. None by default.
   vtkGetObjectMacro(CarriedArraySelection, vtkDataArraySelection);
 
@@ -247,6 +275,12 @@ protected:
   vtkTypeBool ComputeNormals;
   double MemoryBudget;
   vtkTypeBool FullGrid;
+  vtkTypeBool FixedLattice;
+  double LatticeOrigin[3];
+  double LatticeCellSize;
+  int PieceAxis;
+  double PieceBounds[2];
+  vtkIdType PieceParticles;
   vtkDataArraySelection* CarriedArraySelection;
   vtkMultiProcessController* Controller;
   std::string ErrorMessage;

@@ -56,7 +56,12 @@ struct SphArgs {
     #[arg(long, default_value = "SumOfWeights")]
     field: String,
     /// Isovalue(s), comma separated.
-    #[arg(long, value_delimiter = ',', required = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_hyphen_values = true
+    )]
     iso: Vec<f64>,
     /// Kernel: cubic, wendland, quintic, quadratic.
     #[arg(long, default_value = "cubic")]
@@ -81,7 +86,7 @@ struct SphArgs {
     tolerance: f64,
     /// Trimming thresholds on the sum of weights: NODE,VERTEX (default 0.1,0.5; off for
     /// the SumOfWeights field).
-    #[arg(long, value_delimiter = ',', num_args = 2)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     trim: Option<Vec<f64>>,
     /// No trimming at free surfaces.
     #[arg(long, conflicts_with = "trim")]
@@ -109,11 +114,11 @@ struct SphArgs {
     no_normals: bool,
     /// Put the virtual grid on a fixed lattice X,Y,Z,CELL (nodes at origin + integer
     /// multiples of CELL; replaces --grid-factor), so separately extracted pieces line up.
-    #[arg(long, value_delimiter = ',', num_args = 4)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     lattice: Option<Vec<f64>>,
     /// Keep only the surface in cells whose lowest corner lies in [X0,Y0,Z0, X1,Y1,Z1);
     /// particles outside still shape the field (a halo).
-    #[arg(long, value_delimiter = ',', num_args = 6)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     clip: Option<Vec<f64>>,
     /// Resample onto the full grid and run plain marching cubes (the baseline).
     #[arg(long)]
@@ -204,7 +209,24 @@ fn settings_from(args: &SphArgs, data: &ParticleData) -> Result<SphSettings> {
     })
 }
 
-fn params_from(args: &SphArgs, quantity: &Quantity) -> Params {
+/// Checks that a comma-separated option has exactly `n` values.
+fn exactly(values: &Option<Vec<f64>>, n: usize, name: &'static str, form: &str) -> Result<()> {
+    match values {
+        Some(v) if v.len() != n => Err(Error::InvalidParameter {
+            name,
+            message: format!(
+                "takes {n} comma-separated numbers ({form}), got {}",
+                v.len()
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
+fn params_from(args: &SphArgs, quantity: &Quantity) -> Result<Params> {
+    exactly(&args.trim, 2, "trim", "NODE,VERTEX")?;
+    exactly(&args.lattice, 4, "lattice", "X,Y,Z,CELL")?;
+    exactly(&args.clip, 6, "clip", "X0,Y0,Z0,X1,Y1,Z1")?;
     let trim = if args.no_trim {
         None
     } else if let Some(t) = &args.trim {
@@ -218,7 +240,7 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Params {
     } else {
         Some(Trim::default())
     };
-    Params {
+    Ok(Params {
         memory_budget: (args.memory_budget * (1u64 << 30) as f64) as u64,
         isovalues: args.iso.clone(),
         grid_factor: args.grid_factor,
@@ -235,7 +257,7 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Params {
             .clip
             .as_ref()
             .map(|c| (DVec3::new(c[0], c[1], c[2]), DVec3::new(c[3], c[4], c[5]))),
-    }
+    })
 }
 
 fn run_sph(args: &SphArgs) -> Result<()> {
@@ -262,7 +284,7 @@ fn run_sph(args: &SphArgs) -> Result<()> {
         let data = io::read_particles(path)?;
         let read_s = t.elapsed().as_secs_f64();
         let settings = settings_from(args, &data)?;
-        let params = params_from(args, &settings.quantity);
+        let params = params_from(args, &settings.quantity)?;
         let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)?;
         io::write_mesh(&output, &extraction.mesh)?;
         if !args.quiet {
