@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
+import threading
 from ctypes import POINTER, byref, c_char_p, c_double
 from typing import Callable, Iterable, Optional, Sequence, Tuple, Union
 
@@ -213,8 +216,10 @@ def extract(
     # KeyboardInterrupt raised while it runs) cancels the extraction too.
     raised: list = []
 
+    interrupted: list = []
+
     def report(_user, fraction, phase):
-        if raised:
+        if raised or interrupted:
             return 1
         try:
             if progress is None:
@@ -227,8 +232,11 @@ def extract(
 
     callback = PROGRESS_FN(report)
     handle = POINTER(SurfaceHandle)()
-    status = lib.isobar_sph_extract(particles._handle, byref(params), callback, None, byref(handle))
+    with _sigint_cancels(interrupted):
+        status = lib.isobar_sph_extract(particles._handle, byref(params), callback, None, byref(handle))
     del keep
+    if interrupted and not raised:
+        raised.append(KeyboardInterrupt())
     if raised:
         if status == 0:
             lib.isobar_surface_free(handle)
@@ -239,6 +247,27 @@ def extract(
         return Surface._from_handle(handle, normals_requested=bool(normals))
     check(status)
     raise AssertionError("unreachable")  # check raises for every non-zero status
+
+
+@contextlib.contextmanager
+def _sigint_cancels(interrupted: list):
+    """While the core runs, Ctrl-C only sets a flag that the progress callback turns into
+    a cancel; the caller then raises KeyboardInterrupt. Python would otherwise raise it at
+    an arbitrary point inside the ctypes callback, where it cannot be caught cleanly.
+    Only where Python's own handler is installed (not inside Blender or another host that
+    manages signals itself), and only on the main thread."""
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        try:
+            if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+                previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
+        except (ValueError, OSError):
+            previous = None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 __all__ = ["extract", "default_params", "DEFAULT_H_ARRAYS"]
