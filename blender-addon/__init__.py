@@ -2,8 +2,9 @@
 
 Modules: ``sequence`` (numbered files), ``extraction`` (the isobar call, attribute names),
 ``cache`` (baked frames), ``mesh`` (numpy into a Blender mesh), ``importer`` (settings to
-mesh at a frame), ``bake`` (frame-range jobs) -- these hold no UI -- and ``properties``,
-``operators``, ``panels``, ``handlers`` for Blender's side.
+mesh at a frame), ``bake`` (frame-range jobs), ``usd_export`` (frame ranges into isobar's
+USD writer) -- these hold no UI -- and ``properties``, ``operators``, ``panels``,
+``handlers`` for Blender's side.
 """
 
 from __future__ import annotations

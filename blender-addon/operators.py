@@ -1,15 +1,16 @@
 """Operators: import a particle sequence, make a surface from scene particles, refresh,
-bake (modal, Esc cancels) and free the bake. Errors reach the user through self.report."""
+bake (modal, Esc cancels), free the bake and export to USD. Errors reach the user through
+self.report."""
 
 from __future__ import annotations
 
 import os
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
-from bpy_extras.io_utils import ImportHelper
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import bake, extraction, importer, sequence
+from . import bake, extraction, importer, sequence, usd_export
 
 
 def _fluid_object(context, name: str = ""):
@@ -392,8 +393,160 @@ class ISOBAR_OT_free_bake(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _export_objects(context, name: str = ""):
+    """The surfaces to export: the one named, else the selected fluid surfaces, else the
+    active one."""
+    if name:
+        obj = bpy.data.objects.get(name)
+        return [obj] if importer.is_fluid(obj) else []
+    selected = [o for o in (getattr(context, "selected_objects", None) or []) if importer.is_fluid(o)]
+    if selected:
+        return sorted(selected, key=lambda o: o.name)
+    active = _fluid_object(context)
+    return [active] if active is not None else []
+
+
+class ISOBAR_OT_export_usd(bpy.types.Operator, ExportHelper):
+    """Export fluid surfaces over a frame range to USD: time-sampled mesh, vertex normals, sph_* primvars, velocities"""
+
+    bl_idname = "isobar.export_usd"
+    bl_label = "Export Fluid to USD"
+    bl_options = {"REGISTER"}
+
+    filename_ext = ".usd"
+    filter_glob: StringProperty(default="*.usd;*.usda;*.usdc", options={"HIDDEN"})
+
+    object_name: StringProperty(
+        name="Object",
+        description="Fluid surface to export (default: the selected fluid surfaces, else the active one)",
+        options={"SKIP_SAVE"},
+    )
+    use_scene_range: BoolProperty(
+        name="Scene Range", default=True, description="Export the scene's frame range (else Start to End)"
+    )
+    frame_start: IntProperty(name="Start", default=1, description="First frame to export")
+    frame_end: IntProperty(name="End", default=250, description="Last frame to export")
+    layout: EnumProperty(
+        name="Layout",
+        items=[
+            ("AUTO", "Auto", "One file for a single frame, value clips otherwise"),
+            ("CLIPS", "Value Clips", "One layer per frame in <name>.clips/, joined by value clips: any length, "
+             "one frame in memory at a time"),
+            ("FLAT", "Single File", "Every frame's samples in the one file (all frames in memory until written)"),
+        ],
+        default="AUTO",
+    )
+    up_axis: EnumProperty(
+        name="Up Axis",
+        items=[
+            ("AUTO", "Auto", "Y for a surface imported with Y Up (the object rotated 90 degrees about X), else Z"),
+            ("Y", "Y", "Declare the stage Y up (the data is not rotated)"),
+            ("Z", "Z", "Declare the stage Z up (the data is not rotated)"),
+        ],
+        default="AUTO",
+    )
+    meters_per_unit: FloatProperty(
+        name="Meters per Unit", default=1.0, min=1e-9, precision=4, description="The stage's metersPerUnit"
+    )
+    export_attributes: BoolProperty(
+        name="Attributes", default=True, description="The sph_* attributes as vertex primvars"
+    )
+    export_velocities: BoolProperty(
+        name="Velocities", default=True, description="The velocity attribute as the mesh's velocities (motion blur)"
+    )
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(self, "use_scene_range")
+        col = layout.column(align=True)
+        col.active = not self.use_scene_range
+        col.prop(self, "frame_start")
+        col.prop(self, "frame_end")
+        for name in ("layout", "up_axis", "meters_per_unit", "export_attributes", "export_velocities"):
+            layout.prop(self, name)
+
+    def check(self, _context):
+        """Keeps .usd, .usda and .usdc (the file format follows the extension); adds .usd
+        to anything else."""
+        filepath = self.filepath
+        if os.path.basename(filepath) and os.path.splitext(filepath)[1].lower() not in (".usd", ".usda", ".usdc"):
+            self.filepath = bpy.path.ensure_ext(filepath, self.filename_ext)
+            return True
+        return False
+
+    def invoke(self, context, event):
+        objects = _export_objects(context, self.object_name)
+        if not self.filepath and objects:
+            folder = os.path.dirname(bpy.data.filepath) if bpy.data.filepath else ""
+            self.filepath = os.path.join(folder, usd_export.prim_name(objects[0].name) + self.filename_ext)
+        scene = context.scene
+        if not self.properties.is_property_set("frame_start"):
+            self.frame_start = scene.frame_start
+        if not self.properties.is_property_set("frame_end"):
+            self.frame_end = scene.frame_end
+        return ExportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        scene = context.scene
+        frames = (
+            bake.scene_frames(scene)
+            if self.use_scene_range
+            else bake.scene_frames(scene, self.frame_start, self.frame_end)
+        )
+        options = usd_export.Options(
+            layout=self.layout,
+            up_axis=self.up_axis,
+            meters_per_unit=self.meters_per_unit,
+            primvars=self.export_attributes,
+            velocities=self.export_velocities,
+        )
+        try:
+            job = usd_export.ExportJob(
+                _export_objects(context, self.object_name), scene, frames, self.filepath, options
+            )
+        except ImportError as error:  # no pxr in this Blender, or the writer's wheel is missing
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        except Exception as error:  # noqa: BLE001 - reported, not raised
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, job.total)
+        try:
+            results = job.run(progress=wm.progress_update)
+        except usd_export.ExportError as error:
+            path = job.paths[job.obj_names.index(error.obj_name)]
+            done = "".join(f"; {r.path} was written" for r in job.results)
+            self.report({"ERROR"}, f"USD export stopped at {error} ({path} left as it was{done})")
+            return {"CANCELLED"}
+        except Exception as error:  # noqa: BLE001
+            self.report({"ERROR"}, f"USD export failed: {importer.describe_error(error)}")
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        for warning in job.warnings:
+            self.report({"WARNING"}, warning)
+        for result in results:
+            span = f"frame {frames[0]}" if len(frames) == 1 else f"frames {frames[0]}-{frames[-1]}"
+            baked = sum(1 for s in result.sources if s == "bake")
+            note = f", {baked} from the bake" if baked else ""
+            count = len(result.frames)
+            kind = "value clips" if result.layout == "clips" else "one file"
+            self.report(
+                {"INFO"},
+                f"Exported '{result.name}' {span} ({count} frame{'s' if count != 1 else ''}{note}, "
+                f"{result.up_axis} up, {kind}) to {result.path}",
+            )
+        return {"FINISHED"}
+
+
 def menu_import(self, context):
     self.layout.operator(ISOBAR_OT_import_sequence.bl_idname, text="SPH Particle Sequence (isobar)")
+
+
+def menu_export(self, context):
+    self.layout.operator(ISOBAR_OT_export_usd.bl_idname, text="Fluid Surface to USD (isobar)")
 
 
 classes = (
@@ -402,6 +555,7 @@ classes = (
     ISOBAR_OT_refresh,
     ISOBAR_OT_bake,
     ISOBAR_OT_free_bake,
+    ISOBAR_OT_export_usd,
 )
 
 
@@ -409,9 +563,11 @@ def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.TOPBAR_MT_file_import.append(menu_import)
+    bpy.types.TOPBAR_MT_file_export.append(menu_export)
 
 
 def unregister():
+    bpy.types.TOPBAR_MT_file_export.remove(menu_export)
     bpy.types.TOPBAR_MT_file_import.remove(menu_import)
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

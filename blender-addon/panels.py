@@ -41,6 +41,7 @@ class ISOBAR_PT_main(_Sidebar, bpy.types.Panel):
         row = box.row(align=True)
         row.operator("isobar.refresh", text="Refresh", icon="FILE_REFRESH")
         row.prop(settings, "live_update", text="Live", toggle=True)
+        box.operator("isobar.export_usd", text="Export USD", icon="EXPORT")
 
 
 class ISOBAR_PT_source(_Sidebar, bpy.types.Panel):

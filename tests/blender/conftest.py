@@ -73,6 +73,25 @@ def scene(addon):
     return bpy.context.scene
 
 
+@pytest.fixture(scope="session")
+def pxr(addon):
+    """USD's Python module for reading exports: the copy bpy ships (in its own Python's
+    site-packages, which the PyPI bpy module leaves off sys.path), else usd-core (run.sh
+    installs it when bpy ships none)."""
+    version = f"python{sys.version_info.major}.{sys.version_info.minor}"
+    local = bpy.utils.resource_path("LOCAL")
+    for folder in (
+        os.path.join(local, "python", "lib", version, "site-packages"),  # Linux, macOS
+        os.path.join(local, "python", "lib", "site-packages"),  # Windows
+    ):
+        if os.path.isdir(os.path.join(folder, "pxr")) and folder not in sys.path:
+            sys.path.append(folder)
+    module = pytest.importorskip("pxr", reason="no USD Python module (bpy ships none and usd-core is not installed)")
+    from pxr import Usd  # noqa: F401
+
+    return module
+
+
 def make_sequence(folder: Path, sources, pattern="frame_{:04d}.vtk", start=1):
     """Copies `sources` to folder/frame_0001.vtk, frame_0002.vtk, ...; returns the paths."""
     folder.mkdir(parents=True, exist_ok=True)

@@ -45,6 +45,23 @@ if ! "$venv/bin/python" -c 'import bpy, pytest' >/dev/null 2>&1; then
 fi
 "$venv/bin/python" -c 'import bpy, numpy, sys; print("bpy", bpy.app.version_string, "numpy", numpy.__version__, "python", sys.version.split()[0])'
 
+# USD's Python module, to read what the USD export writes: bpy ships pxr (the one Blender
+# links, in <bpy>/<version>/python/lib/pythonX.Y/site-packages, off sys.path in the PyPI
+# module); only a bpy without it gets usd-core from PyPI.
+if ! "$venv/bin/python" - >/dev/null 2>&1 <<'PY'
+import os, sys, bpy
+local = bpy.utils.resource_path("LOCAL")
+version = f"python{sys.version_info.major}.{sys.version_info.minor}"
+folders = [os.path.join(local, "python", "lib", version, "site-packages"), os.path.join(local, "python", "lib", "site-packages")]
+sys.exit(0 if any(os.path.isdir(os.path.join(f, "pxr")) for f in folders) else 1)
+PY
+then
+    if ! "$venv/bin/python" -c 'import pxr' >/dev/null 2>&1; then
+        log "pip install usd-core (this bpy ships no pxr)"
+        "$venv/bin/python" -m pip install -q usd-core
+    fi
+fi
+
 log "build the extension (blender-addon/build.sh)"
 zip="$(PYTHON="$python" bash "$root/blender-addon/build.sh")"
 echo "$zip"

@@ -9,14 +9,16 @@ import bpy
 from conftest import MODULE, ZIP
 
 
-def test_zip_is_an_extension_with_the_isobar_wheel():
+def test_zip_is_an_extension_with_the_isobar_and_isobar_usd_wheels():
     with zipfile.ZipFile(ZIP) as archive:
         names = archive.namelist()
         manifest = archive.read("blender_manifest.toml").decode()
-    assert "__init__.py" in names
-    wheels = [n for n in names if n.startswith("wheels/") and n.endswith(".whl")]
-    assert len(wheels) == 1 and wheels[0].endswith("-py3-none-linux_x86_64.whl"), wheels
-    assert f'wheels = ["./{wheels[0]}"]' in manifest
+    assert "__init__.py" in names and "usd_export.py" in names
+    wheels = sorted(n for n in names if n.startswith("wheels/") and n.endswith(".whl"))
+    assert len(wheels) == 2, wheels
+    assert wheels[0].startswith("wheels/isobar-") and wheels[0].endswith("-py3-none-linux_x86_64.whl"), wheels
+    assert wheels[1].startswith("wheels/isobar_usd-") and wheels[1].endswith("-py3-none-any.whl"), wheels
+    assert "wheels = [" + ", ".join(f'"./{w}"' for w in wheels) + "]" in manifest
     assert 'id = "isobar_fluid"' in manifest and 'platforms = ["linux-x64"]' in manifest
 
 
@@ -37,7 +39,7 @@ def test_installed_and_enabled(addon, isobar):
     assert isobar.__file__.startswith(user), isobar.__file__
     assert os.path.dirname(isobar.library_path) == os.path.dirname(isobar.__file__)
     assert isobar.core_version() == isobar.__version__
-    for op in ("import_sequence", "surface_from_object", "refresh", "bake", "free_bake"):
+    for op in ("import_sequence", "surface_from_object", "refresh", "bake", "free_bake", "export_usd"):
         assert hasattr(bpy.ops.isobar, op)
     assert bpy.types.ISOBAR_PT_main.bl_category == "isobar"
     assert bpy.types.ISOBAR_PT_main.bl_region_type == "UI"
