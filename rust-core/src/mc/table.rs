@@ -108,8 +108,16 @@ fn generate() -> CaseTable {
 fn triangulate_loop(lp: &[u8], out: &mut Vec<[u8; 3]>) {
     let n = lp.len();
     let pos: Vec<[f64; 3]> = lp.iter().map(|&e| edge_midpoint(e as usize)).collect();
+    // A diagonal (a triangle side that is not a side of the loop) between two vertices of
+    // one cell face would lie in that face, where the neighbour cell may draw the same
+    // diagonal: the edge would then border four triangles.
+    let is_diagonal = |i: usize, j: usize| j - i > 1 && !(i == 0 && j == n - 1);
     let cost = |a: usize, b: usize, c: usize| -> f64 {
-        if shares_a_face([lp[a], lp[b], lp[c]]) {
+        let in_face = shares_a_face(&[lp[a], lp[b], lp[c]])
+            || [(a, b), (b, c), (a, c)]
+                .iter()
+                .any(|&(i, j)| is_diagonal(i, j) && shares_a_face(&[lp[i], lp[j]]));
+        if in_face {
             return 1e9;
         }
         // Squared perimeter over area: 20.8 for an equilateral triangle, more when thin.
@@ -147,7 +155,7 @@ fn triangulate_loop(lp: &[u8], out: &mut Vec<[u8; 3]>) {
 }
 
 /// True when the three local edges all lie on one face of the cell.
-fn shares_a_face(edges: [u8; 3]) -> bool {
+fn shares_a_face(edges: &[u8]) -> bool {
     (0..3).any(|a| {
         (0..2).any(|s| {
             edges.iter().all(|&e| {
@@ -281,9 +289,33 @@ mod tests {
         for case in 0..256 {
             for tri in &t.triangles[case] {
                 assert!(
-                    !shares_a_face(*tri),
+                    !shares_a_face(tri),
                     "case {case}: triangle {tri:?} lies in a face"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn no_interior_edge_lies_in_a_cell_face() {
+        // A triangle side used by two triangles of the same cell is interior to the cell's
+        // surface; if it lay in a face, the neighbour could use it too (four triangles).
+        let t = case_table();
+        for case in 0..256 {
+            let mut uses = std::collections::HashMap::new();
+            for tri in &t.triangles[case] {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                }
+            }
+            for (&(a, b), &n) in &uses {
+                if n == 2 {
+                    assert!(
+                        !shares_a_face(&[a, b]),
+                        "case {case}: interior edge {a}-{b} lies in a face"
+                    );
+                }
             }
         }
     }
