@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import glob
 import os
 import re
 import socket
@@ -56,9 +57,17 @@ def replace(staged: Path, final: Path) -> None:
 
 
 def discard(path: Path) -> None:
-    """Removes a staging file, if it is there."""
+    """Removes a staging file, if it is there, and the temporary siblings USD's own writer
+    makes beside it (`<staged stem>.XXXXXX`), which a process killed mid-export leaves."""
+    path = Path(path)
     with contextlib.suppress(FileNotFoundError):
         os.unlink(path)
+    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
+    if _STAGED.match(path.name):
+        with contextlib.suppress(OSError):
+            for sibling in path.parent.glob(glob.escape(stem) + ".*"):
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(sibling)
 
 
 @contextlib.contextmanager
