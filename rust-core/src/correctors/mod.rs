@@ -266,14 +266,14 @@ pub fn extract(
     let n = params.isovalues.len() as f64;
     progress.phase("seed cells", 0.0, 0.0)?;
     let t = Instant::now();
-    let smoothed = seeds::smoothed_at_particles(field);
-    stats.field_evaluations += smoothed.len() as u64;
+    let search = seeds::SeedSearch::new(field)?;
+    stats.field_evaluations += field.len() as u64;
     stats.timings.seeds += t.elapsed().as_secs_f64();
     for (k, &iso) in params.isovalues.iter().enumerate() {
         let at = |f: f64| (k as f64 + f) / n;
         progress.phase("seed cells", at(0.0), at(0.1))?;
         let t = Instant::now();
-        let seeds = seeds::seed_cells(field, &grid, iso, &smoothed)?;
+        let seeds = seeds::seed_cells(field, &grid, iso, &search)?;
         stats.seed_cells += seeds.len() as u64;
         stats.timings.seeds += t.elapsed().as_secs_f64();
 

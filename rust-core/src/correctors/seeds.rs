@@ -37,22 +37,59 @@ pub(crate) const WINDOW_CELLS: f64 = 2.0;
 /// Added to the kernel's linear-crossing error, as a fraction of the segment.
 pub(crate) const WINDOW_MARGIN: f64 = 0.05;
 
-/// The smoothed field at each particle (grid-slot order), for [`seed_cells`].
-pub fn smoothed_at_particles(field: &SphField) -> Vec<f64> {
-    (0..field.len())
-        .into_par_iter()
-        .map(|i| field.value_and_weight(field.position(i)).0)
-        .collect()
+/// What seeding needs that does not depend on the isovalue, built once per extraction:
+/// particle positions, a neighbour grid for the pair search, the smoothed field at each
+/// particle (grid-slot order).
+pub struct SeedSearch {
+    positions: Vec<DVec3>,
+    pairs: NeighbourGrid,
+    smoothed: Vec<f64>,
 }
 
-/// Sorted, unique keys of the seed cells for `iso`; `smoothed` from
-/// [`smoothed_at_particles`].
+impl SeedSearch {
+    /// Builds the search for `field`; costs one field evaluation per particle.
+    pub fn new(field: &SphField) -> Result<Self> {
+        let positions: Vec<DVec3> = (0..field.len()).map(|i| field.position(i)).collect();
+        let max_radius = (0..field.len())
+            .map(|i| side_radius(field, i))
+            .fold(0.0, f64::max);
+        let pairs = NeighbourGrid::build(&positions, max_radius, DEFAULT_MEMORY_BUDGET)?;
+        let smoothed = positions
+            .par_iter()
+            .map(|&x| field.value_and_weight(x).0)
+            .collect();
+        Ok(SeedSearch {
+            positions,
+            pairs,
+            smoothed,
+        })
+    }
+}
+
+/// Pairs are searched within h (the paper).
+fn pair_radius(field: &SphField, i: usize) -> f64 {
+    field.h_unscaled(i).min(field.support(i))
+}
+
+/// A side counts as covered by a neighbour within 1.5 h: solvers space particles about h
+/// apart, so h alone would leave the axis neighbours of an interior particle just outside
+/// and mark it as free surface on every side.
+fn side_radius(field: &SphField, i: usize) -> f64 {
+    (1.5 * field.h_unscaled(i)).min(field.support(i))
+}
+
+/// Sorted, unique keys of the seed cells for `iso`.
 pub fn seed_cells(
     field: &SphField,
     grid: &VirtualGrid,
     iso: f64,
-    smoothed: &[f64],
+    search: &SeedSearch,
 ) -> Result<Vec<u64>> {
+    let SeedSearch {
+        positions,
+        pairs,
+        smoothed,
+    } = search;
     // Each particle is classified twice, by its raw and by its smoothed value; a pair
     // straddles when either classification differs.
     let class = |i: usize| (field.raw_value(i) > iso) as u8 | ((smoothed[i] > iso) as u8) << 1;
@@ -67,22 +104,14 @@ pub fn seed_cells(
     };
     let fraction = field.kernel().linear_crossing_error() + WINDOW_MARGIN;
     let window = |length: f64| (WINDOW_CELLS * grid.cell_size).max(fraction * length);
-    // Pairs within h (the paper). A side counts as covered by a neighbour within 1.5 h:
-    // solvers space particles about h apart, so h alone would leave the axis neighbours of
-    // an interior particle just outside and mark it as free surface on every side.
-    let radius_of = |i: usize| field.h_unscaled(i).min(field.support(i));
-    let side_radius_of = |i: usize| (1.5 * field.h_unscaled(i)).min(field.support(i));
-    let positions: Vec<DVec3> = (0..field.len()).map(|i| field.position(i)).collect();
-    let max_radius = (0..field.len()).map(side_radius_of).fold(0.0, f64::max);
-    let pairs = NeighbourGrid::build(&positions, max_radius, DEFAULT_MEMORY_BUDGET)?;
     let order = pairs.order();
     let mut seeds: Vec<u64> = (0..field.len())
         .into_par_iter()
         .fold(Vec::new, |mut out, i| {
             let xi = positions[i];
             let ci = class(i);
-            let r2 = radius_of(i).powi(2);
-            let side_r2 = side_radius_of(i).powi(2);
+            let r2 = pair_radius(field, i).powi(2);
+            let side_r2 = side_radius(field, i).powi(2);
             // Bit 2a+s: a neighbour lies on side s (0: negative, 1: positive) of axis a.
             let mut sides = 0u8;
             pairs.for_each_candidate_range(xi, 1, |range| {

@@ -275,8 +275,8 @@ mod tests {
                 }
             }
             assert_eq!(used, t.edges_cut[case], "case {case}");
-            // Within the cell, every interior triangle edge is shared by two triangles
-            // wound oppositely; the rest lie on the cell's faces.
+            // At most 12 triangles a case (the loops' orientation and closure are checked
+            // by triangles_keep_the_loop_orientation).
             let tris = &t.triangles[case];
             assert!(tris.len() <= 12, "case {case}: {} triangles", tris.len());
         }
