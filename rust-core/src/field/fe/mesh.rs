@@ -1,0 +1,331 @@
+//! A mesh of Lagrange cells with a scalar field on its nodes: the mapping T, its Jacobian
+//! and second derivatives, the world-space gradient and Hessian of the field (the paper's
+//! eqs. 19–20), element validity and face adjacency.
+
+use super::basis::{outer, BasisValues};
+use super::shape::{Kind, Shape};
+use crate::error::{Error, Result};
+use crate::field::particles::Attribute;
+use glam::{DMat3, DVec3};
+use rustc_hash::FxHashMap;
+
+/// No neighbour across a face (the domain boundary).
+pub const NO_NEIGHBOUR: u32 = u32::MAX;
+
+/// Lagrange cells over shared points, with per-point arrays.
+#[derive(Clone, Debug)]
+pub struct FeMesh {
+    pub points: Vec<DVec3>,
+    /// Distinct (kind, order) shapes; cells refer to them by index.
+    shapes: Vec<Shape>,
+    cell_shape: Vec<u16>,
+    /// Cell c's nodes are `connectivity[offsets[c]..offsets[c + 1]]`, in VTK order.
+    offsets: Vec<usize>,
+    connectivity: Vec<u32>,
+    /// For cell c and face f: (neighbour cell, its face index), or NO_NEIGHBOUR.
+    neighbours: Vec<[(u32, u8); 6]>,
+    /// Arrays given per point (the candidates for the field).
+    pub point_data: Vec<Attribute>,
+}
+
+/// Everything the particle system needs at one point of one cell.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Evaluation {
+    /// World position T(u).
+    pub x: DVec3,
+    /// J = ∂x/∂u (columns ∂x/∂r, ∂x/∂s, ∂x/∂t).
+    pub jacobian: DMat3,
+    /// F*(u) = F(T(u)).
+    pub value: f64,
+    /// F*_u.
+    pub grad_ref: DVec3,
+    /// F_x = Kᵀ F*_u (eq. 19).
+    pub grad: DVec3,
+    /// F_xx (eq. 20).
+    pub hessian: DMat3,
+}
+
+impl Evaluation {
+    /// K = J⁻¹.
+    pub fn inverse_jacobian(&self) -> DMat3 {
+        self.jacobian.inverse()
+    }
+}
+
+/// Reusable evaluation buffers (one per thread).
+#[derive(Clone, Debug, Default)]
+pub struct Scratch {
+    basis: BasisValues,
+}
+
+impl FeMesh {
+    /// Builds a mesh from VTK-style arrays: `points`, per-cell VTK `types`, `offsets`
+    /// (cell c's nodes are `connectivity[offsets[c]..offsets[c+1]]`, offsets.len() = cells + 1),
+    /// optional per-cell `degrees` (VTK's HigherOrderDegrees), and per-point arrays. `name`
+    /// is what error messages call the data. Checks indices, node counts and that no
+    /// element is inverted or degenerate (det J > 0 at every node).
+    pub fn new(
+        name: &str,
+        points: Vec<DVec3>,
+        types: &[u8],
+        offsets: &[usize],
+        connectivity: Vec<u32>,
+        degrees: Option<&[[usize; 3]]>,
+        point_data: Vec<Attribute>,
+    ) -> Result<FeMesh> {
+        let bad = |m: String| Error::InvalidInput(format!("{name}: {m}"));
+        if offsets.len() != types.len() + 1 {
+            return Err(bad(format!(
+                "{} cell types but {} offsets",
+                types.len(),
+                offsets.len().saturating_sub(1)
+            )));
+        }
+        if types.is_empty() {
+            return Err(bad("no cells".into()));
+        }
+        if let Some(p) = points.iter().position(|p| !p.is_finite()) {
+            return Err(bad(format!("point {p} has a non-finite coordinate")));
+        }
+        for a in &point_data {
+            if a.data.len() != points.len() * a.components {
+                return Err(bad(format!(
+                    "point array '{}' has {} values for {} points",
+                    a.name,
+                    a.data.len(),
+                    points.len()
+                )));
+            }
+        }
+        let mut shapes: Vec<Shape> = Vec::new();
+        let mut cell_shape = Vec::with_capacity(types.len());
+        for (c, &ty) in types.iter().enumerate() {
+            let kind = Kind::from_vtk(ty).ok_or_else(|| {
+                bad(format!(
+                    "cell {c} has VTK type {ty}, not a Lagrange hexahedron (72), tetrahedron (71) or wedge (73)"
+                ))
+            })?;
+            let (start, end) = (offsets[c], offsets[c + 1]);
+            if end < start || end > connectivity.len() {
+                return Err(bad(format!(
+                    "cell {c}: offsets {start}..{end} out of order or range"
+                )));
+            }
+            let n = end - start;
+            let order = match degrees.map(|d| d[c]) {
+                Some(d) if d.iter().all(|&x| x > 0) => {
+                    let o = match kind {
+                        Kind::Hexahedron => d,
+                        Kind::Tetrahedron => [d[0]; 3],
+                        Kind::Wedge => [d[0], d[0], d[2]],
+                    };
+                    if kind.node_count(o) != n {
+                        return Err(bad(format!(
+                            "cell {c} ({}): HigherOrderDegrees {:?} need {} nodes, the cell has {n}",
+                            kind.name(),
+                            d,
+                            kind.node_count(o)
+                        )));
+                    }
+                    o
+                }
+                _ => {
+                    let p = kind.order_from_count(n).ok_or_else(|| {
+                        bad(format!(
+                            "cell {c} ({}) has {n} nodes, which matches no order",
+                            kind.name()
+                        ))
+                    })?;
+                    [p; 3]
+                }
+            };
+            if order.iter().any(|&o| o > 16) {
+                return Err(bad(format!(
+                    "cell {c}: order {order:?} is above the supported 16"
+                )));
+            }
+            let s = match shapes
+                .iter()
+                .position(|s| s.kind == kind && s.order == order)
+            {
+                Some(s) => s,
+                None => {
+                    shapes.push(Shape::new(kind, order));
+                    shapes.len() - 1
+                }
+            };
+            cell_shape.push(s as u16);
+            if let Some(&bad_node) = connectivity[start..end]
+                .iter()
+                .find(|&&i| i as usize >= points.len())
+            {
+                return Err(bad(format!(
+                    "cell {c} refers to point {bad_node}, but there are {} points",
+                    points.len()
+                )));
+            }
+        }
+        let mut mesh = FeMesh {
+            points,
+            shapes,
+            cell_shape,
+            offsets: offsets.to_vec(),
+            connectivity,
+            neighbours: Vec::new(),
+            point_data,
+        };
+        mesh.check_elements(name)?;
+        mesh.neighbours = mesh.face_adjacency();
+        Ok(mesh)
+    }
+
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.cell_shape.len()
+    }
+
+    /// The shape of cell `c`.
+    pub fn shape(&self, c: usize) -> &Shape {
+        &self.shapes[self.cell_shape[c] as usize]
+    }
+
+    /// Node (point) indices of cell `c` in VTK order.
+    pub fn nodes(&self, c: usize) -> &[u32] {
+        &self.connectivity[self.offsets[c]..self.offsets[c + 1]]
+    }
+
+    /// (neighbour cell, its face) across face `f` of cell `c`, if any.
+    pub fn neighbour(&self, c: usize, f: usize) -> Option<(usize, usize)> {
+        let (n, g) = self.neighbours[c][f];
+        (n != NO_NEIGHBOUR).then_some((n as usize, g as usize))
+    }
+
+    /// World position and Jacobian of cell `c` at reference point `u`.
+    pub fn map(&self, c: usize, u: DVec3, scratch: &mut Scratch) -> (DVec3, DMat3) {
+        self.shape(c).evaluate(u, &mut scratch.basis);
+        let b = &scratch.basis;
+        let mut x = DVec3::ZERO;
+        let mut j = DMat3::ZERO;
+        for (k, &n) in self.nodes(c).iter().enumerate() {
+            let p = self.points[n as usize];
+            x += p * b.values[k];
+            j += outer(p, b.gradients[k]);
+        }
+        (x, j)
+    }
+
+    /// T, J, F*, F*_u, F_x and F_xx of the point array `values` in cell `c` at `u`.
+    pub fn evaluate(
+        &self,
+        values: &[f64],
+        c: usize,
+        u: DVec3,
+        scratch: &mut Scratch,
+    ) -> Evaluation {
+        self.shape(c).evaluate(u, &mut scratch.basis);
+        let b = &scratch.basis;
+        let mut x = DVec3::ZERO;
+        let mut jac = DMat3::ZERO;
+        // Hessians of the three world coordinates with respect to u (J's derivatives).
+        let mut hx = [DMat3::ZERO; 3];
+        let mut f = 0.0;
+        let mut fu = DVec3::ZERO;
+        let mut fuu = DMat3::ZERO;
+        for (k, &n) in self.nodes(c).iter().enumerate() {
+            let p = self.points[n as usize];
+            let v = values[n as usize];
+            let (phi, g, h) = (b.values[k], b.gradients[k], &b.hessians[k]);
+            x += p * phi;
+            jac += outer(p, g);
+            hx[0] += *h * p.x;
+            hx[1] += *h * p.y;
+            hx[2] += *h * p.z;
+            f += v * phi;
+            fu += g * v;
+            fuu += *h * v;
+        }
+        let k = jac.inverse();
+        let grad = k.transpose() * fu;
+        // F_xx = Kᵀ (F*_uu − Σ_m (F_x)_m ∂²x_m/∂u²) K (eq. 20 written out).
+        let m = fuu - hx[0] * grad.x - hx[1] * grad.y - hx[2] * grad.z;
+        let hessian = k.transpose() * m * k;
+        Evaluation {
+            x,
+            jacobian: jac,
+            value: f,
+            grad_ref: fu,
+            grad,
+            hessian,
+        }
+    }
+
+    /// Fails naming the first cell whose Jacobian determinant is not positive at one of its
+    /// nodes or its centroid (inverted, flat or collapsed).
+    fn check_elements(&self, name: &str) -> Result<()> {
+        let mut scratch = Scratch::default();
+        for c in 0..self.cell_count() {
+            let shape = self.shape(c);
+            // Scale-free test: det J relative to the cube of the cell's extent.
+            let pts: Vec<DVec3> = self
+                .nodes(c)
+                .iter()
+                .map(|&n| self.points[n as usize])
+                .collect();
+            let (lo, hi) = pts
+                .iter()
+                .fold((pts[0], pts[0]), |(a, b), &p| (a.min(p), b.max(p)));
+            let size = (hi - lo).max_element();
+            let floor = 1e-12 * size * size * size;
+            let probe = (0..shape.len())
+                .map(|n| shape.node_coords(n))
+                .chain(std::iter::once(shape.kind.centroid()));
+            for u in probe {
+                let (_, j) = self.map(c, u, &mut scratch);
+                let det = j.determinant();
+                if det <= floor || det.is_nan() {
+                    let what = if det < -floor {
+                        "inverted"
+                    } else {
+                        "degenerate"
+                    };
+                    return Err(Error::InvalidInput(format!(
+                        "{name}: cell {c} ({} of order {}) is {what}: det J = {det:.3e} at reference point ({:.3}, {:.3}, {:.3})",
+                        shape.kind.name(),
+                        shape.order[0],
+                        u.x,
+                        u.y,
+                        u.z
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Pairs cell faces through their shared corner points.
+    fn face_adjacency(&self) -> Vec<[(u32, u8); 6]> {
+        let none = (NO_NEIGHBOUR, 0u8);
+        let mut out = vec![[none; 6]; self.cell_count()];
+        let mut open: FxHashMap<[u32; 4], (u32, u8)> = FxHashMap::default();
+        for c in 0..self.cell_count() {
+            let nodes = self.nodes(c);
+            for (f, corners) in self.shape(c).kind.faces().iter().enumerate() {
+                let mut key = [u32::MAX; 4];
+                for (k, &i) in corners.iter().enumerate() {
+                    key[k] = nodes[i];
+                }
+                key.sort_unstable();
+                match open.remove(&key) {
+                    Some((d, g)) => {
+                        out[c][f] = (d, g);
+                        out[d as usize][g as usize] = (c as u32, f as u8);
+                    }
+                    None => {
+                        open.insert(key, (c as u32, f as u8));
+                    }
+                }
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,22 @@
+//! High-order finite elements: Lagrange hexahedra, tetrahedra and wedges of any order in
+//! VTK's node ordering, used both for the geometry (the mapping T from reference to world
+//! space) and for the field, as VTK's Lagrange cells are.
+//!
+//! `shape` numbers the nodes, `basis` evaluates basis functions with first and second
+//! derivatives, `mesh` assembles T, J, ∂J, the world-space gradient and Hessian (the
+//! paper's eqs. 19–20), checks elements and pairs faces, `locate` carries a reference
+//! point across a face into the neighbouring cell, `curvature` gives principal curvatures.
+
+mod basis;
+pub mod curvature;
+mod locate;
+mod mesh;
+mod shape;
+#[cfg(test)]
+mod tests;
+
+pub use basis::BasisValues;
+pub use mesh::{Evaluation, FeMesh, Scratch, NO_NEIGHBOUR};
+pub use shape::{
+    Kind, Shape, VTK_LAGRANGE_HEXAHEDRON, VTK_LAGRANGE_TETRAHEDRON, VTK_LAGRANGE_WEDGE,
+};
