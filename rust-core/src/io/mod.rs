@@ -10,6 +10,7 @@
 //! | --- | --- | --- |
 //! | `.vtk` | legacy VTK, ASCII or BINARY | |
 //! | `.vtu`, `.vtp` | VTK XML (ascii, base64, appended, zlib) | `.vtp` |
+//! | `.vtu` (Lagrange cells) | finite elements: [`read_fe_mesh`] | |
 //! | `.ply` | ascii and binary | binary little endian |
 //! | `.obj` | | yes |
 //! | `.bgeo` | Houdini classic geometry (gzip or not) | |
@@ -149,6 +150,24 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
     };
     check_mesh(&mesh, &name)?;
     Ok(mesh)
+}
+
+/// Reads high-order finite elements: a `.vtu` UnstructuredGrid with Lagrange hexahedra,
+/// tetrahedra and wedges (VTK types 72, 71, 73) and its point arrays. Every cell is checked
+/// (node count, point indices, det J > 0) and a failure names the cell.
+pub fn read_fe_mesh(path: &Path) -> Result<crate::field::fe::FeMesh> {
+    let format = extension_of(path);
+    if format != "vtu" {
+        return Err(Error::format(
+            path,
+            format!("cannot read finite elements from '.{format}'; supported: .vtu"),
+        ));
+    }
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.is_empty() {
+        return Err(Error::format(path, "the file is empty"));
+    }
+    vtk_xml::read_fe_mesh(&bytes, &path.display().to_string())
 }
 
 /// Lower-case extension; for `x.bgeo.gz` it is `bgeo.gz` so that the inner format is known.

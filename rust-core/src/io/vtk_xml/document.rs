@@ -34,6 +34,8 @@ pub(super) struct DataArray {
 pub(super) struct Piece {
     pub(super) points: usize,
     polys: usize,
+    /// NumberOfCells of an UnstructuredGrid piece.
+    pub(super) cells: usize,
     pub(super) normals_name: Option<String>,
     pub(super) arrays: Vec<DataArray>,
 }
@@ -47,6 +49,8 @@ enum Appended<'a> {
 pub(super) struct Document<'a> {
     name: &'a str,
     pub(super) kind: String,
+    /// The `version` attribute of <VTKFile>, if any ("2.2" ...).
+    pub(super) version: Option<String>,
     endian: Endian,
     header: Scalar,
     compressed: bool,
@@ -81,6 +85,7 @@ impl<'a> Document<'a> {
         let mut doc = Document {
             name,
             kind: String::new(),
+            version: None,
             endian: Endian::Little,
             header: Scalar::U32,
             compressed: false,
@@ -230,6 +235,7 @@ impl<'a> Document<'a> {
         match tag {
             "VTKFile" => {
                 self.kind = attr("type")?.unwrap_or_default();
+                self.version = attr("version")?;
                 if self.kind.is_empty() {
                     return Err(self.err("<VTKFile> has no type attribute"));
                 }
@@ -278,6 +284,7 @@ impl<'a> Document<'a> {
                 let piece = Piece {
                     points: count("NumberOfPoints")?,
                     polys: count("NumberOfPolys")?,
+                    cells: count("NumberOfCells")?,
                     ..Piece::default()
                 };
                 self.pieces.push(piece);

@@ -6,6 +6,7 @@
 //! split at `<AppendedData ...>_`: the part before goes to the XML parser, the part after is
 //! addressed by each array's `offset`.
 
+mod cells;
 mod document;
 #[cfg(test)]
 mod tests;
@@ -16,6 +17,7 @@ use crate::field::particles::{Attribute, ParticleData};
 use crate::mesh::Mesh;
 use document::Document;
 
+pub(crate) use cells::read_fe_mesh;
 pub(crate) use write::write_mesh;
 
 /// Reads the points and point arrays of every piece of a VTK XML dataset (pieces are
