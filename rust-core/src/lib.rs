@@ -8,9 +8,11 @@ pub mod capi;
 pub mod correctors;
 pub mod error;
 pub mod field;
+pub mod highorder;
 pub mod io;
 pub mod mc;
 pub mod mesh;
 pub mod progress;
+pub mod samples;
 
 pub use error::{Error, Result};

@@ -1,0 +1,231 @@
+//! Isosurfaces of high-order finite elements sampled by a particle system (Meyer, Nelson,
+//! Kirby, Whitaker 2007; `../shared/papers/particle-systems-high-order-fe-isosurfaces.txt`).
+//!
+//! Particles live in reference space (a cell and reference coordinates), so the basis is
+//! always evaluated in closed form and no world point is ever inverted except when a
+//! particle crosses a face. They are projected onto F = C by Newton steps (eq. 1) to ε_T,
+//! repel each other with the compact cotangent energy over curvature-scaled world
+//! distances (eqs. 2–6), move along world velocities mapped to reference space by K
+//! (eq. 21) and projected on the tangent plane (eq. 4), with per-particle adaptive steps
+//! and the paper's accept/reject rules. Updates are Jacobi sweeps (every particle moves
+//! against the previous sweep's positions) so they run in parallel and give the same
+//! result for any thread count. Coarse-to-fine levels, then split/delete against the
+//! ideal hexagonal energy with a seeded random bias, until the count settles.
+
+mod energy;
+mod neighbours;
+mod particle;
+mod seed;
+mod system;
+#[cfg(test)]
+mod tests;
+
+pub use energy::{alpha, energy, energy_derivative, ideal_energy, BETA};
+
+use crate::error::{Error, Result};
+use crate::field::fe::FeMesh;
+use crate::field::particles::Attribute;
+use crate::progress::Progress;
+use crate::samples::PointSamples;
+use particle::Surface;
+use std::sync::atomic::AtomicU64;
+
+/// Parameters of [`sample`].
+#[derive(Clone, Debug)]
+pub struct Params {
+    /// The isovalue C.
+    pub iso: f64,
+    /// s: particle spacing on a flat surface, world units; ≤ 0 picks 1/40 of the mesh's
+    /// bounding-box diagonal.
+    pub spacing: f64,
+    /// ρ: extra density per unit angle on curved surfaces (0: uniform spacing).
+    pub rho: f64,
+    /// ε_T: every sample has |F − C| ≤ tolerance.
+    pub tolerance: f64,
+    /// Upper bound on the curvature scaling of α, as a multiple of the flat value
+    /// (bounds the density near singular points).
+    pub max_density: f64,
+    /// Coarse-to-fine levels above the final spacing (each halves s).
+    pub levels: usize,
+    /// Most sweeps per relaxation.
+    pub max_iterations: usize,
+    /// Steady state: relative change of the system energy below this (paper: 0.15 %).
+    pub steady_fraction: f64,
+    /// Neighbour lists are rebuilt every this many sweeps (paper: 5).
+    pub neighbour_refresh: usize,
+    /// Most split/delete rounds at the final spacing.
+    pub split_rounds: usize,
+    /// Seed of the random bias in split/delete decisions.
+    pub seed: u64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            iso: 0.0,
+            spacing: 0.0,
+            rho: 0.0,
+            tolerance: 1e-6,
+            max_density: 8.0,
+            levels: 2,
+            max_iterations: 60,
+            steady_fraction: 0.0015,
+            neighbour_refresh: 5,
+            split_rounds: 6,
+            seed: 1,
+        }
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Stats {
+    /// Particles returned.
+    pub particles: usize,
+    /// Projected seeds before thinning.
+    pub seeds: usize,
+    /// Relaxation sweeps over all levels.
+    pub iterations: usize,
+    /// Forward evaluations (basis functions, mapping and field at one reference point).
+    pub evaluations: u64,
+    /// Particles added by splitting (not counting coarse-to-fine refinement).
+    pub splits: usize,
+    /// Particles deleted.
+    pub deletes: usize,
+    /// The spacing s used.
+    pub spacing: f64,
+    /// Largest |F − C| over the returned samples.
+    pub max_residual: f64,
+}
+
+/// Samples the isosurface `params.iso` of the point array `field` of `mesh` with the
+/// particle system. Returns oriented points with radius and the arrays "Element",
+/// "Reference" (3), "Curvature" (D = sqrt(κ1² + κ2²)) and "Energy".
+pub fn sample(
+    mesh: &FeMesh,
+    field: &str,
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<(PointSamples, Stats)> {
+    check(params)?;
+    let values = field_values(mesh, field)?;
+    let spacing = if params.spacing > 0.0 {
+        params.spacing
+    } else {
+        let (lo, hi) = mesh
+            .points
+            .iter()
+            .fold((mesh.points[0], mesh.points[0]), |(a, b), &p| {
+                (a.min(p), b.max(p))
+            });
+        (hi - lo).length() / 40.0
+    };
+    let surface = Surface {
+        mesh,
+        values,
+        iso: params.iso,
+        tolerance: params.tolerance,
+        evaluations: AtomicU64::new(0),
+    };
+    let (particles, mut stats) = system::run(&surface, params, spacing, progress)?;
+    stats.spacing = spacing;
+    stats.particles = particles.len();
+    stats.evaluations = surface.evaluations.into_inner();
+    stats.max_residual = particles.iter().map(|p| p.residual).fold(0.0, f64::max);
+    Ok((to_samples(&particles, params, spacing), stats))
+}
+
+fn check(p: &Params) -> Result<()> {
+    let bad = |name, message: &str| {
+        Err(Error::InvalidParameter {
+            name,
+            message: message.into(),
+        })
+    };
+    if !p.iso.is_finite() {
+        return bad("iso", "must be finite");
+    }
+    if !(p.tolerance > 0.0 && p.tolerance.is_finite()) {
+        return bad("tolerance", "must be positive");
+    }
+    if !p.spacing.is_finite() {
+        return bad("spacing", "must be finite");
+    }
+    if !(p.rho >= 0.0 && p.rho.is_finite()) {
+        return bad("rho", "must be ≥ 0");
+    }
+    if !(p.max_density >= 1.0 && p.max_density.is_finite()) {
+        return bad("max_density", "must be ≥ 1");
+    }
+    if p.levels > 8 {
+        return bad("levels", "at most 8 (each level halves the spacing)");
+    }
+    if p.neighbour_refresh == 0 {
+        return bad("neighbour_refresh", "must be ≥ 1");
+    }
+    Ok(())
+}
+
+/// The scalar point array `name` ("NAME:K" for component K of a vector array).
+fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]> {
+    let missing = || Error::MissingArray {
+        name: name.to_string(),
+        available: mesh
+            .point_data
+            .iter()
+            .filter(|a| a.components == 1)
+            .map(|a| a.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+    };
+    let a = mesh
+        .point_data
+        .iter()
+        .find(|a| a.name == name)
+        .ok_or_else(missing)?;
+    if a.components != 1 {
+        return Err(Error::InvalidInput(format!(
+            "point array '{name}' has {} components; the field must be a scalar array",
+            a.components
+        )));
+    }
+    if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "point array '{name}' has a non-finite value at point {i}"
+        )));
+    }
+    Ok(&a.data)
+}
+
+fn to_samples(particles: &[particle::Particle], params: &Params, s: f64) -> PointSamples {
+    let amax = params.max_density * BETA / s;
+    let mut out = PointSamples::default();
+    let mut element = Vec::with_capacity(particles.len());
+    let mut reference = Vec::with_capacity(3 * particles.len());
+    let mut curvature = Vec::with_capacity(particles.len());
+    let mut energy = Vec::with_capacity(particles.len());
+    for p in particles {
+        out.positions.push(p.x.to_array());
+        out.normals.push(p.n.as_vec3().to_array());
+        // Local spacing d = β/α; a hexagonal Voronoi cell of spacing d fits in a disk of
+        // radius d/√3 = β d.
+        out.radii
+            .push(BETA * BETA / alpha(s, params.rho, p.d, amax));
+        element.push(p.cell as f64);
+        reference.extend(p.u.to_array());
+        curvature.push(p.d);
+        energy.push(p.energy);
+    }
+    let attr = |name: &str, components, data| Attribute {
+        name: name.into(),
+        components,
+        data,
+    };
+    out.attributes = vec![
+        attr("Element", 1, element),
+        attr("Reference", 3, reference),
+        attr("Curvature", 1, curvature),
+        attr("Energy", 1, energy),
+    ];
+    out
+}
