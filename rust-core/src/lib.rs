@@ -12,5 +12,6 @@ pub mod io;
 pub mod mc;
 pub mod mesh;
 pub mod progress;
+pub mod slider;
 
 pub use error::{Error, Result};

@@ -1,6 +1,7 @@
 //! Fields that extractors contour: anything that evaluates a value and a gradient at any
 //! point, in f64. `sph` is the meshless one; grids and finite elements join here.
 
+pub mod grid;
 pub mod kernel;
 pub mod neighbours;
 pub mod particles;

@@ -7,6 +7,7 @@
 //! addressed by each array's `offset`.
 
 mod document;
+mod image;
 #[cfg(test)]
 mod tests;
 mod write;
@@ -16,6 +17,8 @@ use crate::field::particles::{Attribute, ParticleData};
 use crate::mesh::Mesh;
 use document::Document;
 
+pub(crate) use document::find as find_bytes;
+pub(crate) use image::read_image;
 pub(crate) use write::write_mesh;
 
 /// Reads the points and point arrays of every piece of a VTK XML dataset (pieces are
