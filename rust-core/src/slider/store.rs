@@ -268,6 +268,19 @@ impl Store {
         self.levels.len()
     }
 
+    /// Smallest and largest node value.
+    pub fn value_range(&self) -> (f32, f32) {
+        (
+            self.value(self.order(0)),
+            self.value(self.order(self.nodes - 1)),
+        )
+    }
+
+    /// Number of nodes.
+    pub fn node_count(&self) -> usize {
+        self.nodes
+    }
+
     /// Bytes of the mapped file.
     pub fn file_size(&self) -> u64 {
         self.map.len() as u64
