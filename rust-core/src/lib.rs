@@ -14,5 +14,6 @@ pub mod mc;
 pub mod mesh;
 pub mod progress;
 pub mod samples;
+pub mod slider;
 
 pub use error::{Error, Result};

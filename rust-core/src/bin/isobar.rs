@@ -43,6 +43,10 @@ enum Command {
     },
     /// List the particles and arrays of a file.
     Info { input: PathBuf },
+    /// Precompute an isovalue-slider store from a volume (.vti, .nrrd, .npy, .raw).
+    SlideBuild(Box<isobar::slider::cli::BuildArgs>),
+    /// Slide the isosurface of a store: keys move the isovalue (or isovalues on stdin).
+    Slide(isobar::slider::cli::SlideArgs),
 }
 
 #[derive(Args)]
@@ -143,6 +147,8 @@ fn main() -> ExitCode {
         Command::Sph(args) => run_sph(&args),
         Command::Demo { output, quiet } => run_demo(&output, quiet),
         Command::Info { input } => run_info(&input),
+        Command::SlideBuild(args) => isobar::slider::cli::run_build(&args),
+        Command::Slide(args) => isobar::slider::cli::run_slide(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,6 +2,7 @@
 //! point, in f64. `sph` is the meshless one, `fe` the high-order finite elements.
 
 pub mod fe;
+pub mod grid;
 pub mod kernel;
 pub mod neighbours;
 pub mod particles;

@@ -28,6 +28,7 @@ mod numeric;
 mod obj;
 mod ply;
 mod sequence;
+pub mod volume;
 mod vtk_legacy;
 mod vtk_xml;
 
@@ -41,7 +42,9 @@ use glam::DVec3;
 use std::io::Read;
 use std::path::Path;
 
+pub(crate) use atomic::write_atomically;
 pub use sequence::{expand_sequence, frame_number};
+pub use volume::{read_volume, RawLayout, RawType};
 
 /// Extensions [`read_particles`] understands (each may also carry a trailing `.gz`).
 pub const PARTICLE_EXTENSIONS: &[&str] = &[

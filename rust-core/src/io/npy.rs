@@ -22,6 +22,27 @@ pub(crate) fn read_npy(bytes: &[u8], name: &str) -> Result<ParticleData> {
     })
 }
 
+/// Reads an `.npy` file holding one 3-D array as a volume: shape (nz, ny, nx) in C order,
+/// so x varies fastest (numpy's usual layout for `volume[z, y, x]`). Returns the node
+/// counts (x, y, z), the stored element type and the values.
+pub(crate) fn read_npy_volume(bytes: &[u8], name: &str) -> Result<([usize; 3], Scalar, Vec<f64>)> {
+    let array = Array::parse(bytes, name, None)?;
+    let [nz, ny, nx] = array.shape[..] else {
+        return Err(Error::format(
+            name,
+            format!(
+                "a volume must be a 3-D array (nz, ny, nx), this one has shape {}",
+                shape_text(&array.shape)
+            ),
+        ));
+    };
+    Ok((
+        [nx as usize, ny as usize, nz as usize],
+        array.ty,
+        array.data,
+    ))
+}
+
 /// Reads an `.npz` archive: positions from the first of [`POSITION_NAMES`] present (or from
 /// three (N,) arrays `x`, `y`, `z`), and every other array whose first dimension is N as an
 /// attribute ((N,) scalar, (N, k) with k components). Other arrays are ignored.
@@ -181,6 +202,8 @@ fn shape_text(shape: &[u64]) -> String {
 /// One decoded array.
 struct Array {
     shape: Vec<u64>,
+    /// Element type as stored.
+    ty: Scalar,
     data: Vec<f64>,
     /// "array 'positions'" (in an .npz) or "the array" (an .npy), for messages.
     what: String,
@@ -258,6 +281,7 @@ impl Array {
         }
         Ok(Array {
             shape,
+            ty,
             data: values,
             what: key.map_or("the array".into(), |k| format!("array '{k}'")),
         })

@@ -33,11 +33,23 @@ pub(super) struct DataArray {
 #[derive(Debug, Default)]
 pub(super) struct Piece {
     pub(super) points: usize,
+    /// `Extent` of an ImageData piece (x0 x1 y0 y1 z0 z1), nodes inclusive.
+    pub(super) extent: Option<[i64; 6]>,
     polys: usize,
     /// NumberOfCells of an UnstructuredGrid piece.
     pub(super) cells: usize,
     pub(super) normals_name: Option<String>,
+    /// The point data's active scalars (`Scalars=` attribute).
+    pub(super) scalars_name: Option<String>,
     pub(super) arrays: Vec<DataArray>,
+}
+
+/// `WholeExtent`, `Origin` and `Spacing` of an `<ImageData>` element.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ImageGeometry {
+    pub(super) whole_extent: [i64; 6],
+    pub(super) origin: [f64; 3],
+    pub(super) spacing: [f64; 3],
 }
 
 /// Appended data: the bytes after the `_` marker.
@@ -55,6 +67,8 @@ pub(super) struct Document<'a> {
     header: Scalar,
     compressed: bool,
     pub(super) pieces: Vec<Piece>,
+    /// Geometry of an ImageData file.
+    pub(super) image: Option<ImageGeometry>,
     appended: Option<Appended<'a>>,
     /// Sorted offsets of all appended arrays: a base64 array runs to the next one.
     appended_offsets: Vec<usize>,
@@ -90,6 +104,7 @@ impl<'a> Document<'a> {
             header: Scalar::U32,
             compressed: false,
             pieces: Vec::new(),
+            image: None,
             appended: None,
             appended_offsets: Vec::new(),
         };
@@ -281,18 +296,45 @@ impl<'a> Document<'a> {
                         }),
                     }
                 };
+                let extent = match attr("Extent")? {
+                    Some(text) => Some(self.numbers::<6, i64>(&text, "Piece Extent")?),
+                    None => None,
+                };
                 let piece = Piece {
                     points: count("NumberOfPoints")?,
                     polys: count("NumberOfPolys")?,
                     cells: count("NumberOfCells")?,
+                    extent,
                     ..Piece::default()
                 };
                 self.pieces.push(piece);
             }
+            "ImageData" => {
+                let get = |key: &str| -> Result<String> {
+                    attr(key)?
+                        .ok_or_else(|| self.err(format!("<ImageData> has no {key} attribute")))
+                };
+                let whole_extent = self.numbers::<6, i64>(&get("WholeExtent")?, "WholeExtent")?;
+                let origin = match attr("Origin")? {
+                    Some(t) => self.numbers::<3, f64>(&t, "Origin")?,
+                    None => [0.0; 3],
+                };
+                let spacing = match attr("Spacing")? {
+                    Some(t) => self.numbers::<3, f64>(&t, "Spacing")?,
+                    None => [1.0; 3],
+                };
+                self.image = Some(ImageGeometry {
+                    whole_extent,
+                    origin,
+                    spacing,
+                });
+            }
             "PointData" => {
                 let normals = attr("Normals")?;
+                let scalars = attr("Scalars")?;
                 if let Some(piece) = self.pieces.last_mut() {
                     piece.normals_name = normals;
+                    piece.scalars_name = scalars;
                 }
             }
             "AppendedData" => {
@@ -352,6 +394,30 @@ impl<'a> Document<'a> {
             _ => {}
         }
         Ok(None)
+    }
+
+    /// Exactly `N` whitespace-separated numbers from an attribute's text.
+    fn numbers<const N: usize, T: std::str::FromStr + Copy + Default>(
+        &self,
+        text: &str,
+        what: &str,
+    ) -> Result<[T; N]> {
+        let parsed: Vec<T> = text
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| {
+                self.err(format!(
+                    "{what}=\"{}\" is not {N} numbers",
+                    show(text.as_bytes())
+                ))
+            })?;
+        <[T; N]>::try_from(parsed).map_err(|_| {
+            self.err(format!(
+                "{what}=\"{}\" is not {N} numbers",
+                show(text.as_bytes())
+            ))
+        })
     }
 
     /// The piece's point coordinates, item-major.
@@ -640,7 +706,7 @@ fn xml_type(name: &str) -> Option<Scalar> {
     })
 }
 
-pub(super) fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
+pub(crate) fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
     haystack.windows(needle.len()).position(|w| w == needle)
 }
 

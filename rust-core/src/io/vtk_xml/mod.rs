@@ -8,6 +8,7 @@
 
 mod cells;
 mod document;
+mod image;
 #[cfg(test)]
 mod tests;
 mod write;
@@ -18,6 +19,8 @@ use crate::mesh::Mesh;
 use document::Document;
 
 pub(crate) use cells::read_fe_mesh;
+pub(crate) use document::find as find_bytes;
+pub(crate) use image::read_image;
 pub(crate) use write::write_mesh;
 
 /// Reads the points and point arrays of every piece of a VTK XML dataset (pieces are

@@ -1,0 +1,365 @@
+//! Regular volumes: node values on a uniform (possibly anisotropic) lattice, x fastest, as
+//! scanners and simulation codes write them. A [`Volume`] is a [`ScalarField`] through
+//! trilinear interpolation, and gives the node gradients (central differences) that
+//! vertex normals of grid isosurfaces are interpolated from.
+
+use super::ScalarField;
+use crate::error::{Error, Result};
+use glam::DVec3;
+
+/// Element type of a volume's values. Files of other numeric types are converted to f32.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ValueType {
+    F32,
+    U16,
+    U8,
+}
+
+impl ValueType {
+    /// Bytes per value.
+    pub fn size(self) -> usize {
+        match self {
+            ValueType::F32 => 4,
+            ValueType::U16 => 2,
+            ValueType::U8 => 1,
+        }
+    }
+
+    /// Stable code used in files.
+    pub fn code(self) -> u8 {
+        match self {
+            ValueType::F32 => 1,
+            ValueType::U16 => 2,
+            ValueType::U8 => 3,
+        }
+    }
+
+    /// Inverse of [`ValueType::code`].
+    pub fn from_code(code: u8) -> Option<Self> {
+        match code {
+            1 => Some(ValueType::F32),
+            2 => Some(ValueType::U16),
+            3 => Some(ValueType::U8),
+            _ => None,
+        }
+    }
+
+    /// Lower-case name ("f32", "u16", "u8").
+    pub fn name(self) -> &'static str {
+        match self {
+            ValueType::F32 => "f32",
+            ValueType::U16 => "u16",
+            ValueType::U8 => "u8",
+        }
+    }
+}
+
+/// Node values in their native type (u16 and u8 convert to f32 exactly).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Values {
+    F32(Vec<f32>),
+    U16(Vec<u16>),
+    U8(Vec<u8>),
+}
+
+impl Values {
+    /// Number of values.
+    pub fn len(&self) -> usize {
+        match self {
+            Values::F32(v) => v.len(),
+            Values::U16(v) => v.len(),
+            Values::U8(v) => v.len(),
+        }
+    }
+
+    /// True when there are no values.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Value `i` as f32.
+    #[inline]
+    pub fn get(&self, i: usize) -> f32 {
+        match self {
+            Values::F32(v) => v[i],
+            Values::U16(v) => v[i] as f32,
+            Values::U8(v) => v[i] as f32,
+        }
+    }
+
+    /// The element type.
+    pub fn value_type(&self) -> ValueType {
+        match self {
+            Values::F32(_) => ValueType::F32,
+            Values::U16(_) => ValueType::U16,
+            Values::U8(_) => ValueType::U8,
+        }
+    }
+
+    /// Little-endian bytes of every value, in order.
+    pub fn to_le_bytes(&self) -> Vec<u8> {
+        match self {
+            Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            Values::U16(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            Values::U8(v) => v.clone(),
+        }
+    }
+}
+
+/// Node positions of a regular lattice: node (x, y, z) sits at `origin + (x, y, z) * spacing`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lattice {
+    /// Nodes per axis, each at least 2.
+    pub dims: [usize; 3],
+    pub origin: DVec3,
+    /// Node spacing per axis, positive.
+    pub spacing: DVec3,
+}
+
+impl Lattice {
+    /// Checks dimensions (≥ 2 nodes per axis) and geometry (finite, positive spacing).
+    pub fn new(dims: [usize; 3], origin: DVec3, spacing: DVec3) -> Result<Self> {
+        if dims.iter().any(|&d| d < 2) {
+            return Err(Error::InvalidInput(format!(
+                "a volume needs at least 2 nodes along every axis, got {}×{}×{}",
+                dims[0], dims[1], dims[2]
+            )));
+        }
+        if !origin.is_finite() {
+            return Err(Error::InvalidInput(format!(
+                "volume origin {:?} is not finite",
+                origin.to_array()
+            )));
+        }
+        if !(spacing.is_finite() && spacing.min_element() > 0.0) {
+            return Err(Error::InvalidInput(format!(
+                "volume spacing {:?} must be positive and finite",
+                spacing.to_array()
+            )));
+        }
+        Ok(Lattice {
+            dims,
+            origin,
+            spacing,
+        })
+    }
+
+    /// Number of nodes.
+    pub fn node_count(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// Linear index of node (x, y, z), x fastest.
+    #[inline]
+    pub fn index(&self, x: usize, y: usize, z: usize) -> usize {
+        x + self.dims[0] * (y + self.dims[1] * z)
+    }
+
+    /// (x, y, z) of a linear node index.
+    #[inline]
+    pub fn coords(&self, i: usize) -> [usize; 3] {
+        let x = i % self.dims[0];
+        let r = i / self.dims[0];
+        [x, r % self.dims[1], r / self.dims[1]]
+    }
+
+    /// Linear index step of one node along `axis`.
+    #[inline]
+    pub fn stride(&self, axis: usize) -> usize {
+        match axis {
+            0 => 1,
+            1 => self.dims[0],
+            _ => self.dims[0] * self.dims[1],
+        }
+    }
+
+    /// Position of node (x, y, z).
+    #[inline]
+    pub fn position(&self, c: [usize; 3]) -> DVec3 {
+        self.origin + DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * self.spacing
+    }
+
+    /// Position at parameter `t` along the lattice edge from node `c` in direction `axis`.
+    /// Every grid extractor places vertices with this, so their meshes agree bit for bit.
+    #[inline]
+    pub fn edge_point(&self, c: [usize; 3], axis: usize, t: f64) -> DVec3 {
+        let mut g = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+        g[axis] += t;
+        self.origin + g * self.spacing
+    }
+}
+
+/// A regular volume: a lattice and one value per node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume {
+    pub lattice: Lattice,
+    pub values: Values,
+}
+
+impl Volume {
+    /// Checks that there is one value per node and that no value is NaN or infinite
+    /// (the error names the first bad node).
+    pub fn new(lattice: Lattice, values: Values) -> Result<Self> {
+        let n = lattice.node_count();
+        if values.len() != n {
+            return Err(Error::InvalidInput(format!(
+                "a {}×{}×{} volume needs {n} values, got {}",
+                lattice.dims[0],
+                lattice.dims[1],
+                lattice.dims[2],
+                values.len()
+            )));
+        }
+        if let Values::F32(v) = &values {
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                let [x, y, z] = lattice.coords(i);
+                return Err(Error::InvalidInput(format!(
+                    "volume value at node {i} (x={x}, y={y}, z={z}) is {}",
+                    v[i]
+                )));
+            }
+        }
+        Ok(Volume { lattice, values })
+    }
+
+    /// Value at node (x, y, z).
+    #[inline]
+    pub fn at(&self, x: usize, y: usize, z: usize) -> f32 {
+        self.values.get(self.lattice.index(x, y, z))
+    }
+
+    /// Smallest and largest value.
+    pub fn range(&self) -> (f32, f32) {
+        (0..self.values.len()).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), i| {
+            let v = self.values.get(i);
+            (lo.min(v), hi.max(v))
+        })
+    }
+
+    /// Gradient at a node by central differences (one-sided on the boundary).
+    pub fn node_gradient(&self, c: [usize; 3]) -> DVec3 {
+        node_gradient(&self.lattice, |i| self.values.get(i), c)
+    }
+}
+
+/// Gradient at node `c` of values given by `value(index)`, by central differences inside
+/// and one-sided differences on the boundary. Shared by the volume and the slider's
+/// memory-mapped store so both give the same normals.
+pub fn node_gradient(lattice: &Lattice, value: impl Fn(usize) -> f32, c: [usize; 3]) -> DVec3 {
+    let i = lattice.index(c[0], c[1], c[2]);
+    let mut g = DVec3::ZERO;
+    for a in 0..3 {
+        let s = lattice.stride(a);
+        let (lo, hi, span) = if c[a] == 0 {
+            (i, i + s, 1.0)
+        } else if c[a] + 1 == lattice.dims[a] {
+            (i - s, i, 1.0)
+        } else {
+            (i - s, i + s, 2.0)
+        };
+        g[a] = (value(hi) as f64 - value(lo) as f64) / (span * lattice.spacing[a]);
+    }
+    g
+}
+
+impl Volume {
+    /// Cell (lower corner) containing `p` and the local coordinates in [0, 1]³, with
+    /// points outside clamped to the nearest cell.
+    fn locate(&self, p: DVec3) -> ([usize; 3], DVec3) {
+        let l = &self.lattice;
+        let g = (p - l.origin) / l.spacing;
+        let mut c = [0usize; 3];
+        let mut f = DVec3::ZERO;
+        for a in 0..3 {
+            let max_cell = (l.dims[a] - 2) as f64;
+            let cell = g[a].floor().clamp(0.0, max_cell);
+            c[a] = cell as usize;
+            f[a] = (g[a] - cell).clamp(0.0, 1.0);
+        }
+        (c, f)
+    }
+}
+
+impl ScalarField for Volume {
+    fn value(&self, x: DVec3) -> f64 {
+        self.value_and_gradient(x).0
+    }
+
+    /// Trilinear value and its exact gradient (outside the lattice: the nearest boundary
+    /// cell's value at the clamped point).
+    fn value_and_gradient(&self, p: DVec3) -> (f64, DVec3) {
+        let (c, f) = self.locate(p);
+        let v = |dx: usize, dy: usize, dz: usize| self.at(c[0] + dx, c[1] + dy, c[2] + dz) as f64;
+        let (fx, fy, fz) = (f.x, f.y, f.z);
+        let c00 = v(0, 0, 0) * (1.0 - fx) + v(1, 0, 0) * fx;
+        let c10 = v(0, 1, 0) * (1.0 - fx) + v(1, 1, 0) * fx;
+        let c01 = v(0, 0, 1) * (1.0 - fx) + v(1, 0, 1) * fx;
+        let c11 = v(0, 1, 1) * (1.0 - fx) + v(1, 1, 1) * fx;
+        let c0 = c00 * (1.0 - fy) + c10 * fy;
+        let c1 = c01 * (1.0 - fy) + c11 * fy;
+        let value = c0 * (1.0 - fz) + c1 * fz;
+        let dx = |y: usize, z: usize| v(1, y, z) - v(0, y, z);
+        let gx = ((dx(0, 0) * (1.0 - fy) + dx(1, 0) * fy) * (1.0 - fz)
+            + (dx(0, 1) * (1.0 - fy) + dx(1, 1) * fy) * fz)
+            / self.lattice.spacing.x;
+        let gy = ((c10 - c00) * (1.0 - fz) + (c11 - c01) * fz) / self.lattice.spacing.y;
+        let gz = (c1 - c0) / self.lattice.spacing.z;
+        (value, DVec3::new(gx, gy, gz))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn linear_volume() -> Volume {
+        let lattice = Lattice::new(
+            [4, 3, 5],
+            DVec3::new(1.0, -2.0, 0.5),
+            DVec3::new(0.5, 1.0, 2.0),
+        )
+        .unwrap();
+        let mut v = Vec::new();
+        for z in 0..5 {
+            for y in 0..3 {
+                for x in 0..4 {
+                    let p = lattice.position([x, y, z]);
+                    v.push((2.0 * p.x - 3.0 * p.y + 0.5 * p.z) as f32);
+                }
+            }
+        }
+        Volume::new(lattice, Values::F32(v)).unwrap()
+    }
+
+    #[test]
+    fn trilinear_reproduces_a_linear_field_and_its_gradient() {
+        let vol = linear_volume();
+        for p in [
+            DVec3::new(1.2, -1.3, 3.1),
+            DVec3::new(2.4, -0.1, 8.4),
+            DVec3::new(1.0, -2.0, 0.5),
+        ] {
+            let (v, g) = vol.value_and_gradient(p);
+            assert!(
+                (v - (2.0 * p.x - 3.0 * p.y + 0.5 * p.z)).abs() < 1e-5,
+                "{v} at {p}"
+            );
+            assert!((g - DVec3::new(2.0, -3.0, 0.5)).length() < 1e-5, "{g}");
+        }
+        let g = vol.node_gradient([0, 2, 4]);
+        assert!((g - DVec3::new(2.0, -3.0, 0.5)).length() < 1e-5, "{g}");
+    }
+
+    #[test]
+    fn bad_volumes_are_refused_naming_the_problem() {
+        let l = Lattice::new([2, 2, 2], DVec3::ZERO, DVec3::ONE).unwrap();
+        let e = Volume::new(l, Values::U8(vec![0; 7])).unwrap_err();
+        assert!(e.to_string().contains("needs 8 values"), "{e}");
+        let mut v = vec![0.0f32; 8];
+        v[5] = f32::NAN;
+        let e = Volume::new(l, Values::F32(v)).unwrap_err();
+        assert!(e.to_string().contains("node 5 (x=1, y=0, z=1)"), "{e}");
+        assert!(Lattice::new([1, 2, 2], DVec3::ZERO, DVec3::ONE).is_err());
+        assert!(Lattice::new([2, 2, 2], DVec3::ZERO, DVec3::new(1.0, 0.0, 1.0)).is_err());
+    }
+}

@@ -1,0 +1,451 @@
+//! Regular volume readers: VTK ImageData (`.vti`), NRRD (`.nrrd`, raw or gzip encoding,
+//! data attached), NumPy (`.npy`, a 3-D array in C order, x fastest) and headerless raw
+//! files with given dimensions and element type. Values keep their type when it is f32,
+//! u16 or u8; other numeric types are converted to f32.
+
+use super::numeric::{show, Endian, Scalar};
+use crate::error::{Error, Result};
+use crate::field::grid::{Lattice, Values, Volume};
+use glam::DVec3;
+use std::io::Read;
+use std::path::Path;
+
+/// Extensions [`read_volume`] understands (`.raw` needs a [`RawLayout`]).
+pub const VOLUME_EXTENSIONS: &[&str] = &["vti", "nrrd", "npy", "raw"];
+
+/// How a headerless raw file is laid out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RawLayout {
+    /// Nodes per axis, x fastest.
+    pub dims: [usize; 3],
+    /// Element type: "u8", "u16", "i16", "f32", "f64" ...
+    pub ty: RawType,
+    pub big_endian: bool,
+    pub origin: DVec3,
+    pub spacing: DVec3,
+}
+
+/// Element type of a raw file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RawType {
+    U8,
+    I8,
+    U16,
+    I16,
+    U32,
+    I32,
+    F32,
+    F64,
+}
+
+impl std::str::FromStr for RawType {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        Ok(match s.to_ascii_lowercase().as_str() {
+            "u8" | "uint8" | "uchar" => RawType::U8,
+            "i8" | "int8" | "char" => RawType::I8,
+            "u16" | "uint16" | "ushort" => RawType::U16,
+            "i16" | "int16" | "short" => RawType::I16,
+            "u32" | "uint32" | "uint" => RawType::U32,
+            "i32" | "int32" | "int" => RawType::I32,
+            "f32" | "float32" | "float" => RawType::F32,
+            "f64" | "float64" | "double" => RawType::F64,
+            other => {
+                return Err(Error::InvalidParameter {
+                    name: "raw type",
+                    message: format!(
+                        "unknown element type '{other}' (u8 i8 u16 i16 u32 i32 f32 f64)"
+                    ),
+                })
+            }
+        })
+    }
+}
+
+impl RawType {
+    fn scalar(self) -> Scalar {
+        match self {
+            RawType::U8 => Scalar::U8,
+            RawType::I8 => Scalar::I8,
+            RawType::U16 => Scalar::U16,
+            RawType::I16 => Scalar::I16,
+            RawType::U32 => Scalar::U32,
+            RawType::I32 => Scalar::I32,
+            RawType::F32 => Scalar::F32,
+            RawType::F64 => Scalar::F64,
+        }
+    }
+}
+
+/// Reads a volume, choosing the format by extension. `array` names the ImageData point
+/// array to use; `raw` is required for `.raw` files.
+pub fn read_volume(path: &Path, array: Option<&str>, raw: Option<RawLayout>) -> Result<Volume> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let name = path.display().to_string();
+    if !VOLUME_EXTENSIONS.contains(&ext.as_str()) {
+        return Err(Error::format(
+            path,
+            format!(
+                "unknown volume format '.{ext}' (supported: {})",
+                VOLUME_EXTENSIONS.join(", ")
+            ),
+        ));
+    }
+    if ext == "raw" && raw.is_none() {
+        return Err(Error::format(
+            path,
+            "a .raw volume needs its dimensions and element type (--raw-dims, --raw-type)",
+        ));
+    }
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    match ext.as_str() {
+        "vti" => read_vti(&bytes, &name, array),
+        "nrrd" => read_nrrd(&bytes, &name),
+        "npy" => {
+            let (dims, ty, data) = super::npy::read_npy_volume(&bytes, &name)?;
+            build(&name, dims, DVec3::ZERO, DVec3::ONE, ty, data)
+        }
+        _ => read_raw(&bytes, &name, raw.unwrap_or(RawLayout::default_for(&name))),
+    }
+}
+
+impl RawLayout {
+    /// Placeholder never used for reading (read_volume checks first).
+    fn default_for(_: &str) -> Self {
+        RawLayout {
+            dims: [0; 3],
+            ty: RawType::U8,
+            big_endian: false,
+            origin: DVec3::ZERO,
+            spacing: DVec3::ONE,
+        }
+    }
+}
+
+/// A VTK ImageData file in memory.
+pub fn read_vti(bytes: &[u8], name: &str, array: Option<&str>) -> Result<Volume> {
+    let image = super::vtk_xml::read_image(bytes, name, array)?;
+    build(
+        name,
+        image.dims,
+        DVec3::from_array(image.origin),
+        DVec3::from_array(image.spacing),
+        image.ty,
+        image.values,
+    )
+    .map_err(|e| match e {
+        Error::InvalidInput(m) => Error::format(name, format!("array '{}': {m}", image.array)),
+        e => e,
+    })
+}
+
+/// A headerless raw file in memory; its size must match the layout exactly.
+pub fn read_raw(bytes: &[u8], name: &str, layout: RawLayout) -> Result<Volume> {
+    let ty = layout.ty.scalar();
+    let count = layout
+        .dims
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d));
+    let need = count.and_then(|c| c.checked_mul(ty.size()));
+    if need != Some(bytes.len()) {
+        return Err(Error::format(
+            name,
+            format!(
+                "a {}×{}×{} raw volume of {:?} needs {} bytes, the file holds {}",
+                layout.dims[0],
+                layout.dims[1],
+                layout.dims[2],
+                layout.ty,
+                need.map_or("too many".into(), |n| n.to_string()),
+                bytes.len()
+            ),
+        ));
+    }
+    let endian = if layout.big_endian {
+        Endian::Big
+    } else {
+        Endian::Little
+    };
+    let data = ty.decode(bytes, endian);
+    build(name, layout.dims, layout.origin, layout.spacing, ty, data)
+}
+
+/// A NRRD file with attached data (`raw` or `gzip` encoding).
+pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
+    let err = |m: String| Error::format(name, m);
+    if !bytes.starts_with(b"NRRD000") {
+        return Err(err("not a NRRD file (no NRRD000x magic)".into()));
+    }
+    // The header ends at the first empty line.
+    let (header_end, data_start) = match super::vtk_xml::find_bytes(bytes, b"\n\n") {
+        Some(i) => (i, i + 2),
+        None => match super::vtk_xml::find_bytes(bytes, b"\r\n\r\n") {
+            Some(i) => (i, i + 4),
+            None => return Err(err("truncated: no empty line ends the header".into())),
+        },
+    };
+    let header = String::from_utf8_lossy(&bytes[..header_end]);
+    let mut ty = None;
+    let mut dimension = None;
+    let mut sizes: Option<Vec<usize>> = None;
+    let mut encoding = String::from("raw");
+    let mut endian = Endian::Little;
+    let mut spacing = DVec3::ONE;
+    let mut origin = DVec3::ZERO;
+    for line in header.lines().skip(1) {
+        let line = line.trim();
+        if line.starts_with('#') || line.is_empty() {
+            continue;
+        }
+        let Some((key, value)) = line.split_once(':') else {
+            continue;
+        };
+        // `key:=value` lines are key/value pairs, not fields.
+        if value.starts_with('=') {
+            continue;
+        }
+        let value = value.trim();
+        match key.trim().to_ascii_lowercase().as_str() {
+            "type" => {
+                ty = Some(nrrd_type(value).ok_or_else(|| {
+                    err(format!(
+                        "unsupported NRRD type '{}'",
+                        show(value.as_bytes())
+                    ))
+                })?)
+            }
+            "dimension" => dimension = value.parse::<usize>().ok(),
+            "sizes" => {
+                sizes = Some(
+                    value
+                        .split_whitespace()
+                        .map(str::parse)
+                        .collect::<std::result::Result<_, _>>()
+                        .map_err(|_| err(format!("bad sizes '{}'", show(value.as_bytes()))))?,
+                )
+            }
+            "encoding" => encoding = value.to_ascii_lowercase(),
+            "endian" => {
+                endian = if value.eq_ignore_ascii_case("big") {
+                    Endian::Big
+                } else {
+                    Endian::Little
+                }
+            }
+            "spacings" => {
+                let v: Vec<f64> = value
+                    .split_whitespace()
+                    .filter_map(|t| t.parse().ok())
+                    .collect();
+                if v.len() == 3 {
+                    spacing = DVec3::new(v[0], v[1], v[2]);
+                }
+            }
+            "space directions" => {
+                // Axis-aligned directions only: the spacing is each vector's length.
+                let vectors: Vec<Vec<f64>> = value
+                    .split(')')
+                    .filter_map(|v| v.trim().strip_prefix('('))
+                    .map(|v| v.split(',').filter_map(|t| t.trim().parse().ok()).collect())
+                    .collect();
+                if vectors.len() == 3 && vectors.iter().all(|v| v.len() == 3) {
+                    for a in 0..3 {
+                        let off_axis = (0..3).filter(|&b| b != a).any(|b| vectors[a][b] != 0.0);
+                        if off_axis {
+                            return Err(err(
+                                "space directions are not axis-aligned; only axis-aligned volumes are supported".into(),
+                            ));
+                        }
+                        spacing[a] = vectors[a][a].abs();
+                    }
+                }
+            }
+            "space origin" => {
+                let v: Vec<f64> = value
+                    .trim_matches(|c| c == '(' || c == ')')
+                    .split(',')
+                    .filter_map(|t| t.trim().parse().ok())
+                    .collect();
+                if v.len() == 3 {
+                    origin = DVec3::new(v[0], v[1], v[2]);
+                }
+            }
+            "data file" | "datafile" => {
+                return Err(err(
+                    "detached data files are not supported; save the NRRD with attached data"
+                        .into(),
+                ))
+            }
+            _ => {}
+        }
+    }
+    let ty = ty.ok_or_else(|| err("no 'type' field".into()))?;
+    if dimension != Some(3) {
+        return Err(err(format!(
+            "a volume needs 'dimension: 3', got {}",
+            dimension.map_or("none".into(), |d| d.to_string())
+        )));
+    }
+    let sizes = sizes.ok_or_else(|| err("no 'sizes' field".into()))?;
+    let [nx, ny, nz] = sizes[..] else {
+        return Err(err(format!(
+            "'sizes' has {} entries, expected 3",
+            sizes.len()
+        )));
+    };
+    let count = nx
+        .checked_mul(ny)
+        .and_then(|n| n.checked_mul(nz))
+        .and_then(|n| n.checked_mul(ty.size()))
+        .ok_or_else(|| err("sizes are impossibly large".into()))?;
+    let payload = &bytes[data_start..];
+    let data: std::borrow::Cow<[u8]> = match encoding.as_str() {
+        "raw" => payload.into(),
+        "gzip" | "gz" => {
+            let mut out = Vec::with_capacity(count.min(payload.len().saturating_mul(16)));
+            flate2::read::MultiGzDecoder::new(payload)
+                .take(count as u64)
+                .read_to_end(&mut out)
+                .map_err(|e| err(format!("gzip data: {e}")))?;
+            out.into()
+        }
+        other => {
+            return Err(err(format!(
+                "NRRD encoding '{}' is not supported (raw, gzip)",
+                show(other.as_bytes())
+            )))
+        }
+    };
+    if data.len() < count {
+        return Err(err(format!(
+            "truncated: {nx}×{ny}×{nz} values need {count} bytes, the data holds {}",
+            data.len()
+        )));
+    }
+    // Raw data may be preceded by padding; NRRD puts the data at the end of the file.
+    let data = &data[data.len() - count..];
+    let values = ty.decode(data, endian);
+    build(name, [nx, ny, nz], origin, spacing, ty, values)
+}
+
+fn nrrd_type(t: &str) -> Option<Scalar> {
+    Some(match t {
+        "uchar" | "unsigned char" | "uint8" | "uint8_t" => Scalar::U8,
+        "signed char" | "int8" | "int8_t" => Scalar::I8,
+        "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => Scalar::U16,
+        "short" | "short int" | "signed short" | "int16" | "int16_t" => Scalar::I16,
+        "uint" | "unsigned int" | "uint32" | "uint32_t" => Scalar::U32,
+        "int" | "signed int" | "int32" | "int32_t" => Scalar::I32,
+        "float" => Scalar::F32,
+        "double" => Scalar::F64,
+        _ => return None,
+    })
+}
+
+/// Makes a volume from decoded values, keeping f32/u16/u8 and converting the rest to f32.
+fn build(
+    name: &str,
+    dims: [usize; 3],
+    origin: DVec3,
+    spacing: DVec3,
+    ty: Scalar,
+    data: Vec<f64>,
+) -> Result<Volume> {
+    let lattice =
+        Lattice::new(dims, origin, spacing).map_err(|e| Error::format(name, e.to_string()))?;
+    let values = match ty {
+        Scalar::U8 => Values::U8(data.iter().map(|&v| v as u8).collect()),
+        Scalar::U16 => Values::U16(data.iter().map(|&v| v as u16).collect()),
+        _ => Values::F32(data.iter().map(|&v| v as f32).collect()),
+    };
+    Volume::new(lattice, values).map_err(|e| match e {
+        Error::InvalidInput(m) => Error::format(name, m),
+        e => e,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(dims: [usize; 3]) -> Vec<u16> {
+        (0..dims[0] * dims[1] * dims[2])
+            .map(|i| (i * 7 % 1000) as u16)
+            .collect()
+    }
+
+    #[test]
+    fn raw_nrrd_npy_and_vti_agree() {
+        let dims = [3, 4, 5];
+        let v = ramp(dims);
+        let le: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let be: Vec<u8> = v.iter().flat_map(|x| x.to_be_bytes()).collect();
+        let expect = Values::U16(v.clone());
+
+        let layout = RawLayout {
+            dims,
+            ty: RawType::U16,
+            big_endian: true,
+            origin: DVec3::new(1.0, 2.0, 3.0),
+            spacing: DVec3::new(0.5, 0.5, 2.0),
+        };
+        let raw = read_raw(&be, "a.raw", layout).unwrap();
+        assert_eq!(raw.values, expect);
+        assert_eq!(raw.lattice.spacing, layout.spacing);
+        let short = read_raw(&be[1..], "a.raw", layout).unwrap_err();
+        assert!(
+            short
+                .to_string()
+                .contains("needs 120 bytes, the file holds 119"),
+            "{short}"
+        );
+
+        let head = "NRRD0004\ntype: unsigned short\ndimension: 3\nsizes: 3 4 5\nendian: little\nspace directions: (0.5,0,0) (0,0.5,0) (0,0,2)\nspace origin: (1,2,3)\n";
+        let mut plain = format!("{head}encoding: raw\n\n").into_bytes();
+        plain.extend_from_slice(&le);
+        let n = read_nrrd(&plain, "a.nrrd").unwrap();
+        assert_eq!(n.values, expect);
+        assert_eq!(n.lattice, raw.lattice);
+        let mut gz = format!("{head}encoding: gzip\n\n").into_bytes();
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut enc, &le).unwrap();
+        gz.extend_from_slice(&enc.finish().unwrap());
+        assert_eq!(read_nrrd(&gz, "a.nrrd").unwrap().values, expect);
+        let cut = read_nrrd(&plain[..plain.len() - 3], "a.nrrd").unwrap_err();
+        assert!(cut.to_string().contains("truncated"), "{cut}");
+        let cut = read_nrrd(&gz[..gz.len() - 10], "a.nrrd").unwrap_err();
+        assert!(cut.to_string().contains("a.nrrd"), "{cut}");
+
+        let npy = super::super::npy::tests::npy("<u2", "(5, 4, 3)", false, &le);
+        let (d, ty, data) = super::super::npy::read_npy_volume(&npy, "a.npy").unwrap();
+        assert_eq!((d, ty), (dims, Scalar::U16));
+        assert_eq!(data.len(), 60);
+        let bad = super::super::npy::tests::npy("<u2", "(60,)", false, &le);
+        assert!(super::super::npy::read_npy_volume(&bad, "a.npy").is_err());
+
+        let text: Vec<String> = v.iter().map(|x| x.to_string()).collect();
+        let vti = format!(
+            r#"<?xml version="1.0"?>
+<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian">
+<ImageData WholeExtent="2 4 0 3 0 4" Origin="0 2 3" Spacing="0.5 0.5 2">
+<Piece Extent="2 4 0 3 0 4"><PointData Scalars="density">
+<DataArray type="Float32" Name="other" NumberOfComponents="3" format="ascii">{}</DataArray>
+<DataArray type="UInt16" Name="density" format="ascii">{}</DataArray>
+</PointData></Piece></ImageData></VTKFile>
+"#,
+            vec!["0"; 180].join(" "),
+            text.join(" ")
+        );
+        let vol = read_vti(vti.as_bytes(), "a.vti", None).unwrap();
+        assert_eq!(vol.values, expect);
+        assert_eq!(vol.lattice, raw.lattice);
+        let e = read_vti(vti.as_bytes(), "a.vti", Some("nope")).unwrap_err();
+        assert!(e.to_string().contains("no point array 'nope'"), "{e}");
+        let e = read_vti(vti.as_bytes(), "a.vti", Some("other")).unwrap_err();
+        assert!(e.to_string().contains("3 components"), "{e}");
+    }
+}

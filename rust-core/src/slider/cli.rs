@@ -1,0 +1,276 @@
+//! The `slide-build` and `slide` commands: precompute a store from a volume file, then
+//! slide its isosurface from the keyboard (or from isovalues read one per line when stdin
+//! is not a terminal, so scripts and tests can drive it).
+
+use super::{build_store, BuildParams, Slider};
+use crate::error::{Error, Result};
+use crate::io::{read_volume, RawLayout, RawType};
+use crate::progress::Progress;
+use glam::DVec3;
+use std::io::{BufRead, IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// `isobar slide-build`.
+#[derive(clap::Args, Debug)]
+pub struct BuildArgs {
+    /// Volume file: .vti, .nrrd, .npy (3-D, C order) or .raw (with --raw-dims, --raw-type).
+    pub input: PathBuf,
+    /// Store to write (default: the input with extension .isoslider).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Point array of a .vti to use (default: the active scalars, else the first scalar array).
+    #[arg(long)]
+    pub array: Option<String>,
+    /// Nodes per axis of a .raw file, e.g. 256,256,128.
+    #[arg(long, value_delimiter = ',')]
+    pub raw_dims: Option<Vec<usize>>,
+    /// Element type of a .raw file (u8 i8 u16 i16 u32 i32 f32 f64).
+    #[arg(long, default_value = "u8")]
+    pub raw_type: String,
+    /// A .raw file is big-endian.
+    #[arg(long)]
+    pub raw_big_endian: bool,
+    /// Node spacing of a .raw file.
+    #[arg(long, value_delimiter = ',')]
+    pub raw_spacing: Option<Vec<f64>>,
+    /// Skip-list threshold: a block closes once its redundant edges exceed this fraction
+    /// of the active edges.
+    #[arg(long, default_value_t = 0.25)]
+    pub threshold: f64,
+    /// Most skip-list levels above level 0.
+    #[arg(long, default_value_t = 12)]
+    pub max_levels: usize,
+    /// Memory budget of the precomputation in bytes.
+    #[arg(long, default_value_t = crate::field::DEFAULT_MEMORY_BUDGET)]
+    pub memory_budget: u64,
+    /// Print no progress.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `isobar slide`.
+#[derive(clap::Args, Debug)]
+#[command(allow_negative_numbers = true)]
+pub struct SlideArgs {
+    /// Store written by `isobar slide-build`.
+    pub store: PathBuf,
+    /// Starting isovalue (default: the middle of the value range).
+    #[arg(long)]
+    pub iso: Option<f64>,
+    /// Isovalue step of one key press, as a fraction of the value range.
+    #[arg(long, default_value_t = 0.001)]
+    pub step: f64,
+}
+
+/// Runs `slide-build`.
+pub fn run_build(args: &BuildArgs) -> Result<()> {
+    let three = |v: &Option<Vec<f64>>, name: &'static str| -> Result<Option<DVec3>> {
+        match v.as_deref() {
+            None => Ok(None),
+            Some([a, b, c]) => Ok(Some(DVec3::new(*a, *b, *c))),
+            Some(other) => Err(Error::InvalidParameter {
+                name,
+                message: format!("needs 3 comma-separated values, got {}", other.len()),
+            }),
+        }
+    };
+    let dims = three(
+        &args
+            .raw_dims
+            .as_ref()
+            .map(|d| d.iter().map(|&v| v as f64).collect()),
+        "raw-dims",
+    )?;
+    let spacing = three(&args.raw_spacing, "raw-spacing")?;
+    let raw = match (dims, &args.raw_dims) {
+        (Some(_), Some(d)) => Some(RawLayout {
+            dims: [d[0], d[1], d[2]],
+            ty: args.raw_type.parse::<RawType>()?,
+            big_endian: args.raw_big_endian,
+            origin: DVec3::ZERO,
+            spacing: spacing.unwrap_or(DVec3::ONE),
+        }),
+        _ => None,
+    };
+    let volume = read_volume(&args.input, args.array.as_deref(), raw)?;
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| default_store_path(&args.input));
+    let params = BuildParams {
+        threshold: args.threshold,
+        max_levels: args.max_levels,
+        memory_budget: args.memory_budget,
+    };
+    let quiet = args.quiet;
+    let mut report = |f: f64, phase: &str| {
+        if !quiet {
+            eprint!("\r{:>3.0}% {phase:<24}", f * 100.0);
+        }
+        true
+    };
+    let stats = build_store(&volume, &output, &params, &mut Progress::new(&mut report));
+    if !quiet {
+        eprintln!();
+    }
+    let stats = stats?;
+    let [nx, ny, nz] = volume.lattice.dims;
+    let volume_bytes = volume.values.len() * volume.values.value_type().size();
+    println!(
+        "{}: {nx}×{ny}×{nz} {} volume ({volume_bytes} bytes) -> {} ({} bytes, {:.2}× the volume), {} skip-list levels (blocks {:?}), {:.2} s",
+        args.input.display(),
+        volume.values.value_type().name(),
+        output.display(),
+        stats.file_bytes,
+        stats.file_bytes as f64 / volume_bytes as f64,
+        stats.level_blocks.len(),
+        stats.level_blocks,
+        stats.seconds
+    );
+    Ok(())
+}
+
+/// Runs `slide`: interactive on a terminal, else one isovalue per input line.
+pub fn run_slide(args: &SlideArgs) -> Result<()> {
+    let mut slider = Slider::open(&args.store)?;
+    let (lo, hi) = slider.store().value_range();
+    let range = (hi - lo).max(f32::MIN_POSITIVE) as f64;
+    if std::io::stdin().is_terminal() {
+        interactive(&mut slider, args, lo as f64, range)
+    } else {
+        scripted(&mut slider)
+    }
+}
+
+/// One line per isovalue read from stdin: iso, triangles, vertices, update time.
+fn scripted(slider: &mut Slider) -> Result<()> {
+    let stdin = std::io::stdin();
+    let mut out = std::io::stdout().lock();
+    for (k, line) in stdin.lock().lines().enumerate() {
+        let line = line.map_err(|e| Error::io("<stdin>", e))?;
+        let text = line.trim();
+        if text.is_empty() || text.starts_with('#') {
+            continue;
+        }
+        let iso: f64 = text.parse().map_err(|_| Error::InvalidParameter {
+            name: "isovalue",
+            message: format!("line {}: '{text}' is not a number", k + 1),
+        })?;
+        let change = slider.set_isovalue(iso)?;
+        writeln!(
+            out,
+            "iso {iso} triangles {} vertices {} update_ms {:.3} added {} removed {}",
+            slider.triangle_count(),
+            slider.positions().len(),
+            change.seconds * 1e3,
+            change.added_triangles.len(),
+            change.removed_triangles.len()
+        )
+        .map_err(|e| Error::io("<stdout>", e))?;
+    }
+    Ok(())
+}
+
+/// Puts the terminal in non-canonical, no-echo mode while alive (through `stty`, so no
+/// terminal library is needed), and restores it when dropped.
+struct RawTerminal {
+    saved: Option<String>,
+}
+
+impl RawTerminal {
+    fn enter() -> Self {
+        let stty = |args: &[&str]| {
+            std::process::Command::new("stty")
+                .args(args)
+                .stdin(std::process::Stdio::inherit())
+                .output()
+                .ok()
+                .filter(|o| o.status.success())
+                .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        };
+        let saved = stty(&["-g"]);
+        if saved.is_some() {
+            stty(&["-icanon", "-echo", "min", "1"]);
+        }
+        RawTerminal { saved }
+    }
+}
+
+impl Drop for RawTerminal {
+    fn drop(&mut self) {
+        if let Some(s) = &self.saved {
+            let _ = std::process::Command::new("stty")
+                .arg(s)
+                .stdin(std::process::Stdio::inherit())
+                .status();
+        }
+    }
+}
+
+fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Result<()> {
+    let mut iso = args.iso.unwrap_or(lo + 0.5 * range);
+    let mut step = args.step * range;
+    eprintln!(
+        "{}: values {lo} .. {}; keys: up/right/+ raise, down/left/- lower, ]/[ step ×10/÷10, q quits",
+        args.store.display(),
+        lo + range
+    );
+    let _raw = RawTerminal::enter();
+    let mut stdin = std::io::stdin().lock();
+    let mut key = [0u8; 1];
+    let mut escape = 0u8;
+    loop {
+        let change = slider.set_isovalue(iso)?;
+        eprint!(
+            "\riso {iso:<14.6} step {step:<10.4} triangles {:<10} update {:>8.3} ms   ",
+            slider.triangle_count(),
+            change.seconds * 1e3
+        );
+        loop {
+            if stdin.read(&mut key).map_err(|e| Error::io("<stdin>", e))? == 0 {
+                eprintln!();
+                return Ok(());
+            }
+            // Arrow keys arrive as ESC [ A..D.
+            let k = match (escape, key[0]) {
+                (0, 0x1b) => {
+                    escape = 1;
+                    continue;
+                }
+                (1, b'[') => {
+                    escape = 2;
+                    continue;
+                }
+                (2, c) => {
+                    escape = 0;
+                    match c {
+                        b'A' | b'C' => b'+',
+                        b'B' | b'D' => b'-',
+                        _ => continue,
+                    }
+                }
+                (_, c) => {
+                    escape = 0;
+                    c
+                }
+            };
+            match k {
+                b'+' | b'=' | b'k' => iso += step,
+                b'-' | b'_' | b'j' => iso -= step,
+                b']' => step *= 10.0,
+                b'[' => step /= 10.0,
+                b'q' | b'Q' | 3 | 4 => {
+                    eprintln!();
+                    return Ok(());
+                }
+                _ => continue,
+            }
+            break;
+        }
+    }
+}
+
+/// The default store path for a volume path.
+pub fn default_store_path(input: &Path) -> PathBuf {
+    input.with_extension("isoslider")
+}

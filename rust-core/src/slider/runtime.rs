@@ -1,0 +1,558 @@
+//! Run time: the isosurface kept in memory and updated coherently as the isovalue slides.
+//!
+//! State (the paper's §3.2): the active-edge array E (one vertex per active edge, with
+//! what its position and normal are interpolated from), the vertex and normal arrays V and
+//! N, triangle lists bucketed by the number of triangles their cell has (a cell's
+//! triangles are contiguous; a hole left by a removed cell is filled by the bucket's last
+//! cell), and hash maps from edge id to vertex (HE) and from cell id to its case and slot
+//! (HC). An isovalue change walks the store's skip list from the current position to the
+//! new one, collecting the net edge changes; removed edges leave holes that added edges
+//! fill, leftovers are compacted from the end; only cells around changed edges are
+//! re-triangulated, cells around moved vertices get their indices rewritten in place.
+
+use super::build::node_edges;
+use super::store::Store;
+use crate::error::{Error, Result};
+use crate::field::grid::{node_gradient, Lattice};
+use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing};
+use crate::progress::Progress;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use rustc_hash::FxHashMap;
+use std::time::Instant;
+
+/// What one interpolated vertex is computed from: its edge's lower node and axis, the two
+/// end values and the node gradients (f32, as normals only need f32).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct EdgeData {
+    pub(crate) node: [u32; 3],
+    pub(crate) axis: u8,
+    pub(crate) s0: f32,
+    pub(crate) s1: f32,
+    pub(crate) g0: [f32; 3],
+    pub(crate) g1: [f32; 3],
+}
+
+impl EdgeData {
+    /// Position (f64) and unit normal (pointing down the gradient, the side the case
+    /// table's triangles face) of the vertex at isovalue `iso`. The slider and the
+    /// from-scratch extraction both place vertices with this.
+    #[inline]
+    pub(crate) fn vertex(&self, lattice: &Lattice, iso: f64) -> (DVec3, [f32; 3]) {
+        let t = linear_crossing(self.s0 as f64, self.s1 as f64, iso);
+        let c = self.node.map(|v| v as usize);
+        let p = lattice.edge_point(c, self.axis as usize, t);
+        let (g0, g1) = (Vec3::from_array(self.g0), Vec3::from_array(self.g1));
+        let g = g0 * (1.0 - t as f32) + g1 * t as f32;
+        let n = (-g).normalize_or_zero();
+        (p, n.to_array())
+    }
+}
+
+/// The triangles of one cell: where they sit in the bucketed lists.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct CellEntry {
+    case: u8,
+    /// Triangles per cell of the bucket (0 never stored).
+    bucket: u8,
+    slot: u32,
+}
+
+/// Cells with `size` triangles each, stored contiguously.
+#[derive(Clone, Debug, Default)]
+struct Bucket {
+    size: usize,
+    triangles: Vec<[u32; 3]>,
+    cells: Vec<u32>,
+}
+
+/// What one isovalue change did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Change {
+    /// The isovalue now shown.
+    pub isovalue: f64,
+    /// Triangles removed, in the vertex numbering before the change.
+    pub removed_triangles: Vec<[u32; 3]>,
+    /// Triangles added, in the vertex numbering after the change.
+    pub added_triangles: Vec<[u32; 3]>,
+    /// Vertices that kept their edge but changed index: (before, after).
+    pub moved_vertices: Vec<(u32, u32)>,
+    pub edges_added: u64,
+    pub edges_removed: u64,
+    /// Blocks applied per skip-list level (index 0 = level 0).
+    pub blocks_per_level: Vec<u64>,
+    /// Wall time of the update, seconds.
+    pub seconds: f64,
+}
+
+/// Running totals.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SliderStats {
+    /// Isovalue changes applied.
+    pub updates: u64,
+    /// Sum of update times, seconds.
+    pub total_seconds: f64,
+    /// The last update's time, seconds.
+    pub last_seconds: f64,
+    /// Edge additions and removals applied so far.
+    pub edge_changes: u64,
+}
+
+/// An isosurface that slides: open a store, set isovalues, read the arrays.
+pub struct Slider {
+    store: Store,
+    /// Level-0 position: nodes with rank < `rank` lie at or below the isovalue.
+    rank: usize,
+    iso: f64,
+    edges: Vec<u32>,
+    data: Vec<EdgeData>,
+    he: FxHashMap<u32, u32>,
+    hc: FxHashMap<u32, CellEntry>,
+    buckets: Vec<Bucket>,
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    stats: SliderStats,
+}
+
+impl Slider {
+    /// An empty surface below every value of the store's volume.
+    pub fn new(store: Store) -> Slider {
+        let table = case_table();
+        let most = table.triangles.iter().map(Vec::len).max().unwrap_or(0);
+        let buckets = (0..=most)
+            .map(|size| Bucket {
+                size,
+                ..Bucket::default()
+            })
+            .collect();
+        let iso = store.value(store.order(0)) as f64 - 1.0;
+        Slider {
+            store,
+            rank: 0,
+            iso,
+            edges: Vec::new(),
+            data: Vec::new(),
+            he: FxHashMap::default(),
+            hc: FxHashMap::default(),
+            buckets,
+            positions: Vec::new(),
+            normals: Vec::new(),
+            stats: SliderStats::default(),
+        }
+    }
+
+    /// Opens the store at `path`.
+    pub fn open(path: &std::path::Path) -> Result<Slider> {
+        Ok(Slider::new(Store::open(path)?))
+    }
+
+    /// The store.
+    pub fn store(&self) -> &Store {
+        &self.store
+    }
+
+    /// The isovalue shown.
+    pub fn isovalue(&self) -> f64 {
+        self.iso
+    }
+
+    /// Vertex positions (V).
+    pub fn positions(&self) -> &[[f32; 3]] {
+        &self.positions
+    }
+
+    /// Unit vertex normals (N).
+    pub fn normals(&self) -> &[[f32; 3]] {
+        &self.normals
+    }
+
+    /// Edge id (`node · 3 + axis`) of each vertex.
+    pub fn vertex_edges(&self) -> &[u32] {
+        &self.edges
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.buckets.iter().map(|b| b.triangles.len()).sum()
+    }
+
+    /// All triangles (I), bucket after bucket.
+    pub fn triangles(&self) -> Vec<[u32; 3]> {
+        let mut out = Vec::with_capacity(self.triangle_count());
+        for b in &self.buckets {
+            out.extend_from_slice(&b.triangles);
+        }
+        out
+    }
+
+    /// Active cells and their cases, sorted by cell id.
+    pub fn cells(&self) -> Vec<(u32, u8)> {
+        let mut v: Vec<(u32, u8)> = self.hc.iter().map(|(&c, e)| (c, e.case)).collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Running totals.
+    pub fn stats(&self) -> &SliderStats {
+        &self.stats
+    }
+
+    /// Moves the surface to isovalue `iso`.
+    pub fn set_isovalue(&mut self, iso: f64) -> Result<Change> {
+        self.set_isovalue_with(iso, &mut Progress::none())
+    }
+
+    /// Moves the surface to isovalue `iso`, reporting progress during long walks.
+    pub fn set_isovalue_with(&mut self, iso: f64, progress: &mut Progress) -> Result<Change> {
+        if !iso.is_finite() {
+            return Err(Error::InvalidParameter {
+                name: "isovalue",
+                message: format!("must be finite, got {iso}"),
+            });
+        }
+        let start = Instant::now();
+        let target = self.store.rank_of(iso);
+        let mut change = Change {
+            isovalue: iso,
+            blocks_per_level: vec![0; self.store.levels.len() + 1],
+            ..Change::default()
+        };
+        let delta = self.walk(target, &mut change, progress)?;
+        self.rank = target;
+        self.iso = iso;
+        self.apply(delta, &mut change)?;
+        self.update_vertices();
+        change.seconds = start.elapsed().as_secs_f64();
+        self.stats.updates += 1;
+        self.stats.total_seconds += change.seconds;
+        self.stats.last_seconds = change.seconds;
+        self.stats.edge_changes += change.edges_added + change.edges_removed;
+        Ok(change)
+    }
+
+    /// Walks the skip list from the current rank to `target`, taking the highest level
+    /// whose block fits, and returns the net change per edge (+1 on, −1 off).
+    fn walk(
+        &self,
+        target: usize,
+        change: &mut Change,
+        progress: &mut Progress,
+    ) -> Result<FxHashMap<u32, i8>> {
+        let store = &self.store;
+        let lattice = *store.lattice();
+        let mut delta: FxHashMap<u32, i8> = FxHashMap::default();
+        let mut bump = |e: u32, d: i8| {
+            let entry = delta.entry(e).or_insert(0);
+            *entry += d;
+            if *entry == 0 {
+                delta.remove(&e);
+            }
+        };
+        let mut r = self.rank;
+        let span = r.abs_diff(target).max(1) as f64;
+        let mut steps = 0u64;
+        while r != target {
+            steps += 1;
+            if steps.is_multiple_of(65536) {
+                progress.report(1.0 - r.abs_diff(target) as f64 / span)?;
+            }
+            let up = target > r;
+            // Levels nest: a boundary of level L is one of every lower level, so the
+            // search stops at the first level where `r` is not a boundary.
+            let mut used = None;
+            for (l, level) in store.levels.iter().enumerate() {
+                let block = if up {
+                    store
+                        .block_starting_at(level, r)
+                        .filter(|&k| k < level.blocks && store.start(level, k + 1) <= target)
+                } else {
+                    store
+                        .block_starting_at(level, r)
+                        .filter(|&k| k > 0 && store.start(level, k - 1) >= target)
+                        .map(|k| k - 1)
+                };
+                match block {
+                    Some(k) => used = Some((l, k)),
+                    None => {
+                        if store.block_starting_at(level, r).is_none() {
+                            break;
+                        }
+                    }
+                }
+            }
+            let sign = if up { 1 } else { -1 };
+            match used {
+                Some((l, k)) => {
+                    let level = &store.levels[l];
+                    let (plus, minus) = store.block_edges(level, k);
+                    plus.for_each(|e| bump(e, sign));
+                    minus.for_each(|e| bump(e, -sign));
+                    change.blocks_per_level[l + 1] += 1;
+                    r = if up {
+                        store.start(level, k + 1)
+                    } else {
+                        store.start(level, k)
+                    };
+                }
+                None => {
+                    let b = if up { r } else { r - 1 };
+                    let m = store.mask(b);
+                    for (d, e) in node_edges(&lattice, store.order(b)) {
+                        bump(e, if m >> d & 1 == 1 { sign } else { -sign });
+                    }
+                    change.blocks_per_level[0] += 1;
+                    r = if up { r + 1 } else { r - 1 };
+                }
+            }
+        }
+        Ok(delta)
+    }
+
+    /// The (up to four) cells around edge `e`.
+    fn edge_cells(lattice: &Lattice, e: u32, out: &mut Vec<u32>) {
+        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+        let c = lattice.coords(node);
+        let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
+        for (sb, sd) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            if c[b] < sb || c[d] < sd {
+                continue;
+            }
+            let mut cell = c;
+            cell[b] -= sb;
+            cell[d] -= sd;
+            if (0..3).all(|a| cell[a] + 1 < lattice.dims[a]) {
+                out.push(lattice.index(cell[0], cell[1], cell[2]) as u32);
+            }
+        }
+    }
+
+    fn corrupt(&self, what: String) -> Error {
+        Error::format(
+            self.store.path(),
+            format!("the store's edge lists are inconsistent ({what}); rebuild it"),
+        )
+    }
+
+    /// Applies the net edge changes: cells first out, edges out (holes), edges in (filling
+    /// holes), compaction, cells in.
+    fn apply(&mut self, delta: FxHashMap<u32, i8>, change: &mut Change) -> Result<()> {
+        let lattice = *self.store.lattice();
+        let mut removed: Vec<u32> = Vec::new();
+        let mut added: Vec<u32> = Vec::new();
+        for (&e, &d) in &delta {
+            match d {
+                1 => added.push(e),
+                -1 => removed.push(e),
+                _ => return Err(self.corrupt(format!("edge {e} changes {d} times"))),
+            }
+        }
+        removed.sort_unstable();
+        added.sort_unstable();
+        change.edges_added = added.len() as u64;
+        change.edges_removed = removed.len() as u64;
+        let mut dirty = Vec::with_capacity(4 * (removed.len() + added.len()));
+        for &e in removed.iter().chain(&added) {
+            Self::edge_cells(&lattice, e, &mut dirty);
+        }
+        dirty.sort_unstable();
+        dirty.dedup();
+
+        // Cells around changed edges change case: their triangles go.
+        for &cell in &dirty {
+            if let Some(entry) = self.hc.remove(&cell) {
+                let b = &self.buckets[entry.bucket as usize];
+                let s = entry.slot as usize * b.size;
+                change
+                    .removed_triangles
+                    .extend_from_slice(&b.triangles[s..s + b.size]);
+                self.remove_slot(entry);
+            }
+        }
+        // Edges out leave holes ...
+        let mut holes = Vec::with_capacity(removed.len());
+        for &e in &removed {
+            let Some(v) = self.he.remove(&e) else {
+                return Err(self.corrupt(format!("edge {e} turns off but is not on")));
+            };
+            self.edges[v as usize] = u32::MAX;
+            holes.push(v);
+        }
+        // ... that edges in fill first.
+        holes.sort_unstable_by(|a, b| b.cmp(a));
+        for &e in &added {
+            if self.he.contains_key(&e) || e as usize >= 3 * self.store.nodes {
+                return Err(self.corrupt(format!("edge {e} turns on but is already on")));
+            }
+            let data = self.edge_data(e);
+            let v = match holes.pop() {
+                Some(h) => {
+                    self.edges[h as usize] = e;
+                    self.data[h as usize] = data;
+                    h
+                }
+                None => {
+                    self.edges.push(e);
+                    self.data.push(data);
+                    (self.edges.len() - 1) as u32
+                }
+            };
+            self.he.insert(e, v);
+        }
+        // Leftover holes: move vertices from the end into them.
+        holes.sort_unstable();
+        let mut reindex = Vec::new();
+        for h in holes {
+            while self.edges.last() == Some(&u32::MAX) {
+                self.edges.pop();
+                self.data.pop();
+            }
+            let last = self.edges.len();
+            if (h as usize) >= last {
+                continue;
+            }
+            let e = self.edges.pop().expect("non-empty: h < len");
+            let d = self.data.pop().expect("data parallels edges");
+            self.edges[h as usize] = e;
+            self.data[h as usize] = d;
+            self.he.insert(e, h);
+            change.moved_vertices.push(((last - 1) as u32, h));
+            Self::edge_cells(&lattice, e, &mut reindex);
+        }
+        reindex.sort_unstable();
+        reindex.dedup();
+        for cell in reindex {
+            if let Some(&entry) = self.hc.get(&cell) {
+                let tris = self.cell_triangles(cell, entry.case)?;
+                let b = &mut self.buckets[entry.bucket as usize];
+                let s = entry.slot as usize * b.size;
+                b.triangles[s..s + b.size].copy_from_slice(&tris);
+            }
+        }
+        // Cells around changed edges come back with their new case.
+        for &cell in &dirty {
+            let case = self.case_of(cell);
+            if case == 0 || case == 255 {
+                continue;
+            }
+            let tris = self.cell_triangles(cell, case)?;
+            change.added_triangles.extend_from_slice(&tris);
+            let b = &mut self.buckets[tris.len()];
+            b.triangles.extend_from_slice(&tris);
+            b.cells.push(cell);
+            let entry = CellEntry {
+                case,
+                bucket: tris.len() as u8,
+                slot: (b.cells.len() - 1) as u32,
+            };
+            self.hc.insert(cell, entry);
+        }
+        Ok(())
+    }
+
+    /// Removes a cell's triangles, filling the hole with the bucket's last cell.
+    fn remove_slot(&mut self, entry: CellEntry) {
+        let b = &mut self.buckets[entry.bucket as usize];
+        let last = b.cells.len() - 1;
+        let slot = entry.slot as usize;
+        if slot != last {
+            let moved = b.cells[last];
+            b.triangles
+                .copy_within(last * b.size..(last + 1) * b.size, slot * b.size);
+            b.cells[slot] = moved;
+            if let Some(m) = self.hc.get_mut(&moved) {
+                m.slot = slot as u32;
+            }
+        }
+        b.cells.pop();
+        b.triangles.truncate(last * b.size);
+    }
+
+    /// Case of `cell` at the current isovalue (bit c: corner c above it).
+    fn case_of(&self, cell: u32) -> u8 {
+        let lattice = self.store.lattice();
+        let c = lattice.coords(cell as usize);
+        let mut case = 0u8;
+        for k in 0..8 {
+            let [dx, dy, dz] = corner_offset(k).map(|v| v as usize);
+            let v = self
+                .store
+                .value(lattice.index(c[0] + dx, c[1] + dy, c[2] + dz));
+            if v as f64 > self.iso {
+                case |= 1 << k;
+            }
+        }
+        case
+    }
+
+    /// Triangles of `cell` in `case`, as vertex indices through HE.
+    fn cell_triangles(&self, cell: u32, case: u8) -> Result<Vec<[u32; 3]>> {
+        let lattice = self.store.lattice();
+        let c = lattice.coords(cell as usize);
+        let mut out = Vec::with_capacity(5);
+        for tri in &case_table().triangles[case as usize] {
+            let mut t = [0u32; 3];
+            for (k, &local) in tri.iter().enumerate() {
+                let (corner, axis) = edge_corner_axis(local as usize);
+                let [dx, dy, dz] = corner_offset(corner).map(|v| v as usize);
+                let node = lattice.index(c[0] + dx, c[1] + dy, c[2] + dz);
+                let e = (node * 3 + axis) as u32;
+                t[k] = *self.he.get(&e).ok_or_else(|| {
+                    self.corrupt(format!("cell {cell} in case {case} needs edge {e}, not on"))
+                })?;
+            }
+            out.push(t);
+        }
+        Ok(out)
+    }
+
+    /// Interpolation data of edge `e` from the mapped values.
+    fn edge_data(&self, e: u32) -> EdgeData {
+        let store = &self.store;
+        let lattice = store.lattice();
+        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+        let c = lattice.coords(node);
+        let mut up = c;
+        up[axis] += 1;
+        let value = |i: usize| store.value(i);
+        edge_data_from(lattice, value, c, axis, up)
+    }
+
+    /// Recomputes V and N from E (every vertex moves when the isovalue does).
+    fn update_vertices(&mut self) {
+        let lattice = *self.store.lattice();
+        let iso = self.iso;
+        let computed: Vec<([f32; 3], [f32; 3])> = self
+            .data
+            .par_iter()
+            .with_min_len(4096)
+            .map(|d| {
+                let (p, n) = d.vertex(&lattice, iso);
+                (p.as_vec3().to_array(), n)
+            })
+            .collect();
+        self.positions.clear();
+        self.normals.clear();
+        self.positions.extend(computed.iter().map(|c| c.0));
+        self.normals.extend(computed.iter().map(|c| c.1));
+    }
+}
+
+/// Interpolation data of the edge from node `c` to node `up` along `axis`.
+pub(crate) fn edge_data_from(
+    lattice: &Lattice,
+    value: impl Fn(usize) -> f32 + Copy,
+    c: [usize; 3],
+    axis: usize,
+    up: [usize; 3],
+) -> EdgeData {
+    let g0 = node_gradient(lattice, value, c).as_vec3().to_array();
+    let g1 = node_gradient(lattice, value, up).as_vec3().to_array();
+    EdgeData {
+        node: c.map(|v| v as u32),
+        axis: axis as u8,
+        s0: value(lattice.index(c[0], c[1], c[2])),
+        s1: value(lattice.index(up[0], up[1], up[2])),
+        g0,
+        g1,
+    }
+}

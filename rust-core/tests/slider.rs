@@ -1,0 +1,369 @@
+//! The slider against from-scratch marching cubes of the same volume, its coherent
+//! updates, and its store's refusal of damaged files.
+
+use glam::DVec3;
+use isobar::field::grid::{Lattice, Values, Volume};
+use isobar::mc::{edge_key, VirtualGrid};
+use isobar::mesh::Mesh;
+use isobar::progress::Progress;
+use isobar::slider::{build_store, full, BuildParams, Slider, Store};
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("isobar-slider-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Two blobs (sum of Gaussians) plus noise, f32: closed surfaces for mid isovalues.
+fn blobs(dims: [usize; 3], noise: f64) -> Volume {
+    let lattice = Lattice::new(
+        dims,
+        DVec3::new(-1.0, -0.5, 0.25),
+        DVec3::new(0.1, 0.12, 0.09),
+    )
+    .unwrap();
+    let mut rng = Lcg(7);
+    let hi = lattice.position([dims[0] - 1, dims[1] - 1, dims[2] - 1]);
+    let lo = lattice.origin;
+    let c1 = lo + (hi - lo) * DVec3::new(0.35, 0.4, 0.5);
+    let c2 = lo + (hi - lo) * DVec3::new(0.65, 0.6, 0.45);
+    let r = (hi - lo).min_element() * 0.2;
+    let mut v = Vec::new();
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                let p = lattice.position([x, y, z]);
+                let f = (-(p - c1).length_squared() / (r * r)).exp()
+                    + 0.8 * (-(p - c2).length_squared() / (r * r)).exp()
+                    + noise * (rng.next() - 0.5);
+                v.push(f as f32);
+            }
+        }
+    }
+    Volume::new(lattice, Values::F32(v)).unwrap()
+}
+
+/// u8 noise: many ties between node values.
+fn ties(dims: [usize; 3]) -> Volume {
+    let lattice = Lattice::new(dims, DVec3::ZERO, DVec3::ONE).unwrap();
+    let mut rng = Lcg(3);
+    let v = (0..lattice.node_count())
+        .map(|_| (rng.next() * 12.0) as u8)
+        .collect();
+    Volume::new(lattice, Values::U8(v)).unwrap()
+}
+
+fn store_of(volume: &Volume, name: &str, threshold: f64) -> PathBuf {
+    let path = temp(name);
+    let params = BuildParams {
+        threshold,
+        ..BuildParams::default()
+    };
+    build_store(volume, &path, &params, &mut Progress::none()).unwrap();
+    path
+}
+
+/// The grid edge key (as `mc` names edges) of a slider edge id.
+fn mc_key(lattice: &Lattice, id: u32) -> u64 {
+    let (node, axis) = ((id / 3) as usize, (id % 3) as usize);
+    let [x, y, z] = lattice.coords(node);
+    edge_key(VirtualGrid::key(x as u32, y as u32, z as u32), axis)
+}
+
+/// Triangles as edge-key triples, each rotated to start at its smallest key (orientation
+/// kept), sorted; plus position and normal per edge key.
+type Canon = (Vec<[u64; 3]>, HashMap<u64, ([f32; 3], [f32; 3])>);
+
+fn canon(keys: &[u64], tris: &[[u32; 3]], pos: &[[f32; 3]], nor: &[[f32; 3]]) -> Canon {
+    let mut t: Vec<[u64; 3]> = tris
+        .iter()
+        .map(|t| {
+            let k = t.map(|i| keys[i as usize]);
+            let m = (0..3).min_by_key(|&i| k[i]).unwrap();
+            [k[m], k[(m + 1) % 3], k[(m + 2) % 3]]
+        })
+        .collect();
+    t.sort_unstable();
+    let v = keys
+        .iter()
+        .enumerate()
+        .map(|(i, &k)| (k, (pos[i], nor[i])))
+        .collect();
+    (t, v)
+}
+
+fn slider_canon(s: &Slider) -> Canon {
+    let lattice = *s.store().lattice();
+    let keys: Vec<u64> = s
+        .vertex_edges()
+        .iter()
+        .map(|&e| mc_key(&lattice, e))
+        .collect();
+    canon(&keys, &s.triangles(), s.positions(), s.normals())
+}
+
+/// The reference mesh's canonical form: its vertices are the sorted cut-edge keys.
+fn reference_canon(volume: &Volume, iso: f64) -> (Canon, Mesh) {
+    let (mesh, keys) = full::extract_keyed(volume, iso, &mut Progress::none()).unwrap();
+    let pos: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.map(|c| c as f32)).collect();
+    (canon(&keys, &mesh.triangles, &pos, &mesh.normals), mesh)
+}
+
+fn assert_same(slider: &Canon, reference: &Canon, what: &str) {
+    assert_eq!(slider.0.len(), reference.0.len(), "{what}: triangle counts");
+    assert!(slider.0 == reference.0, "{what}: triangles differ");
+    for (k, (p, n)) in &slider.1 {
+        let (rp, rn) = reference
+            .1
+            .get(k)
+            .unwrap_or_else(|| panic!("{what}: edge {k}"));
+        assert_eq!(p, rp, "{what}: position of edge {k}");
+        assert_eq!(n, rn, "{what}: normal of edge {k}");
+    }
+}
+
+#[test]
+fn slider_equals_from_scratch_marching_cubes_for_many_isovalues() {
+    for (name, volume, threshold) in [
+        ("blobs", blobs([22, 19, 24], 0.05), 0.25),
+        ("blobs-t", blobs([22, 19, 24], 0.05), 0.02),
+        ("ties", ties([13, 11, 12]), 0.25),
+    ] {
+        let path = store_of(&volume, &format!("{name}.isoslider"), threshold);
+        let mut slider = Slider::open(&path).unwrap();
+        assert!(slider.store().level_count() >= 2, "{name}: skip list built");
+        let (lo, hi) = volume.range();
+        let mut rng = Lcg(11);
+        let mut used_levels = 0u64;
+        let mut isos: Vec<f64> = (0..25)
+            .map(|_| lo as f64 + (hi - lo) as f64 * rng.next())
+            .collect();
+        // Exact node values, small steps and jumps both ways.
+        isos.extend([lo as f64, hi as f64, 5.0, 5.0, 4.0, 0.3, 0.31, 0.305, 0.9]);
+        for iso in isos {
+            let change = slider.set_isovalue(iso).unwrap();
+            used_levels += change.blocks_per_level[1..].iter().sum::<u64>();
+            let (reference, mesh) = reference_canon(&volume, iso);
+            assert_same(
+                &slider_canon(&slider),
+                &reference,
+                &format!("{name} at {iso}"),
+            );
+            assert_eq!(slider.triangle_count(), mesh.triangles.len());
+        }
+        assert!(
+            used_levels > 0,
+            "{name}: the walks never used the skip list"
+        );
+    }
+}
+
+#[test]
+fn slider_vertices_lie_on_edges_at_the_linear_crossing() {
+    // Independent of the shared vertex code: recompute t from the volume.
+    let volume = blobs([16, 15, 14], 0.0);
+    let path = store_of(&volume, "cross.isoslider", 0.25);
+    let mut s = Slider::open(&path).unwrap();
+    let iso = 0.5;
+    s.set_isovalue(iso).unwrap();
+    assert!(s.triangle_count() > 100);
+    let l = volume.lattice;
+    for (i, &e) in s.vertex_edges().iter().enumerate() {
+        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+        let c = l.coords(node);
+        let mut up = c;
+        up[axis] += 1;
+        let (a, b) = (
+            volume.at(c[0], c[1], c[2]) as f64,
+            volume.at(up[0], up[1], up[2]) as f64,
+        );
+        assert!((a <= iso) != (b <= iso), "edge {e} is not cut");
+        let t = (iso - a) / (b - a);
+        let want = l.position(c) + (l.position(up) - l.position(c)) * t;
+        let got = DVec3::from_array(s.positions()[i].map(|v| v as f64));
+        assert!((got - want).length() < 1e-5, "vertex {i}: {got} vs {want}");
+        // Normals point down the field, out of the blob.
+        let n = DVec3::from_array(s.normals()[i].map(|v| v as f64));
+        assert!((n.length() - 1.0).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn sliding_up_and_back_returns_the_identical_state_and_changes_add_up() {
+    let volume = blobs([20, 20, 20], 0.08);
+    let path = store_of(&volume, "updown.isoslider", 0.25);
+    let mut s = Slider::open(&path).unwrap();
+    s.set_isovalue(0.4).unwrap();
+    let before = slider_canon(&s);
+    let cells = s.cells();
+    // Small steps up, a jump below everything and back, a big step up and back down.
+    for iso in [0.401, 0.405, 0.425, 0.525, 0.4, -4.6, 0.525, 0.825, 0.4] {
+        let old = slider_canon(&s);
+        let old_keys: Vec<u64> = s
+            .vertex_edges()
+            .iter()
+            .map(|&e| mc_key(s.store().lattice(), e))
+            .collect();
+        let change = s.set_isovalue(iso).unwrap();
+        let new_keys: Vec<u64> = s
+            .vertex_edges()
+            .iter()
+            .map(|&e| mc_key(s.store().lattice(), e))
+            .collect();
+        // old − removed + added = new, as multisets of edge-key triangles.
+        let key_tri = |keys: &[u64], t: &[u32; 3]| {
+            let k = t.map(|i| keys[i as usize]);
+            let m = (0..3).min_by_key(|&i| k[i]).unwrap();
+            [k[m], k[(m + 1) % 3], k[(m + 2) % 3]]
+        };
+        let mut count: HashMap<[u64; 3], i64> = HashMap::new();
+        for t in &old.0 {
+            *count.entry(*t).or_default() += 1;
+        }
+        for t in &change.removed_triangles {
+            *count.entry(key_tri(&old_keys, t)).or_default() -= 1;
+        }
+        for t in &change.added_triangles {
+            *count.entry(key_tri(&new_keys, t)).or_default() += 1;
+        }
+        let mut expect: Vec<[u64; 3]> = count
+            .into_iter()
+            .flat_map(|(t, n)| {
+                assert!(n >= 0, "a removed triangle was not there");
+                std::iter::repeat_n(t, n as usize)
+            })
+            .collect();
+        expect.sort_unstable();
+        assert!(
+            expect == slider_canon(&s).0,
+            "change does not add up at {iso}"
+        );
+        for &(from, to) in &change.moved_vertices {
+            assert_eq!(old_keys[from as usize], new_keys[to as usize]);
+        }
+    }
+    let after = slider_canon(&s);
+    assert_eq!(s.cells(), cells);
+    assert_same(&after, &before, "back at 0.4");
+    assert_eq!(after.0, before.0);
+    assert_eq!(s.stats().updates, 10);
+}
+
+#[test]
+fn closed_surfaces_are_watertight() {
+    let volume = blobs([24, 24, 24], 0.0);
+    let path = store_of(&volume, "closed.isoslider", 0.25);
+    let mut s = Slider::open(&path).unwrap();
+    for iso in [0.2, 0.5, 0.7, 0.35] {
+        s.set_isovalue(iso).unwrap();
+        let mesh = Mesh {
+            positions: s.positions().iter().map(|p| p.map(|c| c as f64)).collect(),
+            triangles: s.triangles(),
+            ..Mesh::default()
+        };
+        assert!(mesh.triangles.len() > 200);
+        assert!(
+            mesh.topology().is_watertight_oriented(),
+            "{iso}: {:?}",
+            mesh.topology()
+        );
+        // Normals point out of the region above the isovalue, like the triangles.
+        assert!(mesh.signed_volume() != 0.0);
+    }
+}
+
+#[test]
+fn same_store_bytes_for_any_thread_count() {
+    let volume = blobs([14, 13, 12], 0.1);
+    let a = store_of(&volume, "det-a.isoslider", 0.25);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let b = temp("det-b.isoslider");
+    pool.install(|| build_store(&volume, &b, &BuildParams::default(), &mut Progress::none()))
+        .unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
+
+#[test]
+fn damaged_or_foreign_stores_are_refused_clearly() {
+    let volume = blobs([10, 9, 8], 0.1);
+    let path = store_of(&volume, "good.isoslider", 0.25);
+    let good = std::fs::read(&path).unwrap();
+    Store::open(&path).unwrap();
+    let bad = temp("bad.isoslider");
+    let refuse = |bytes: &[u8], want: &str| {
+        std::fs::write(&bad, bytes).unwrap();
+        let e = Store::open(&bad)
+            .err()
+            .unwrap_or_else(|| panic!("accepted ({want})"))
+            .to_string();
+        assert!(e.contains("bad.isoslider"), "{e}");
+        assert!(e.contains(want), "wanted '{want}': {e}");
+    };
+    // Truncated anywhere.
+    for cut in [
+        0,
+        5,
+        11,
+        60,
+        150,
+        good.len() / 3,
+        good.len() / 2,
+        good.len() - 8,
+        good.len() - 1,
+    ] {
+        let want = if cut < 8 { "magic" } else { "" };
+        refuse(&good[..cut], want);
+    }
+    refuse(&good[..good.len() / 2], "truncated");
+    // Corrupted: one flipped bit in a section, in the header, in the directory.
+    for at in [good.len() / 2, good.len() - 3, 200] {
+        let mut b = good.clone();
+        b[at] ^= 0x10;
+        refuse(&b, "corrupt");
+    }
+    let mut b = good.clone();
+    b[20] ^= 1;
+    refuse(&b, "checksum");
+    // Another version is refused, not misread.
+    let mut b = good.clone();
+    b[8..12].copy_from_slice(&2u32.to_le_bytes());
+    refuse(&b, "version 2");
+    let mut b = good;
+    b[..8].copy_from_slice(b"NOTASTOR");
+    refuse(&b, "magic");
+}
+
+#[test]
+fn over_budget_volumes_are_refused_before_work() {
+    let volume = blobs([10, 10, 10], 0.0);
+    let params = BuildParams {
+        memory_budget: 1000,
+        ..BuildParams::default()
+    };
+    let e = build_store(
+        &volume,
+        &temp("x.isoslider"),
+        &params,
+        &mut Progress::none(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("memory budget"), "{e}");
+    assert!(!temp("x.isoslider").exists());
+}

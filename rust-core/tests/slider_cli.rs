@@ -1,0 +1,159 @@
+//! `isobar slide-build` and `isobar slide` as a user runs them.
+
+use isobar::io::{read_volume, RawLayout, RawType};
+use isobar::progress::Progress;
+use isobar::slider::full;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+
+fn isobar() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_isobar"))
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("isobar-slider-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn build_then_slide_from_stdin_matches_marching_cubes() {
+    // A u16 raw volume: a ring-shaped bump with a ramp.
+    let dims = [18usize, 15, 13];
+    let mut bytes = Vec::new();
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                let (fx, fy, fz) = (x as f64 - 8.5, y as f64 - 7.0, z as f64 - 6.0);
+                let ring = ((fx * fx + fy * fy).sqrt() - 4.5).powi(2) + fz * fz;
+                let v = 3000.0 * (-ring / 6.0).exp() + 20.0 * x as f64;
+                bytes.extend_from_slice(&(v as u16).to_le_bytes());
+            }
+        }
+    }
+    let raw = temp("ring.raw");
+    std::fs::write(&raw, &bytes).unwrap();
+    let store = temp("ring.isoslider");
+    let out = isobar()
+        .args([
+            "slide-build",
+            "--quiet",
+            "--raw-type",
+            "u16",
+            "--raw-dims",
+            "18,15,13",
+        ])
+        .arg(&raw)
+        .arg("-o")
+        .arg(&store)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("18×15×13 u16 volume"), "{text}");
+
+    let isos = [1500.0, 1510.0, 800.0, 2900.0, 1500.0, 100.0];
+    let mut child = isobar()
+        .arg("slide")
+        .arg(&store)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        let mut stdin = child.stdin.take().unwrap();
+        for iso in isos {
+            writeln!(stdin, "{iso}").unwrap();
+        }
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), isos.len(), "{text}");
+    let layout = RawLayout {
+        dims,
+        ty: RawType::U16,
+        big_endian: false,
+        origin: glam::DVec3::ZERO,
+        spacing: glam::DVec3::ONE,
+    };
+    let volume = read_volume(&raw, None, Some(layout)).unwrap();
+    for (line, iso) in lines.iter().zip(isos) {
+        let mesh = full::extract(&volume, iso, &mut Progress::none()).unwrap();
+        assert!(!mesh.triangles.is_empty());
+        let want = format!(
+            "iso {iso} triangles {} vertices {} ",
+            mesh.triangles.len(),
+            mesh.positions.len()
+        );
+        assert!(line.starts_with(&want), "{line} vs {want}");
+        assert!(line.contains("update_ms"), "{line}");
+    }
+}
+
+#[test]
+fn bad_inputs_fail_with_a_clear_message() {
+    let junk = temp("junk.isoslider");
+    std::fs::write(&junk, b"hello").unwrap();
+    let out = isobar().arg("slide").arg(&junk).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("junk.isoslider") && err.contains("magic"),
+        "{err}"
+    );
+
+    let raw = temp("short.raw");
+    std::fs::write(&raw, [0u8; 10]).unwrap();
+    let out = isobar()
+        .args(["slide-build", "--quiet", "--raw-dims", "2,2,3"])
+        .arg(&raw)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("short.raw") && err.contains("needs 12 bytes"),
+        "{err}"
+    );
+
+    let good = temp("one.raw");
+    std::fs::write(&good, [0u8, 1, 2, 3, 4, 5, 6, 7]).unwrap();
+    let store = temp("one.isoslider");
+    assert!(isobar()
+        .args(["slide-build", "--quiet", "--raw-dims", "2,2,2"])
+        .arg(&good)
+        .output()
+        .unwrap()
+        .status
+        .success());
+    let mut child = isobar()
+        .arg("slide")
+        .arg(&store)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(b"3.5\nabc\n")
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 2") && err.contains("'abc'"), "{err}");
+}
