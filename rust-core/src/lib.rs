@@ -3,6 +3,7 @@
 //! Data flows one way: file or host arrays -> [`field`] -> extractor ([`correctors`],
 //! [`baseline`]) -> [`mesh::Mesh`] -> writer or host. See ARCHITECTURE.md.
 
+pub mod adaptive;
 pub mod baseline;
 pub mod capi;
 pub mod correctors;

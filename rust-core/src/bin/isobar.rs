@@ -32,6 +32,13 @@ struct Cli {
 enum Command {
     /// Extract isosurfaces of an SPH field by Marching Correctors.
     Sph(Box<SphArgs>),
+    /// Adaptive crack-free surface on a 3-level grid (one isovalue; the SPH options as for `sph`).
+    Adaptive {
+        #[command(flatten)]
+        sph: Box<SphArgs>,
+        #[command(flatten)]
+        adaptive: isobar::adaptive::cli::AdaptiveArgs,
+    },
     /// Extract the free surface and a pressure isosurface of the embedded dam-break frame.
     Demo {
         /// Where to write the surface (.ply, .obj or .vtp).
@@ -145,6 +152,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sph(args) => run_sph(&args),
+        Command::Adaptive { sph, adaptive } => run_adaptive(&sph, &adaptive),
         Command::Demo { output, quiet } => run_demo(&output, quiet),
         Command::Info { input } => run_info(&input),
         Command::SlideBuild(args) => isobar::slider::cli::run_build(&args),
@@ -310,6 +318,20 @@ fn run_sph(args: &SphArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn run_adaptive(sph: &SphArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -> Result<()> {
+    let common = isobar::adaptive::cli::Common {
+        input: &sph.input,
+        output: &sph.output,
+        iso: &sph.iso,
+        grid_factor: sph.grid_factor,
+        normals: !sph.no_normals,
+        memory_budget: (sph.memory_budget * (1u64 << 30) as f64) as u64,
+        quiet: sph.quiet,
+        stats_json: sph.stats_json.as_deref(),
+    };
+    isobar::adaptive::cli::run(adaptive, &common, &|data| settings_from(sph, data))
 }
 
 fn run_demo(output: &Path, quiet: bool) -> Result<()> {

@@ -42,6 +42,7 @@ use glam::DVec3;
 use std::io::Read;
 use std::path::Path;
 
+/// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::write_atomically;
 pub use sequence::{expand_sequence, frame_number};
 pub use volume::{read_volume, RawLayout, RawType};

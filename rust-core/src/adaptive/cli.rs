@@ -1,0 +1,268 @@
+//! The `isobar adaptive` subcommand's body: the binary parses the SPH field options
+//! shared with `isobar sph` and hands them here with these adaptive ones.
+
+use super::{extract, extract_sph, grid_for, hausdorff, Extraction, Params, Stats};
+use crate::correctors;
+use crate::error::{Error, Result};
+use crate::field::particles::ParticleData;
+use crate::field::sph::{SphField, SphSettings};
+use crate::io;
+use crate::progress::Progress;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of `isobar adaptive` beyond the SPH field's.
+#[derive(clap::Args, Clone, Debug)]
+pub struct AdaptiveArgs {
+    /// Splash criterion: coarse cells holding 1..=N particles become level 3 (paper: 1;
+    /// 0 keeps every cell at level 1).
+    #[arg(long, default_value_t = 1)]
+    pub splash_threshold: u32,
+    /// Layers of neighbour cells raised to level 3 around each splash cell (0 = the
+    /// paper's criterion alone).
+    #[arg(long, default_value_t = 1)]
+    pub splash_dilation: u32,
+    /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+    #[arg(long, default_value_t = 5)]
+    pub bisection_iterations: u32,
+    /// Also run uniform marching cubes at the finest level (the full-grid baseline and the
+    /// adaptive code with every cell at level 3) and print time, triangles, memory and
+    /// the Hausdorff distance.
+    #[arg(long)]
+    pub compare: bool,
+}
+
+/// What the binary passes from its shared SPH options.
+pub struct Common<'a> {
+    pub input: &'a str,
+    pub output: &'a Path,
+    pub iso: &'a [f64],
+    pub grid_factor: f64,
+    pub normals: bool,
+    pub memory_budget: u64,
+    pub quiet: bool,
+    pub stats_json: Option<&'a Path>,
+}
+
+/// Runs the subcommand on every frame of `common.input`.
+pub fn run(
+    args: &AdaptiveArgs,
+    common: &Common,
+    settings: &dyn Fn(&ParticleData) -> Result<SphSettings>,
+) -> Result<()> {
+    let [isovalue] = common.iso else {
+        return Err(Error::InvalidParameter {
+            name: "iso",
+            message: format!(
+                "the adaptive surface takes one isovalue, got {}",
+                common.iso.len()
+            ),
+        });
+    };
+    let params = Params {
+        isovalue: *isovalue,
+        grid_factor: common.grid_factor,
+        splash_threshold: args.splash_threshold,
+        splash_dilation: args.splash_dilation,
+        bisection_iterations: args.bisection_iterations,
+        normals: common.normals,
+        memory_budget: common.memory_budget,
+    };
+    params.validate()?;
+    let frames = io::expand_sequence(common.input)?;
+    let out_text = common.output.to_string_lossy().to_string();
+    if frames.len() > 1 && !out_text.contains('#') {
+        return Err(Error::InvalidParameter {
+            name: "output",
+            message: format!(
+                "{} frames match '{}'; give an output pattern with '#' for the frame number",
+                frames.len(),
+                common.input
+            ),
+        });
+    }
+    for path in &frames {
+        let number = io::frame_number(path).unwrap_or(0);
+        let output = PathBuf::from(fill_frame(&out_text, number));
+        let data = io::read_particles(path)?;
+        let t = Instant::now();
+        let field = SphField::new(&data, &settings(&data)?)?;
+        let build_s = t.elapsed().as_secs_f64();
+        let out = extract_sph(&field, &params, &mut Progress::none())?;
+        io::write_mesh(&output, &out.mesh)?;
+        let mut rows = rows(&data, &out.stats, build_s);
+        if args.compare {
+            rows.extend(compare(&field, &params, &out)?);
+        }
+        if !common.quiet {
+            let mut text = format!("{}\n", path.display());
+            for (k, v) in &rows {
+                let _ = writeln!(text, "  {k:<40} {v:>14}");
+            }
+            let _ = writeln!(text, "surface written to {}", output.display());
+            print!("{text}");
+        }
+        if let Some(json) = common.stats_json {
+            let json = PathBuf::from(fill_frame(&json.to_string_lossy(), number));
+            write_json(&json, &rows)?;
+        }
+    }
+    Ok(())
+}
+
+fn rows(data: &ParticleData, s: &Stats, build_s: f64) -> Vec<(String, String)> {
+    let mut r: Vec<(String, String)> = vec![
+        ("particles".into(), data.len().to_string()),
+        ("coarse cells".into(), s.coarse_cells.to_string()),
+    ];
+    for l in 0..3 {
+        r.push((
+            format!("level {} cells", l + 1),
+            s.cells_per_level[l].to_string(),
+        ));
+        r.push((
+            format!("level {} triangles", l + 1),
+            s.triangles_per_level[l].to_string(),
+        ));
+    }
+    r.extend([
+        ("transition faces".into(), s.transition_faces.to_string()),
+        ("crack triangles".into(), s.crack_triangles.to_string()),
+        ("vertices".into(), s.vertices.to_string()),
+        ("triangles".into(), s.triangles.to_string()),
+        ("field evaluations".into(), s.field_evaluations.to_string()),
+        ("array bytes".into(), s.array_bytes.to_string()),
+        ("time: field build (s)".into(), format!("{build_s:.3}")),
+        (
+            "time: levels (s)".into(),
+            format!("{:.3}", s.timings.levels),
+        ),
+        (
+            "time: level surfaces (s)".into(),
+            format!("{:.3}", s.timings.surfaces),
+        ),
+        (
+            "time: crack filling (s)".into(),
+            format!("{:.3}", s.timings.cracks),
+        ),
+        (
+            "time: assembly (s)".into(),
+            format!("{:.3}", s.timings.assembly),
+        ),
+        (
+            "time: adaptive total (s)".into(),
+            format!("{:.3}", s.timings.total),
+        ),
+    ]);
+    r
+}
+
+/// Uniform marching cubes at the finest level, two ways: the full-grid baseline (linear
+/// edge points, the usual route) and this extractor with every cell at level 3.
+fn compare(
+    field: &SphField,
+    params: &Params,
+    adaptive: &Extraction,
+) -> Result<Vec<(String, String)>> {
+    let grid = grid_for(field, params)?;
+    let t = Instant::now();
+    let uniform = extract(
+        field,
+        &grid,
+        &vec![3u8; grid.cell_count()],
+        params,
+        &mut Progress::none(),
+    )?;
+    let uniform_s = t.elapsed().as_secs_f64();
+    let baseline_params = correctors::Params {
+        isovalues: vec![params.isovalue],
+        grid_factor: params.grid_factor,
+        correct: false,
+        trim: None,
+        normals: params.normals,
+        memory_budget: params.memory_budget,
+        ..correctors::Params::default()
+    };
+    let t = Instant::now();
+    let empty = ParticleData::default();
+    let baseline =
+        crate::baseline::extract(field, &empty, &baseline_params, &mut Progress::none())?;
+    let baseline_s = t.elapsed().as_secs_f64();
+    let fine = grid.fine;
+    let d = hausdorff::hausdorff(&adaptive.mesh, &uniform.mesh, 2.0 * fine);
+    let baseline_nodes = baseline.stats.node_evaluations;
+    let ratio = |n: u64| n as f64 / adaptive.mesh.triangles.len().max(1) as f64;
+    Ok(vec![
+        ("finest cell".into(), format!("{fine:.4e}")),
+        (
+            "uniform L3: triangles".into(),
+            uniform.stats.triangles.to_string(),
+        ),
+        (
+            "uniform L3: triangles / adaptive".into(),
+            format!("{:.2}", ratio(uniform.stats.triangles)),
+        ),
+        (
+            "uniform L3: array bytes".into(),
+            uniform.stats.array_bytes.to_string(),
+        ),
+        ("uniform L3: time (s)".into(), format!("{uniform_s:.3}")),
+        (
+            "full-grid MC: triangles".into(),
+            baseline.stats.triangles.to_string(),
+        ),
+        (
+            "full-grid MC: triangles / adaptive".into(),
+            format!("{:.2}", ratio(baseline.stats.triangles)),
+        ),
+        (
+            "full-grid MC: grid bytes".into(),
+            (baseline_nodes * 16).to_string(),
+        ),
+        ("full-grid MC: time (s)".into(), format!("{baseline_s:.3}")),
+        (
+            "Hausdorff to uniform L3 / finest cell".into(),
+            format!("{:.4}", d / fine),
+        ),
+    ])
+}
+
+fn write_json(path: &Path, rows: &[(String, String)]) -> Result<()> {
+    let body: Vec<String> = rows
+        .iter()
+        .map(|(k, v)| {
+            let key: String = k
+                .chars()
+                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                .collect();
+            let key = key
+                .split('_')
+                .filter(|s| !s.is_empty())
+                .collect::<Vec<_>>()
+                .join("_");
+            let value = if v.parse::<f64>().is_ok() {
+                v.clone()
+            } else {
+                format!("\"{v}\"")
+            };
+            format!("  \"{key}\": {value}")
+        })
+        .collect();
+    let text = format!("{{\n{}\n}}\n", body.join(",\n"));
+    io::write_atomically(path, |w| std::io::Write::write_all(w, text.as_bytes()))
+}
+
+/// `pattern` with its run of '#' replaced by the zero-padded frame number.
+fn fill_frame(pattern: &str, frame: u64) -> String {
+    let Some(start) = pattern.find('#') else {
+        return pattern.to_string();
+    };
+    let width = pattern[start..].chars().take_while(|&c| c == '#').count();
+    format!(
+        "{}{:0width$}{}",
+        &pattern[..start],
+        frame,
+        &pattern[start + width..]
+    )
+}

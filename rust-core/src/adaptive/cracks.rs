@@ -1,0 +1,114 @@
+//! Crack detection and filling (the paper's Algorithm 3), one transition face at a time
+//! in parallel. A face between a level-L and a level-(L+1) cell is cut into the
+//! 2^(L-1) × 2^(L-1) quads of the coarse side; each quad's nine fine-side vertex signs
+//! select a row of the committed pattern table, whose face points map to the fine level's
+//! compacted edges.
+
+use super::crack_gen::{point_edge, ROW};
+use super::crack_table::CRACK_PATTERNS;
+use super::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
+use super::levels::LevelArrays;
+use rayon::prelude::*;
+
+/// A face between two cells whose levels differ: (lower cell along `axis`, axis).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct TransitionFace {
+    pub cell: usize,
+    pub axis: usize,
+}
+
+/// Every transition face, in (cell, axis) order.
+pub fn transition_faces(grid: &CoarseGrid, levels: &[u8]) -> Vec<TransitionFace> {
+    (0..levels.len())
+        .into_par_iter()
+        .flat_map_iter(|cell| {
+            let n = grid.face_neighbours(cell);
+            (0..3).filter_map(move |axis| {
+                let other = n[2 * axis + 1]?;
+                (levels[other] != levels[cell]).then_some(TransitionFace { cell, axis })
+            })
+        })
+        .collect()
+}
+
+/// Fill triangles of every transition face, as (level, index into that level's E)
+/// triples, counter-clockwise seen from outside the region above the isovalue.
+pub fn fill(
+    grid: &CoarseGrid,
+    levels: &[u8],
+    arrays: &[LevelArrays],
+    faces: &[TransitionFace],
+    iso: f64,
+) -> Vec<[(u8, u32); 3]> {
+    faces
+        .par_iter()
+        .flat_map_iter(|&face| face_triangles(grid, levels, arrays, face, iso))
+        .collect()
+}
+
+fn face_triangles(
+    grid: &CoarseGrid,
+    levels: &[u8],
+    arrays: &[LevelArrays],
+    face: TransitionFace,
+    iso: f64,
+) -> Vec<[(u8, u32); 3]> {
+    let a = face.axis;
+    let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+    let lower = face.cell;
+    let mut upper_c = grid.coords(lower);
+    upper_c[a] += 1;
+    let upper = grid.index(upper_c);
+    let (lo_level, hi_level) = (levels[lower], levels[upper]);
+    // The table is counter-clockwise in (u, v), i.e. wound for a normal along +a, which
+    // is right when the coarse cell is the lower one.
+    let (coarse_level, fine_cell, flip) = if lo_level < hi_level {
+        (lo_level, upper, false)
+    } else {
+        (hi_level, lower, true)
+    };
+    let fine_level = coarse_level + 1;
+    let fine = &arrays[fine_level as usize - 1];
+    let slot = fine
+        .slot(fine_cell)
+        .expect("the fine cell has the fine level");
+    let quads = subdivisions(coarse_level);
+    let quad = FINE_PER_COARSE / quads; // quad side in finest cells
+    let half = quad / 2;
+    let base = grid.coords(lower).map(|c| c * FINE_PER_COARSE);
+    let plane = (grid.coords(lower)[a] + 1) * FINE_PER_COARSE;
+    let mut out = Vec::new();
+    for qv in 0..quads {
+        for qu in 0..quads {
+            let node = |i: u32, j: u32| -> [u32; 3] {
+                let mut n = [0u32; 3];
+                n[a] = plane;
+                n[u] = base[u] + qu * quad + i * half;
+                n[v] = base[v] + qv * quad + j * half;
+                n
+            };
+            let mut config = 0usize;
+            for j in 0..3 {
+                for i in 0..3 {
+                    if fine.value_at(grid, slot, node(i, j)) > iso {
+                        config |= 1 << (i + 3 * j);
+                    }
+                }
+            }
+            let row: &[u8; ROW] = &CRACK_PATTERNS[config];
+            for t in 0..row[0] as usize {
+                let tri: [(u8, u32); 3] = std::array::from_fn(|k| {
+                    let p = row[1 + 3 * t + k] as usize;
+                    let ((i, j), dir) = point_edge(p);
+                    let axis = if dir == 0 { u } else { v };
+                    let e = fine
+                        .edge_index(node(i as u32, j as u32), axis)
+                        .expect("a crack point lies on a cut edge of the fine cell");
+                    (fine_level, e as u32)
+                });
+                out.push(if flip { [tri[0], tri[2], tri[1]] } else { tri });
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,334 @@
+//! The coarse grid of the 3-level scheme and its cell levels: particle registration
+//! (Algorithm 1, step 1), splitting by the splash criterion (step 2) and level adjustment
+//! (step 3) so that cells sharing a face differ by at most one level.
+//!
+//! A level-1 cell is one marching-cubes cell; a level-2 cell is tessellated 2×2×2 and a
+//! level-3 cell 4×4×4. All three tessellations sit on one finest lattice whose cell is a
+//! quarter of a coarse cell, so every grid vertex of every level is a finest-lattice node.
+
+use crate::error::{Error, Result};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+/// Finest-lattice cells per coarse cell along an axis.
+pub const FINE_PER_COARSE: u32 = 4;
+/// Levels of the scheme.
+pub const LEVELS: usize = 3;
+
+/// Sub-cells per axis of a cell of `level` (1, 2 or 4).
+pub const fn subdivisions(level: u8) -> u32 {
+    1 << (level - 1)
+}
+
+/// A box of coarse cells on a lattice of finest cells of size `fine`, first node at
+/// `origin`. Positions are computed from integer lattice coordinates only, so a node has
+/// one position bit for bit whichever cell or level asks for it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoarseGrid {
+    pub origin: DVec3,
+    /// Size of a finest (level-3) cell; coarse cells are `FINE_PER_COARSE` times larger.
+    pub fine: f64,
+    /// Coarse cells per axis.
+    pub cells: [u32; 3],
+}
+
+impl CoarseGrid {
+    /// The grid whose coarse cells cover `lo..hi` with finest cells of size `fine`.
+    pub fn covering(lo: DVec3, hi: DVec3, fine: f64) -> Result<Self> {
+        if !(fine > 0.0 && fine.is_finite()) {
+            return Err(Error::InvalidParameter {
+                name: "grid_factor",
+                message: format!("the finest cell size must be positive, got {fine}"),
+            });
+        }
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "the data's bounds are not finite: {lo} to {hi}"
+            )));
+        }
+        let coarse = fine * FINE_PER_COARSE as f64;
+        let mut cells = [0u32; 3];
+        for a in 0..3 {
+            let n = ((hi[a] - lo[a]) / coarse).ceil().max(1.0);
+            // Finest nodes per axis must fit the 20-bit keys of `mc::VirtualGrid`.
+            let max = (crate::mc::MAX_NODES_PER_AXIS - 1) / FINE_PER_COARSE as u64;
+            if n > max as f64 {
+                return Err(Error::InvalidParameter {
+                    name: "grid_factor",
+                    message: format!(
+                        "the adaptive grid would need {n:.0} coarse cells along axis {a}; at most {max} are supported — raise the grid factor"
+                    ),
+                });
+            }
+            cells[a] = n as u32;
+        }
+        Ok(CoarseGrid {
+            origin: lo,
+            fine,
+            cells,
+        })
+    }
+
+    /// Number of coarse cells.
+    pub fn cell_count(&self) -> usize {
+        self.cells.iter().map(|&c| c as usize).product()
+    }
+
+    /// Linear index of coarse cell (x, y, z).
+    #[inline]
+    pub fn index(&self, c: [u32; 3]) -> usize {
+        c[0] as usize
+            + self.cells[0] as usize * (c[1] as usize + self.cells[1] as usize * c[2] as usize)
+    }
+
+    /// Coordinates of coarse cell `i`.
+    #[inline]
+    pub fn coords(&self, i: usize) -> [u32; 3] {
+        let (nx, ny) = (self.cells[0] as usize, self.cells[1] as usize);
+        [
+            (i % nx) as u32,
+            (i / nx % ny) as u32,
+            (i / (nx * ny)) as u32,
+        ]
+    }
+
+    /// The coarse cell holding `p`, if inside the grid.
+    pub fn cell_of(&self, p: DVec3) -> Option<usize> {
+        let g = (p - self.origin) / (self.fine * FINE_PER_COARSE as f64);
+        let mut c = [0u32; 3];
+        for a in 0..3 {
+            let f = g[a].floor();
+            if !(f >= 0.0 && f < self.cells[a] as f64) {
+                return None;
+            }
+            c[a] = f as u32;
+        }
+        Some(self.index(c))
+    }
+
+    /// Position of the point at `sub` in units of `fine / 2^shift`. A finest node
+    /// (x, y, z) is `sub = (x, y, z) · 2^shift`; the product below is one rounding of the
+    /// exact value, so every shift gives the node the same bits.
+    #[inline]
+    pub fn point(&self, sub: [i64; 3], shift: u32) -> DVec3 {
+        let unit = self.fine / (1u64 << shift) as f64;
+        self.origin + DVec3::new(sub[0] as f64, sub[1] as f64, sub[2] as f64) * unit
+    }
+
+    /// The six face neighbours' indices of cell `i` (None outside the grid), ordered
+    /// (axis, side).
+    pub fn face_neighbours(&self, i: usize) -> [Option<usize>; 6] {
+        let c = self.coords(i);
+        std::array::from_fn(|k| self.offset(c, k / 2, if k % 2 == 0 { -1 } else { 1 }))
+    }
+
+    fn offset(&self, c: [u32; 3], axis: usize, d: i64) -> Option<usize> {
+        let x = c[axis] as i64 + d;
+        if x < 0 || x >= self.cells[axis] as i64 {
+            return None;
+        }
+        let mut n = c;
+        n[axis] = x as u32;
+        Some(self.index(n))
+    }
+}
+
+/// Step 1: particles per coarse cell, counted with atomics as on the GPU (counts do not
+/// depend on the order of the additions). Particles outside the grid are an error naming
+/// the first one.
+pub fn register(grid: &CoarseGrid, positions: &[DVec3]) -> Result<Vec<u32>> {
+    let counts: Vec<AtomicU32> = (0..grid.cell_count()).map(|_| AtomicU32::new(0)).collect();
+    let outside = positions
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, &p)| match grid.cell_of(p) {
+            Some(c) => {
+                counts[c].fetch_add(1, Ordering::Relaxed);
+                None
+            }
+            None => Some(i),
+        })
+        .min();
+    if let Some(i) = outside {
+        return Err(Error::InvalidInput(format!(
+            "particle {i} at {} lies outside the adaptive grid",
+            positions[i]
+        )));
+    }
+    Ok(counts.into_iter().map(AtomicU32::into_inner).collect())
+}
+
+/// Step 2: the paper's splash criterion. A cell holding between 1 and `threshold`
+/// particles is level 3 (isolated particles need the finest cells); all others level 1.
+pub fn split(counts: &[u32], threshold: u32) -> Vec<u8> {
+    counts
+        .par_iter()
+        .map(|&n| if n >= 1 && n <= threshold { 3 } else { 1 })
+        .collect()
+}
+
+/// Raises the `rings` layers of cells around every level-3 cell (26-neighbourhood) to
+/// level 3. A splash particle's kernel reaches about one coarse cell beyond its own cell
+/// (support 2h = one coarse cell at the default grid factor), so its droplet surface
+/// spills into those neighbours; at level 1 or 2 they would contour a sphere of one or
+/// two cells' radius, far off the finest surface. 0 keeps the paper's criterion alone.
+pub fn dilate(grid: &CoarseGrid, levels: &mut [u8], rings: u32) {
+    for _ in 0..rings {
+        let next: Vec<u8> = (0..levels.len())
+            .into_par_iter()
+            .map(|i| {
+                let c = grid.coords(i);
+                let mut l = levels[i];
+                for d in 0..27usize {
+                    let o = [d % 3, d / 3 % 3, d / 9].map(|x| x as i64 - 1);
+                    let n: [i64; 3] = std::array::from_fn(|a| c[a] as i64 + o[a]);
+                    if (0..3).all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
+                        && levels[grid.index(n.map(|x| x as u32))] == 3
+                    {
+                        l = 3;
+                    }
+                }
+                l
+            })
+            .collect();
+        levels.copy_from_slice(&next);
+    }
+}
+
+/// Step 3, extended to a fixed point: raises levels until (a) cells sharing a face differ
+/// by at most one level and (b) no grid edge has its four cells alternating between two
+/// levels (coarse, fine, coarse, fine). The paper's one pass gives (a) for its two-valued
+/// input; (b) keeps the mesh manifold: with alternating cells, a sign change in the middle
+/// of the shared edge would give two fine blobs touching along that edge. Levels only
+/// rise, so this terminates; each pass reads the previous one, so it is deterministic.
+pub fn balance(grid: &CoarseGrid, levels: &mut [u8]) {
+    loop {
+        let next: Vec<u8> = (0..levels.len())
+            .into_par_iter()
+            .map(|i| required_level(grid, levels, i))
+            .collect();
+        if next == levels {
+            return;
+        }
+        levels.copy_from_slice(&next);
+    }
+}
+
+/// The level cell `i` must at least have given its neighbours' current levels.
+fn required_level(grid: &CoarseGrid, levels: &[u8], i: usize) -> u8 {
+    let mut need = levels[i];
+    for n in grid.face_neighbours(i).into_iter().flatten() {
+        need = need.max(levels[n].saturating_sub(1));
+    }
+    // The four cells around each of the cell's 12 edges.
+    let c = grid.coords(i);
+    for axis in 0..3 {
+        let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
+        for (sb, sd) in [(-1i64, -1i64), (-1, 1), (1, -1), (1, 1)] {
+            let ring = [
+                Some(i),
+                grid.offset(c, b, sb),
+                grid.offset(c, b, sb)
+                    .and_then(|n| grid.offset(grid.coords(n), d, sd)),
+                grid.offset(c, d, sd),
+            ];
+            if let [Some(_), Some(p), Some(q), Some(r)] = ring {
+                let (l0, l1, l2, l3) = (levels[i], levels[p], levels[q], levels[r]);
+                if l0 == l2 && l1 == l3 && l1 > l0 {
+                    need = need.max(l1);
+                }
+            }
+        }
+    }
+    need
+}
+
+/// Checks a caller's level map: one entry per coarse cell, levels 1..=3, face neighbours
+/// at most one level apart and no alternating edge (see [`balance`]).
+pub fn check_levels(grid: &CoarseGrid, levels: &[u8]) -> Result<()> {
+    if levels.len() != grid.cell_count() {
+        return Err(Error::InvalidInput(format!(
+            "the level map has {} entries for {} coarse cells",
+            levels.len(),
+            grid.cell_count()
+        )));
+    }
+    if let Some(i) = levels.iter().position(|&l| !(1..=3).contains(&l)) {
+        return Err(Error::InvalidInput(format!(
+            "coarse cell {i} has level {}, levels are 1, 2 or 3",
+            levels[i]
+        )));
+    }
+    if let Some(i) = (0..levels.len()).find(|&i| required_level(grid, levels, i) != levels[i]) {
+        return Err(Error::InvalidInput(format!(
+            "coarse cell {i} (level {}) needs level {} next to its neighbours",
+            levels[i],
+            required_level(grid, levels, i)
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: u32) -> CoarseGrid {
+        CoarseGrid {
+            origin: DVec3::ZERO,
+            fine: 0.25,
+            cells: [n; 3],
+        }
+    }
+
+    #[test]
+    fn registration_counts_every_particle_once() {
+        let g = grid(4);
+        let pts = vec![
+            DVec3::new(0.5, 0.5, 0.5),
+            DVec3::new(0.6, 0.5, 0.5),
+            DVec3::new(3.5, 0.5, 2.5),
+        ];
+        let counts = register(&g, &pts).unwrap();
+        assert_eq!(counts.iter().sum::<u32>(), 3);
+        assert_eq!(counts[0], 2);
+        assert_eq!(counts[g.index([3, 0, 2])], 1);
+        let err = register(&g, &[DVec3::new(9.0, 0.0, 0.0)]).unwrap_err();
+        assert!(err.to_string().contains("particle 0"), "{err}");
+    }
+
+    #[test]
+    fn splitting_and_balancing_follow_fig2() {
+        let g = grid(5);
+        let mut counts = vec![0u32; g.cell_count()];
+        counts[g.index([2, 2, 2])] = 1; // an isolated particle
+        counts[g.index([0, 0, 0])] = 7; // bulk fluid
+        let mut levels = split(&counts, 1);
+        assert_eq!(levels[g.index([2, 2, 2])], 3);
+        assert_eq!(levels[g.index([0, 0, 0])], 1);
+        balance(&g, &mut levels);
+        for n in g.face_neighbours(g.index([2, 2, 2])).into_iter().flatten() {
+            assert_eq!(levels[n], 2);
+        }
+        assert_eq!(
+            levels[g.index([1, 1, 2])],
+            1,
+            "edge neighbours may stay coarse"
+        );
+        check_levels(&g, &levels).unwrap();
+        // Two diagonal splash cells around one edge: the edge alternates 3,2,3,2 and the
+        // level-2 cells between them rise to 3.
+        let mut counts = vec![0u32; g.cell_count()];
+        counts[g.index([2, 2, 2])] = 1;
+        counts[g.index([3, 3, 2])] = 1;
+        let mut levels = split(&counts, 1);
+        balance(&g, &mut levels);
+        assert_eq!(levels[g.index([3, 2, 2])], 3);
+        assert_eq!(levels[g.index([2, 3, 2])], 3);
+        check_levels(&g, &levels).unwrap();
+        let mut bad = levels.clone();
+        bad[g.index([0, 0, 0])] = 3;
+        assert!(check_levels(&g, &bad).is_err());
+    }
+}

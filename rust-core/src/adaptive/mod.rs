@@ -1,0 +1,300 @@
+//! Adaptive crack-free SPH surfaces on 3-level grids, after
+//! `shared/papers/gpu-adaptive-3level-sph-surfaces.txt`: coarse cells split to level 3
+//! where they hold few particles (splashes), their face neighbours raised to level 2,
+//! marching cubes per level with bisected edge points that coincide across levels, and
+//! the cracks between levels filled from a table of every transition-face pattern.
+//!
+//! [`extract_sph`] is the whole pipeline on an SPH field; [`extract`] takes any field and
+//! a level map, which the tests use to force every mix of levels.
+
+pub mod cli;
+pub mod crack_gen;
+pub mod crack_table;
+pub mod cracks;
+pub mod grid;
+pub mod hausdorff;
+pub mod levels;
+
+use crate::error::{Error, Result};
+use crate::field::sph::SphField;
+use crate::field::ScalarField;
+use crate::mesh::Mesh;
+use crate::progress::Progress;
+use grid::CoarseGrid;
+use levels::LevelArrays;
+use std::time::Instant;
+
+/// Parameters of an adaptive extraction. The field itself (kernel, h, h-scale, which
+/// quantity) is chosen with `SphSettings`, as for Marching Correctors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Params {
+    pub isovalue: f64,
+    /// Finest (level-3) cell size as a multiple of the smallest smoothing length; coarse
+    /// cells are four times larger.
+    pub grid_factor: f64,
+    /// Splash criterion: a coarse cell holding 1..=this many particles becomes level 3
+    /// (paper: 1). 0 keeps every cell at level 1.
+    pub splash_threshold: u32,
+    /// Layers of neighbour cells (26-neighbourhood) raised to level 3 around each splash
+    /// cell, so a droplet's whole kernel support is contoured finely (0 = the paper).
+    pub splash_dilation: u32,
+    /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5).
+    pub bisection_iterations: u32,
+    /// Vertex normals from the field gradient.
+    pub normals: bool,
+    /// Bytes the grid arrays may take; larger grids are refused before allocation.
+    pub memory_budget: u64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            isovalue: 0.5,
+            grid_factor: 0.5,
+            splash_threshold: 1,
+            splash_dilation: 1,
+            bisection_iterations: 5,
+            normals: true,
+            memory_budget: crate::field::DEFAULT_MEMORY_BUDGET,
+        }
+    }
+}
+
+impl Params {
+    /// Checks every parameter, naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |name, message: String| Err(Error::InvalidParameter { name, message });
+        if !self.isovalue.is_finite() {
+            return bad(
+                "isovalue",
+                format!("{} is not a finite number", self.isovalue),
+            );
+        }
+        if !(self.grid_factor > 0.0 && self.grid_factor.is_finite()) {
+            return bad(
+                "grid_factor",
+                format!("must be positive, got {}", self.grid_factor),
+            );
+        }
+        if !(1..=16).contains(&self.bisection_iterations) {
+            return bad(
+                "bisection_iterations",
+                format!("must lie in 1..=16, got {}", self.bisection_iterations),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Seconds per phase.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Timings {
+    /// Registration, splitting and level adjustment.
+    pub levels: f64,
+    /// Marching cubes of the three levels (field values, edges, triangles).
+    pub surfaces: f64,
+    pub cracks: f64,
+    /// Merging the levels' points into one mesh.
+    pub assembly: f64,
+    pub total: f64,
+}
+
+/// What an extraction did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Stats {
+    pub coarse_cells: u64,
+    /// Coarse cells of level 1, 2, 3.
+    pub cells_per_level: [u64; 3],
+    /// Marching-cubes triangles from cells of level 1, 2, 3.
+    pub triangles_per_level: [u64; 3],
+    pub transition_faces: u64,
+    pub crack_triangles: u64,
+    pub vertices: u64,
+    pub triangles: u64,
+    pub field_evaluations: u64,
+    /// Points found on several levels whose positions differ (0 when bisection agrees).
+    pub point_mismatches: u64,
+    /// Bytes of the per-level arrays at their largest (values, cases, offsets, edges,
+    /// points, triangles).
+    pub array_bytes: u64,
+    pub timings: Timings,
+}
+
+/// A surface and how it was made.
+#[derive(Clone, Debug)]
+pub struct Extraction {
+    pub mesh: Mesh,
+    pub stats: Stats,
+}
+
+/// The coarse grid for `field`: finest cells of `grid_factor` × the smallest smoothing
+/// length, covering every point where some kernel is non-zero plus one coarse cell, so the
+/// grid's border lies outside every surface.
+pub fn grid_for(field: &SphField, params: &Params) -> Result<CoarseGrid> {
+    let (lo, hi) = field.bounds();
+    let fine = params.grid_factor * field.min_h();
+    let pad = field.max_support() + fine * grid::FINE_PER_COARSE as f64;
+    CoarseGrid::covering(lo - pad, hi + pad, fine)
+}
+
+/// Steps 1–3 on `field`'s particles: registration, splitting, level adjustment.
+pub fn levels_for(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Vec<u8>> {
+    let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
+    if grid.cell_count() as u64 * 5 > params.memory_budget {
+        return Err(Error::OverBudget {
+            what: format!(
+                "a coarse grid of {}×{}×{} cells",
+                grid.cells[0], grid.cells[1], grid.cells[2]
+            ),
+            needed_bytes: grid.cell_count() as u64 * 5,
+            budget_bytes: params.memory_budget,
+        });
+    }
+    let counts = grid::register(grid, &positions)?;
+    let mut levels = grid::split(&counts, params.splash_threshold);
+    grid::dilate(grid, &mut levels, params.splash_dilation);
+    grid::balance(grid, &mut levels);
+    Ok(levels)
+}
+
+/// The adaptive surface of an SPH field.
+pub fn extract_sph(
+    field: &SphField,
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Extraction> {
+    params.validate()?;
+    let start = Instant::now();
+    progress.phase("cell levels", 0.0, 0.05)?;
+    let grid = grid_for(field, params)?;
+    let levels = levels_for(field, &grid, params)?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let mut out = extract(field, &grid, &levels, params, progress)?;
+    out.stats.timings.levels = elapsed;
+    out.stats.timings.total += elapsed;
+    Ok(out)
+}
+
+/// The adaptive surface of any field on `grid` with the given cell levels (checked:
+/// 1..=3, face neighbours at most one apart, see [`grid::check_levels`]). Every surface
+/// must stay inside the grid: its border nodes should lie below the isovalue.
+pub fn extract<F: ScalarField + ?Sized>(
+    field: &F,
+    grid: &CoarseGrid,
+    levels: &[u8],
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Extraction> {
+    params.validate()?;
+    grid::check_levels(grid, levels)?;
+    levels::check_budget(levels, params.memory_budget)?;
+    let start = Instant::now();
+    let iso = params.isovalue;
+    let mut stats = Stats {
+        coarse_cells: levels.len() as u64,
+        ..Stats::default()
+    };
+    for &l in levels {
+        stats.cells_per_level[l as usize - 1] += 1;
+    }
+    let t = Instant::now();
+    let mut arrays: Vec<LevelArrays> = Vec::with_capacity(3);
+    for level in 1..=3u8 {
+        let from = 0.05 + 0.25 * (level - 1) as f64;
+        progress.phase("level surfaces", from, from + 0.25)?;
+        let a = levels::build_level(
+            field,
+            grid,
+            levels,
+            level,
+            iso,
+            params.bisection_iterations,
+            params.normals,
+            progress,
+        )?;
+        stats.field_evaluations += a.evaluations;
+        stats.triangles_per_level[level as usize - 1] = a.triangles.len() as u64;
+        arrays.push(a);
+    }
+    stats.array_bytes = arrays.iter().map(array_bytes).sum();
+    stats.timings.surfaces = t.elapsed().as_secs_f64();
+
+    progress.phase("crack filling", 0.8, 0.9)?;
+    let t = Instant::now();
+    let faces = cracks::transition_faces(grid, levels);
+    let fills = cracks::fill(grid, levels, &arrays, &faces, iso);
+    stats.transition_faces = faces.len() as u64;
+    stats.crack_triangles = fills.len() as u64;
+    stats.timings.cracks = t.elapsed().as_secs_f64();
+
+    progress.phase("assembly", 0.9, 1.0)?;
+    let t = Instant::now();
+    let (mesh, mismatches) = assemble(&arrays, &fills, params.normals);
+    stats.point_mismatches = mismatches;
+    stats.timings.assembly = t.elapsed().as_secs_f64();
+    stats.vertices = mesh.vertex_count() as u64;
+    stats.triangles = mesh.triangles.len() as u64;
+    stats.timings.total = start.elapsed().as_secs_f64();
+    progress.phase("done", 1.0, 1.0)?;
+    Ok(Extraction { mesh, stats })
+}
+
+fn array_bytes(a: &LevelArrays) -> u64 {
+    (a.cells.len() * 4
+        + a.values.len() * 8
+        + a.cases.len()
+        + a.triangle_offsets.len() * 4
+        + a.edges.len() * 8
+        + a.points.len() * std::mem::size_of::<levels::EdgePoint>()
+        + a.triangles.len() * 12) as u64
+}
+
+/// One mesh from the levels: points merged by their finest-edge identity (bit-identical
+/// wherever several levels found them), then each level's triangles and the fills.
+/// Also returns how many repeated points disagreed with the first one found.
+fn assemble(arrays: &[LevelArrays], fills: &[[(u8, u32); 3]], normals: bool) -> (Mesh, u64) {
+    let mut ids: Vec<(u64, u8, u32)> = arrays
+        .iter()
+        .flat_map(|a| {
+            a.points
+                .iter()
+                .enumerate()
+                .map(move |(i, p)| (p.id, a.level, i as u32))
+        })
+        .collect();
+    ids.sort_unstable();
+    // Global vertex of each (level, E index).
+    let mut global: Vec<Vec<u32>> = arrays.iter().map(|a| vec![0; a.points.len()]).collect();
+    let mut mesh = Mesh::default();
+    let mut last = None;
+    let mut mismatches = 0;
+    for &(id, level, i) in &ids {
+        let p = &arrays[level as usize - 1].points[i as usize];
+        if last == Some(id) {
+            let first = mesh.positions.last().expect("a point was pushed");
+            if *first != p.position.to_array() {
+                mismatches += 1;
+            }
+        } else {
+            mesh.positions.push(p.position.to_array());
+            if normals {
+                mesh.normals.push(p.normal.as_vec3().to_array());
+            }
+            last = Some(id);
+        }
+        global[level as usize - 1][i as usize] = mesh.positions.len() as u32 - 1;
+    }
+    for a in arrays {
+        let g = &global[a.level as usize - 1];
+        mesh.triangles
+            .extend(a.triangles.iter().map(|t| t.map(|e| g[e as usize])));
+    }
+    mesh.triangles.extend(
+        fills
+            .iter()
+            .map(|t| t.map(|(level, e)| global[level as usize - 1][e as usize])),
+    );
+    (mesh, mismatches)
+}
+#[cfg(test)]
+mod tests;
