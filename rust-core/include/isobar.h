@@ -28,6 +28,9 @@
 // Kernel: Johnson's quadratic kernel (support 2h).
 #define ISOBAR_KERNEL_QUADRATIC 3
 
+// The version this build writes and reads.
+#define VERSION 1
+
 // Status of a fallible call.
 typedef enum IsobarStatus {
   ISOBAR_STATUS_OK = 0,
@@ -50,8 +53,26 @@ typedef enum IsobarStatus {
 // Opaque particle set.
 typedef struct IsobarParticles IsobarParticles;
 
+// Opaque slider: a memory-mapped store and the surface at the current isovalue.
+typedef struct IsobarSlider IsobarSlider;
+
 // Opaque extraction result.
 typedef struct IsobarSurface IsobarSurface;
+
+// Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
+typedef int32_t (*IsobarProgressFn)(void *user, double fraction, const char *phase);
+
+// Summary of one isovalue change (`isobar_slider_set_isovalue`).
+typedef struct IsobarSliderChange {
+  double isovalue;
+  uint64_t triangles_added;
+  uint64_t triangles_removed;
+  uint64_t vertices_moved;
+  uint64_t edges_added;
+  uint64_t edges_removed;
+  // Wall time of the update, seconds.
+  double seconds;
+} IsobarSliderChange;
 
 // Parameters of `isobar_sph_extract`. Fill with `isobar_sph_params_default`, which sets
 // `struct_size`; later library versions only append fields, so old callers keep working.
@@ -113,9 +134,6 @@ typedef struct IsobarSphParams {
   double clip_min[3];
   double clip_max[3];
 } IsobarSphParams;
-
-// Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
-typedef int32_t (*IsobarProgressFn)(void *user, double fraction, const char *phase);
 
 // Statistics of an extraction (the paper's Tables I–V). Set `struct_size` before
 // calling `isobar_surface_stats`; fields beyond it are not written.
@@ -215,6 +233,79 @@ enum IsobarStatus isobar_particles_copy_array(const struct IsobarParticles *part
 
 // Frees a particle set (NULL is ignored).
 void isobar_particles_free(struct IsobarParticles *particles);
+
+// Builds a store at `store_path` from a volume file (.vti, .nrrd, .npy). `array` names
+// the ImageData point array (NULL: the default). `threshold` ≤ 0 and `max_levels` 0 take
+// the defaults. `progress` may be NULL.
+enum IsobarStatus isobar_slider_build_file(const char *volume_path,
+                                           const char *array,
+                                           const char *store_path,
+                                           double threshold,
+                                           uint32_t max_levels,
+                                           IsobarProgressFn progress,
+                                           void *user);
+
+// Builds a store from `dims[0]·dims[1]·dims[2]` f32 values, x fastest, with the given
+// origin and spacing (3 doubles each; NULL means 0 and 1).
+enum IsobarStatus isobar_slider_build_f32(const float *values,
+                                          const size_t *dims,
+                                          const double *origin,
+                                          const double *spacing,
+                                          const char *store_path,
+                                          double threshold,
+                                          uint32_t max_levels,
+                                          IsobarProgressFn progress,
+                                          void *user);
+
+// Opens a store; on success `*out` owns a slider (free with `isobar_slider_free`) whose
+// surface is empty until the first `isobar_slider_set_isovalue`.
+enum IsobarStatus isobar_slider_open(const char *store_path, struct IsobarSlider **out);
+
+// Moves the surface to isovalue `iso`; `change` (may be NULL) receives the summary.
+// `progress` (may be NULL) is called during long walks.
+enum IsobarStatus isobar_slider_set_isovalue(struct IsobarSlider *s,
+                                             double iso,
+                                             IsobarProgressFn progress,
+                                             void *user,
+                                             struct IsobarSliderChange *change);
+
+// Number of vertices (0 for NULL).
+size_t isobar_slider_vertex_count(const struct IsobarSlider *s);
+
+// Number of triangles (0 for NULL).
+size_t isobar_slider_triangle_count(const struct IsobarSlider *s);
+
+// vertex_count × 3 f32 positions (V), or NULL.
+const float *isobar_slider_positions(const struct IsobarSlider *s);
+
+// vertex_count × 3 f32 unit normals (N), or NULL.
+const float *isobar_slider_normals(const struct IsobarSlider *s);
+
+// triangle_count × 3 u32 vertex indices (I), or NULL.
+const uint32_t *isobar_slider_triangles(const struct IsobarSlider *s);
+
+// The last change's triangles: `which` 0 = added (new numbering), 1 = removed (old
+// numbering); `*count` receives the number of triangles (× 3 u32).
+enum IsobarStatus isobar_slider_change_triangles(const struct IsobarSlider *s,
+                                                 uint32_t which,
+                                                 size_t *count,
+                                                 const uint32_t **data);
+
+// The last change's moved vertices as (before, after) u32 pairs; `*count` pairs.
+enum IsobarStatus isobar_slider_change_moved(const struct IsobarSlider *s,
+                                             size_t *count,
+                                             const uint32_t **data);
+
+// Value range of the store's volume.
+enum IsobarStatus isobar_slider_value_range(const struct IsobarSlider *s, double *min, double *max);
+
+// Updates applied so far and their total time in seconds.
+enum IsobarStatus isobar_slider_stats(const struct IsobarSlider *s,
+                                      uint64_t *updates,
+                                      double *total_seconds);
+
+// Frees a slider and unmaps its store (NULL is ignored).
+void isobar_slider_free(struct IsobarSlider *s);
 
 // Writes the default parameters (with `struct_size` set) to `out`.
 enum IsobarStatus isobar_sph_params_default(struct IsobarSphParams *out);

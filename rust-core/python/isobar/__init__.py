@@ -29,6 +29,7 @@ from .errors import (
     Status,
 )
 from .particles import Particles
+from .slider import Slider, SliderUpdate
 from .sph import default_params, extract
 from .surface import Surface
 
@@ -59,6 +60,8 @@ __all__ = [
     "IoError",
     "OverBudgetError",
     "Particles",
+    "Slider",
+    "SliderUpdate",
     "Status",
     "Surface",
     "abi_version",

@@ -49,6 +49,24 @@ class SurfaceHandle(Structure):
     """Opaque ``IsobarSurface``."""
 
 
+class SliderHandle(Structure):
+    """Opaque ``IsobarSlider``."""
+
+
+class SliderChange(Structure):
+    """``IsobarSliderChange``."""
+
+    _fields_ = [
+        ("isovalue", c_double),
+        ("triangles_added", c_uint64),
+        ("triangles_removed", c_uint64),
+        ("vertices_moved", c_uint64),
+        ("edges_added", c_uint64),
+        ("edges_removed", c_uint64),
+        ("seconds", c_double),
+    ]
+
+
 class SphParams(Structure):
     """``IsobarSphParams``; fill with ``isobar_sph_params_default``."""
 
@@ -167,6 +185,46 @@ _PROTOTYPES = {
     "isobar_surface_stats": (_Status, [POINTER(SurfaceHandle), POINTER(Stats)]),
     "isobar_surface_write": (_Status, [POINTER(SurfaceHandle), c_char_p]),
     "isobar_surface_free": (None, [POINTER(SurfaceHandle)]),
+    # slider
+    "isobar_slider_build_file": (
+        _Status,
+        [c_char_p, c_char_p, c_char_p, c_double, c_uint32, PROGRESS_FN, c_void_p],
+    ),
+    "isobar_slider_build_f32": (
+        _Status,
+        [
+            POINTER(c_float),
+            POINTER(c_size_t),
+            POINTER(c_double),
+            POINTER(c_double),
+            c_char_p,
+            c_double,
+            c_uint32,
+            PROGRESS_FN,
+            c_void_p,
+        ],
+    ),
+    "isobar_slider_open": (_Status, [c_char_p, POINTER(POINTER(SliderHandle))]),
+    "isobar_slider_set_isovalue": (
+        _Status,
+        [POINTER(SliderHandle), c_double, PROGRESS_FN, c_void_p, POINTER(SliderChange)],
+    ),
+    "isobar_slider_vertex_count": (c_size_t, [POINTER(SliderHandle)]),
+    "isobar_slider_triangle_count": (c_size_t, [POINTER(SliderHandle)]),
+    "isobar_slider_positions": (POINTER(c_float), [POINTER(SliderHandle)]),
+    "isobar_slider_normals": (POINTER(c_float), [POINTER(SliderHandle)]),
+    "isobar_slider_triangles": (POINTER(c_uint32), [POINTER(SliderHandle)]),
+    "isobar_slider_change_triangles": (
+        _Status,
+        [POINTER(SliderHandle), c_uint32, POINTER(c_size_t), POINTER(POINTER(c_uint32))],
+    ),
+    "isobar_slider_change_moved": (
+        _Status,
+        [POINTER(SliderHandle), POINTER(c_size_t), POINTER(POINTER(c_uint32))],
+    ),
+    "isobar_slider_value_range": (_Status, [POINTER(SliderHandle), POINTER(c_double), POINTER(c_double)]),
+    "isobar_slider_stats": (_Status, [POINTER(SliderHandle), POINTER(c_uint64), POINTER(c_double)]),
+    "isobar_slider_free": (None, [POINTER(SliderHandle)]),
 }
 
 

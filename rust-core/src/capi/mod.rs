@@ -11,10 +11,12 @@
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
 mod particles;
+mod slider;
 mod sph;
 mod surface;
 
 pub use particles::*;
+pub use slider::*;
 pub use sph::*;
 pub use surface::*;
 
