@@ -28,6 +28,7 @@ from .errors import (
     OverBudgetError,
     Status,
 )
+from .adaptive import extract_adaptive
 from .particles import Particles
 from .sph import default_params, extract
 from .surface import Surface
@@ -65,6 +66,7 @@ __all__ = [
     "core_version",
     "default_params",
     "extract",
+    "extract_adaptive",
     "library_path",
 ]
 
