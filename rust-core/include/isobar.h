@@ -13,6 +13,21 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+// Number of sign configurations of a transition face (9 fine vertices).
+#define CONFIGURATIONS 512
+
+// Most fill triangles a configuration may need (the paper's bound).
+#define MAX_TRIANGLES 12
+
+// Integers per table row: the triangle count, then 3 × `MAX_TRIANGLES` point indices.
+#define ROW (1 + (3 * MAX_TRIANGLES))
+
+// Finest-lattice cells per coarse cell along an axis.
+#define FINE_PER_COARSE 4
+
+// Levels of the scheme.
+#define LEVELS 3
+
 // Bumped whenever a function's signature or a struct's prefix changes incompatibly.
 #define ISOBAR_ABI_VERSION 1
 
@@ -27,6 +42,21 @@
 
 // Kernel: Johnson's quadratic kernel (support 2h).
 #define ISOBAR_KERNEL_QUADRATIC 3
+
+// No neighbour across a face (the domain boundary).
+#define NO_NEIGHBOUR UINT32_MAX
+
+// VTK cell type of a Lagrange tetrahedron.
+#define VTK_LAGRANGE_TETRAHEDRON 71
+
+// VTK cell type of a Lagrange hexahedron.
+#define VTK_LAGRANGE_HEXAHEDRON 72
+
+// VTK cell type of a Lagrange wedge (prism).
+#define VTK_LAGRANGE_WEDGE 73
+
+// β = 0.5 / cos(π/6) = 1/√3: the hexagonal-packing constant of eq. 6.
+#define BETA 0.5773502691896258
 
 // The version this build writes and reads.
 #define VERSION 1
@@ -59,20 +89,18 @@ typedef struct IsobarSlider IsobarSlider;
 // Opaque extraction result.
 typedef struct IsobarSurface IsobarSurface;
 
-// Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
-typedef int32_t (*IsobarProgressFn)(void *user, double fraction, const char *phase);
-
-// Summary of one isovalue change (`isobar_slider_set_isovalue`).
-typedef struct IsobarSliderChange {
-  double isovalue;
-  uint64_t triangles_added;
-  uint64_t triangles_removed;
-  uint64_t vertices_moved;
-  uint64_t edges_added;
-  uint64_t edges_removed;
-  // Wall time of the update, seconds.
-  double seconds;
-} IsobarSliderChange;
+// Options of `isobar_adaptive_extract`. Fill with `isobar_adaptive_params_default`,
+// which sets `struct_size`; later versions only append fields.
+typedef struct IsobarAdaptiveParams {
+  // sizeof(IsobarAdaptiveParams) as the caller compiled it.
+  uint32_t struct_size;
+  // Coarse cells holding 1..=this many particles become level 3 (paper: 1; 0 = none).
+  uint32_t splash_threshold;
+  // Layers of neighbour cells raised to level 3 around each splash cell (0 = paper).
+  uint32_t splash_dilation;
+  // Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+  uint32_t bisection_iterations;
+} IsobarAdaptiveParams;
 
 // Parameters of `isobar_sph_extract`. Fill with `isobar_sph_params_default`, which sets
 // `struct_size`; later library versions only append fields, so old callers keep working.
@@ -135,6 +163,39 @@ typedef struct IsobarSphParams {
   double clip_max[3];
 } IsobarSphParams;
 
+// Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
+typedef int32_t (*IsobarProgressFn)(void *user, double fraction, const char *phase);
+
+// What an adaptive extraction did. Set `struct_size` before the call; fields beyond it
+// are not written.
+typedef struct IsobarAdaptiveStats {
+  uint32_t struct_size;
+  // Coarse cells of level 1, 2, 3.
+  uint64_t cells_per_level[3];
+  // Marching-cubes triangles from cells of level 1, 2, 3.
+  uint64_t triangles_per_level[3];
+  uint64_t transition_faces;
+  uint64_t crack_triangles;
+  uint64_t vertices;
+  uint64_t triangles;
+  uint64_t field_evaluations;
+  // Bytes of the per-level arrays.
+  uint64_t array_bytes;
+  double seconds_total;
+} IsobarAdaptiveStats;
+
+// Summary of one isovalue change (`isobar_slider_set_isovalue`).
+typedef struct IsobarSliderChange {
+  double isovalue;
+  uint64_t triangles_added;
+  uint64_t triangles_removed;
+  uint64_t vertices_moved;
+  uint64_t edges_added;
+  uint64_t edges_removed;
+  // Wall time of the update, seconds.
+  double seconds;
+} IsobarSliderChange;
+
 // Statistics of an extraction (the paper's Tables I–V). Set `struct_size` before
 // calling `isobar_surface_stats`; fields beyond it are not written.
 typedef struct IsobarStats {
@@ -177,6 +238,21 @@ uint32_t isobar_abi_version(void);
 
 // The library version, e.g. "0.1.0". Static storage.
 const char *isobar_version(void);
+
+// Writes the default adaptive options (with `struct_size` set) to `out`.
+enum IsobarStatus isobar_adaptive_params_default(struct IsobarAdaptiveParams *out);
+
+// Extracts the adaptive crack-free surface of the particles' SPH field. `progress` and
+// `stats` may be NULL. On success `*out` owns a surface to free with
+// `isobar_surface_free` (its `isobar_surface_stats` carries vertices, triangles, field
+// evaluations and total time); on failure `*out` is left untouched.
+enum IsobarStatus isobar_adaptive_extract(const struct IsobarParticles *particles,
+                                          const struct IsobarSphParams *sph,
+                                          const struct IsobarAdaptiveParams *adaptive,
+                                          IsobarProgressFn progress,
+                                          void *user,
+                                          struct IsobarSurface **out,
+                                          struct IsobarAdaptiveStats *stats);
 
 // Creates a particle set from `count` xyz triples of f64 (copied). NaN or infinite
 // coordinates are reported when a field is built, naming the particle.

@@ -28,6 +28,7 @@ from .errors import (
     OverBudgetError,
     Status,
 )
+from .adaptive import extract_adaptive
 from .particles import Particles
 from .slider import Slider, SliderUpdate
 from .sph import default_params, extract
@@ -68,6 +69,7 @@ __all__ = [
     "core_version",
     "default_params",
     "extract",
+    "extract_adaptive",
     "library_path",
 ]
 

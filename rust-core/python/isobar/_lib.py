@@ -134,6 +134,34 @@ class Stats(Structure):
     ]
 
 
+class AdaptiveParams(Structure):
+    """``IsobarAdaptiveParams``; fill with ``isobar_adaptive_params_default``."""
+
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("splash_threshold", c_uint32),
+        ("splash_dilation", c_uint32),
+        ("bisection_iterations", c_uint32),
+    ]
+
+
+class AdaptiveStats(Structure):
+    """``IsobarAdaptiveStats``; set ``struct_size`` before ``isobar_adaptive_extract``."""
+
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("cells_per_level", c_uint64 * 3),
+        ("triangles_per_level", c_uint64 * 3),
+        ("transition_faces", c_uint64),
+        ("crack_triangles", c_uint64),
+        ("vertices", c_uint64),
+        ("triangles", c_uint64),
+        ("field_evaluations", c_uint64),
+        ("array_bytes", c_uint64),
+        ("seconds_total", c_double),
+    ]
+
+
 #: ``int32_t (*)(void* user, double fraction, const char* phase)``; non-zero cancels.
 PROGRESS_FN = CFUNCTYPE(c_int32, c_void_p, c_double, c_char_p)
 
@@ -170,6 +198,20 @@ _PROTOTYPES = {
     "isobar_sph_extract": (
         _Status,
         [POINTER(ParticlesHandle), POINTER(SphParams), PROGRESS_FN, c_void_p, POINTER(POINTER(SurfaceHandle))],
+    ),
+    # adaptive
+    "isobar_adaptive_params_default": (_Status, [POINTER(AdaptiveParams)]),
+    "isobar_adaptive_extract": (
+        _Status,
+        [
+            POINTER(ParticlesHandle),
+            POINTER(SphParams),
+            POINTER(AdaptiveParams),
+            PROGRESS_FN,
+            c_void_p,
+            POINTER(POINTER(SurfaceHandle)),
+            POINTER(AdaptiveStats),
+        ],
     ),
     # surface
     "isobar_surface_vertex_count": (c_size_t, [POINTER(SurfaceHandle)]),

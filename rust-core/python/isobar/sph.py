@@ -133,6 +133,26 @@ def extract(
     """
     if not isinstance(particles, Particles):
         particles = Particles.from_arrays(particles)
+    params, keep = _sph_params(particles, iso, field, kernel, h, h_array, h_scale, grid_factor,
+                               correct, tolerance, trim, normals, attributes, volume_array,
+                               density_array, mass, mass_array, shepard, memory_budget,
+                               full_grid, lattice, clip)
+    surface = _run(
+        lambda callback, handle: lib.isobar_sph_extract(
+            particles._handle, byref(params), callback, None, byref(handle)
+        ),
+        progress,
+        normals,
+    )
+    del keep
+    return surface
+
+
+def _sph_params(particles, iso, field, kernel, h, h_array, h_scale, grid_factor, correct,
+                tolerance, trim, normals, attributes, volume_array, density_array, mass,
+                mass_array, shepard, memory_budget, full_grid, lattice, clip):
+    """``IsobarSphParams`` for :func:`extract`'s arguments, and the objects it points into
+    (keep them alive until the call returns)."""
     particles._check_open()
 
     params = default_params()
@@ -212,6 +232,12 @@ def extract(
         params.clip_min[:] = tuple(float(v) for v in lo)
         params.clip_max[:] = tuple(float(v) for v in hi)
 
+    return params, keep
+
+
+def _run(invoke, progress: Optional[ProgressCallback], normals: bool) -> Surface:
+    """Calls ``invoke(callback, handle)`` (a core extraction writing a surface handle) with
+    the progress/cancel/Ctrl-C wiring, and wraps the result."""
     # The callback runs on this thread. It is always installed, so that Ctrl-C (a
     # KeyboardInterrupt raised while it runs) cancels the extraction too.
     raised: list = []
@@ -233,8 +259,7 @@ def extract(
     callback = PROGRESS_FN(report)
     handle = POINTER(SurfaceHandle)()
     with _sigint_cancels(interrupted):
-        status = lib.isobar_sph_extract(particles._handle, byref(params), callback, None, byref(handle))
-    del keep
+        status = invoke(callback, handle)
     if interrupted and not raised:
         raised.append(KeyboardInterrupt())
     if raised:

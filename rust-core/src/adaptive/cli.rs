@@ -190,7 +190,7 @@ fn compare(
         crate::baseline::extract(field, &empty, &baseline_params, &mut Progress::none())?;
     let baseline_s = t.elapsed().as_secs_f64();
     let fine = grid.fine;
-    let d = hausdorff::hausdorff(&adaptive.mesh, &uniform.mesh, 2.0 * fine);
+    let d = hausdorff::hausdorff(&adaptive.mesh, &uniform.mesh, 8.0 * fine);
     let baseline_nodes = baseline.stats.node_evaluations;
     let ratio = |n: u64| n as f64 / adaptive.mesh.triangles.len().max(1) as f64;
     Ok(vec![
@@ -241,8 +241,10 @@ fn write_json(path: &Path, rows: &[(String, String)]) -> Result<()> {
                 .filter(|s| !s.is_empty())
                 .collect::<Vec<_>>()
                 .join("_");
-            let value = if v.parse::<f64>().is_ok() {
+            let value = if v.parse::<f64>().is_ok_and(f64::is_finite) {
                 v.clone()
+            } else if v.parse::<f64>().is_ok() {
+                "null".to_string()
             } else {
                 format!("\"{v}\"")
             };

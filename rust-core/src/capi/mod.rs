@@ -10,11 +10,13 @@
 // marking them `unsafe fn` would change nothing for C and only hide the checks below.
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
+mod adaptive;
 mod particles;
 mod slider;
 mod sph;
 mod surface;
 
+pub use adaptive::*;
 pub use particles::*;
 pub use slider::*;
 pub use sph::*;

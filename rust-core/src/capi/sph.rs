@@ -139,7 +139,7 @@ pub extern "C" fn isobar_sph_params_default(out: *mut IsobarSphParams) -> Isobar
 }
 
 /// The caller's struct over the defaults: fields beyond its `struct_size` keep defaults.
-fn read_params(params: *const IsobarSphParams) -> Result<IsobarSphParams, crate::Error> {
+pub(super) fn read_params(params: *const IsobarSphParams) -> Result<IsobarSphParams, crate::Error> {
     let given = non_null(params, "params")?;
     let size = given.struct_size as usize;
     let ours = std::mem::size_of::<IsobarSphParams>();
@@ -164,7 +164,7 @@ fn read_params(params: *const IsobarSphParams) -> Result<IsobarSphParams, crate:
     Ok(out)
 }
 
-fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), crate::Error> {
+pub(super) fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), crate::Error> {
     let kernel = match p.kernel {
         ISOBAR_KERNEL_CUBIC => Kernel::CubicSpline,
         ISOBAR_KERNEL_WENDLAND => Kernel::WendlandC2,

@@ -1,0 +1,311 @@
+//! Adaptive 3-level-grid surfaces through the C ABI. The SPH field and the isovalue come
+//! from the same `IsobarSphParams` as `isobar_sph_extract` (one isovalue; `grid_factor`
+//! sets the finest cell); the adaptive options sit in their own versioned struct.
+
+use super::particles::IsobarParticles;
+use super::sph::{read_params, settings, IsobarProgressFn};
+use super::surface::IsobarSurface;
+use super::{guard, invalid, non_null, put, IsobarSphParams, IsobarStatus};
+use crate::adaptive::{self, Params};
+use crate::correctors;
+use crate::field::sph::SphField;
+use crate::progress::Progress;
+use std::ffi::{c_void, CString};
+
+/// Options of `isobar_adaptive_extract`. Fill with `isobar_adaptive_params_default`,
+/// which sets `struct_size`; later versions only append fields.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct IsobarAdaptiveParams {
+    /// sizeof(IsobarAdaptiveParams) as the caller compiled it.
+    pub struct_size: u32,
+    /// Coarse cells holding 1..=this many particles become level 3 (paper: 1; 0 = none).
+    pub splash_threshold: u32,
+    /// Layers of neighbour cells raised to level 3 around each splash cell (0 = paper).
+    pub splash_dilation: u32,
+    /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+    pub bisection_iterations: u32,
+}
+
+/// Size of the first version of `IsobarAdaptiveParams`.
+const ADAPTIVE_PARAMS_V1_SIZE: usize = 16;
+
+impl Default for IsobarAdaptiveParams {
+    fn default() -> Self {
+        let p = Params::default();
+        IsobarAdaptiveParams {
+            struct_size: std::mem::size_of::<IsobarAdaptiveParams>() as u32,
+            splash_threshold: p.splash_threshold,
+            splash_dilation: p.splash_dilation,
+            bisection_iterations: p.bisection_iterations,
+        }
+    }
+}
+
+/// What an adaptive extraction did. Set `struct_size` before the call; fields beyond it
+/// are not written.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct IsobarAdaptiveStats {
+    pub struct_size: u32,
+    /// Coarse cells of level 1, 2, 3.
+    pub cells_per_level: [u64; 3],
+    /// Marching-cubes triangles from cells of level 1, 2, 3.
+    pub triangles_per_level: [u64; 3],
+    pub transition_faces: u64,
+    pub crack_triangles: u64,
+    pub vertices: u64,
+    pub triangles: u64,
+    pub field_evaluations: u64,
+    /// Bytes of the per-level arrays.
+    pub array_bytes: u64,
+    pub seconds_total: f64,
+}
+
+/// Writes the default adaptive options (with `struct_size` set) to `out`.
+#[no_mangle]
+pub extern "C" fn isobar_adaptive_params_default(out: *mut IsobarAdaptiveParams) -> IsobarStatus {
+    guard(|| put(out, IsobarAdaptiveParams::default(), "out"))
+}
+
+fn read_adaptive(p: *const IsobarAdaptiveParams) -> Result<IsobarAdaptiveParams, crate::Error> {
+    let given = non_null(p, "adaptive")?;
+    let size = given.struct_size as usize;
+    let ours = std::mem::size_of::<IsobarAdaptiveParams>();
+    if !(ADAPTIVE_PARAMS_V1_SIZE..=ours).contains(&size) {
+        return Err(invalid(
+            "adaptive.struct_size",
+            format!(
+                "is {size}; this library accepts {ADAPTIVE_PARAMS_V1_SIZE} to {ours} bytes: fill the struct with isobar_adaptive_params_default"
+            ),
+        ));
+    }
+    let mut out = IsobarAdaptiveParams::default();
+    // SAFETY: both point to at least `size` bytes of IsobarAdaptiveParams layout.
+    unsafe {
+        std::ptr::copy_nonoverlapping(
+            (given as *const IsobarAdaptiveParams).cast::<u8>(),
+            (&mut out as *mut IsobarAdaptiveParams).cast::<u8>(),
+            size,
+        )
+    };
+    Ok(out)
+}
+
+/// Extracts the adaptive crack-free surface of the particles' SPH field. `progress` and
+/// `stats` may be NULL. On success `*out` owns a surface to free with
+/// `isobar_surface_free` (its `isobar_surface_stats` carries vertices, triangles, field
+/// evaluations and total time); on failure `*out` is left untouched.
+#[no_mangle]
+pub extern "C" fn isobar_adaptive_extract(
+    particles: *const IsobarParticles,
+    sph: *const IsobarSphParams,
+    adaptive: *const IsobarAdaptiveParams,
+    progress: IsobarProgressFn,
+    user: *mut c_void,
+    out: *mut *mut IsobarSurface,
+    stats: *mut IsobarAdaptiveStats,
+) -> IsobarStatus {
+    guard(|| {
+        let particles = non_null(particles, "particles")?;
+        if out.is_null() {
+            return Err(invalid("out", "output pointer must not be NULL"));
+        }
+        let p = read_params(sph)?;
+        let a = read_adaptive(adaptive)?;
+        let (field_settings, sph_params) = settings(&p)?;
+        let [isovalue] = sph_params.isovalues[..] else {
+            return Err(invalid(
+                "params.isovalues",
+                format!(
+                    "the adaptive surface takes exactly one isovalue, got {}",
+                    sph_params.isovalues.len()
+                ),
+            ));
+        };
+        let params = Params {
+            isovalue,
+            grid_factor: sph_params.grid_factor,
+            splash_threshold: a.splash_threshold,
+            splash_dilation: a.splash_dilation,
+            bisection_iterations: a.bisection_iterations,
+            normals: sph_params.normals,
+            memory_budget: sph_params.memory_budget,
+        };
+        let mut report = |fraction: f64, phase: &str| match progress {
+            Some(f) => {
+                let phase = CString::new(phase).unwrap_or_default();
+                f(user, fraction, phase.as_ptr()) == 0
+            }
+            None => true,
+        };
+        let mut sink = Progress::new(&mut report);
+        sink.window(0.0, 0.1);
+        let field = SphField::build(&particles.data, &field_settings, &mut sink)?;
+        sink.window(0.1, 1.0);
+        let extraction = adaptive::extract_sph(&field, &params, &mut sink)?;
+        let s = &extraction.stats;
+        if !stats.is_null() {
+            // SAFETY: non-null, and the caller promises a struct of at least struct_size.
+            let given = unsafe { (*stats).struct_size } as usize;
+            let full = IsobarAdaptiveStats {
+                struct_size: given as u32,
+                cells_per_level: s.cells_per_level,
+                triangles_per_level: s.triangles_per_level,
+                transition_faces: s.transition_faces,
+                crack_triangles: s.crack_triangles,
+                vertices: s.vertices,
+                triangles: s.triangles,
+                field_evaluations: s.field_evaluations,
+                array_bytes: s.array_bytes,
+                seconds_total: s.timings.total,
+            };
+            let n = given.min(std::mem::size_of::<IsobarAdaptiveStats>());
+            // SAFETY: copies at most the caller's struct_size bytes of the same layout.
+            unsafe {
+                std::ptr::copy_nonoverlapping(
+                    (&full as *const IsobarAdaptiveStats).cast::<u8>(),
+                    stats.cast::<u8>(),
+                    n,
+                )
+            };
+        }
+        let legacy = correctors::Extraction {
+            stats: correctors::Stats {
+                vertices: s.vertices,
+                triangles: s.triangles,
+                field_evaluations: s.field_evaluations,
+                timings: correctors::Timings {
+                    total: s.timings.total,
+                    ..correctors::Timings::default()
+                },
+                ..correctors::Stats::default()
+            },
+            mesh: extraction.mesh,
+        };
+        put(out, Box::into_raw(IsobarSurface::new(legacy)), "out")
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::capi::{
+        isobar_particles_create, isobar_particles_free, isobar_surface_free,
+        isobar_surface_triangle_count, isobar_surface_vertex_count,
+    };
+    use crate::field::particles::ParticleData;
+    use crate::field::sph::{SmoothingLength, SphSettings};
+    use glam::DVec3;
+
+    fn ball() -> Vec<DVec3> {
+        let mut p = Vec::new();
+        for z in -6i32..=6 {
+            for y in -6i32..=6 {
+                for x in -6i32..=6 {
+                    let v = DVec3::new(x as f64, y as f64, z as f64) * 0.1;
+                    if v.length() <= 0.6 {
+                        p.push(v);
+                    }
+                }
+            }
+        }
+        p.push(DVec3::new(1.4, 0.0, 0.0));
+        p
+    }
+
+    #[test]
+    fn c_entry_point_equals_the_rust_api_and_reports_errors() {
+        let positions = ball();
+        let flat: Vec<f64> = positions.iter().flat_map(|p| p.to_array()).collect();
+        let mut handle = std::ptr::null_mut();
+        assert_eq!(
+            isobar_particles_create(flat.as_ptr(), positions.len(), &mut handle),
+            IsobarStatus::Ok
+        );
+        let iso = [0.5f64];
+        let mut sph = IsobarSphParams {
+            h: 0.2,
+            isovalues: iso.as_ptr(),
+            isovalue_count: 1,
+            ..IsobarSphParams::default()
+        };
+        let mut adaptive = IsobarAdaptiveParams::default();
+        assert_eq!(
+            isobar_adaptive_params_default(&mut adaptive),
+            IsobarStatus::Ok
+        );
+        let mut stats = IsobarAdaptiveStats {
+            struct_size: std::mem::size_of::<IsobarAdaptiveStats>() as u32,
+            ..IsobarAdaptiveStats::default()
+        };
+        let mut surface = std::ptr::null_mut();
+        let status = isobar_adaptive_extract(
+            handle,
+            &sph,
+            &adaptive,
+            None,
+            std::ptr::null_mut(),
+            &mut surface,
+            &mut stats,
+        );
+        assert_eq!(status, IsobarStatus::Ok);
+        // The same extraction through the Rust API.
+        let data = ParticleData {
+            positions: positions.clone(),
+            attributes: vec![],
+        };
+        let field = SphField::new(
+            &data,
+            &SphSettings {
+                smoothing_length: SmoothingLength::Constant(0.2),
+                ..SphSettings::default()
+            },
+        )
+        .unwrap();
+        let rust =
+            adaptive::extract_sph(&field, &Params::default(), &mut Progress::none()).unwrap();
+        assert_eq!(
+            isobar_surface_triangle_count(surface),
+            rust.mesh.triangles.len()
+        );
+        assert_eq!(
+            isobar_surface_vertex_count(surface),
+            rust.mesh.vertex_count()
+        );
+        assert_eq!(stats.triangles as usize, rust.mesh.triangles.len());
+        assert_eq!(stats.cells_per_level, rust.stats.cells_per_level);
+        assert!(stats.cells_per_level[2] > 0, "the droplet is level 3");
+        isobar_surface_free(surface);
+        // Two isovalues: refused with a message, nothing returned.
+        let two = [0.5f64, 0.6];
+        sph.isovalues = two.as_ptr();
+        sph.isovalue_count = 2;
+        let mut none = std::ptr::null_mut();
+        let status = isobar_adaptive_extract(
+            handle,
+            &sph,
+            &adaptive,
+            None,
+            std::ptr::null_mut(),
+            &mut none,
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        assert!(none.is_null());
+        // A struct_size from nowhere.
+        sph.isovalue_count = 1;
+        adaptive.struct_size = 3;
+        let status = isobar_adaptive_extract(
+            handle,
+            &sph,
+            &adaptive,
+            None,
+            std::ptr::null_mut(),
+            &mut none,
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        isobar_particles_free(handle);
+    }
+}

@@ -1,0 +1,42 @@
+"""isobar.extract_adaptive: the adaptive 3-level-grid surface through the C ABI."""
+
+import numpy as np
+import pytest
+
+import isobar
+
+
+def ball_with_droplet():
+    g = np.arange(-6, 7) * 0.1
+    xyz = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    xyz = xyz[np.linalg.norm(xyz, axis=1) <= 0.6]
+    return np.vstack([xyz, [[1.6, 0.0, 0.0]]])
+
+
+def edges_used_twice_oppositely(triangles):
+    directed = {}
+    for a, b, c in triangles.tolist():
+        for e in ((a, b), (b, c), (c, a)):
+            directed[e] = directed.get(e, 0) + 1
+    return all(n == 1 and directed.get((b, a)) == 1 for (a, b), n in directed.items())
+
+
+def test_adaptive_surface_is_closed_and_reports_levels():
+    surface, stats = isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2)
+    assert surface.n_triangles == stats["triangles"] > 0
+    assert edges_used_twice_oppositely(surface.triangles)
+    assert stats["cells_per_level"][2] > 0, "the droplet's cell is level 3"
+    assert sum(stats["triangles_per_level"]) + stats["crack_triangles"] == stats["triangles"]
+    # Normals are unit and point away from the droplet's centre on its little sphere.
+    n = np.linalg.norm(surface.normals, axis=1)
+    assert np.allclose(n, 1, atol=1e-5)
+    near = np.linalg.norm(surface.points - [1.6, 0, 0], axis=1) < 0.3
+    radial = (surface.points[near] - [1.6, 0, 0]) * surface.normals[near]
+    assert (radial.sum(axis=1) > 0).all()
+
+
+def test_adaptive_refuses_bad_input_with_the_core_message():
+    with pytest.raises(isobar.InvalidArgumentError, match="bisection_iterations"):
+        isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, bisection_iterations=0)
+    with pytest.raises(isobar.Cancelled):
+        isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, progress=lambda f, p: False)
