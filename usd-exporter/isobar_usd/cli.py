@@ -68,6 +68,10 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--no-normals", action="store_true", help="no vertex normals")
     g.add_argument("--full-grid", action="store_true", help="resample onto the full grid and run plain marching cubes (the baseline)")
     g.add_argument("--memory-budget", type=float, help="memory budget in GiB for extent-sized structures (default: the core's, 4)")
+    g.add_argument("--method", choices=["correctors", "adaptive"], default="correctors",
+                   help="correctors (default): Marching Correctors, vertices on the level set; adaptive: crack-free "
+                   "3-level grid, far fewer triangles, one isovalue, no attributes")
+    g.add_argument("--splash-threshold", type=int, help="adaptive: coarse cells holding 1..N particles are refined to the finest level (core default 1)")
 
     u = sph.add_argument_group("USD")
     u.add_argument("--frames", help="write only these frame numbers: 10-20, 1-5,9, 100- (the other frames of the stage stay)")
@@ -138,6 +142,10 @@ def _extract_options(args) -> dict:
             options[name] = value
     if args.memory_budget is not None:
         options["memory_budget"] = int(args.memory_budget * 2**30)
+    if args.method != "correctors":
+        options["method"] = args.method
+    if args.splash_threshold is not None:
+        options["splash_threshold"] = args.splash_threshold
     return options
 
 

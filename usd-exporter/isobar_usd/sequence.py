@@ -102,15 +102,25 @@ def _check_stop() -> None:
 # -- extraction options ---------------------------------------------------------------
 
 
+#: Extraction methods: Marching Correctors (exact vertices, attributes, trimming) or the
+#: adaptive 3-level grid (crack-free, far fewer triangles, one isovalue, no attributes).
+METHODS = ("correctors", "adaptive")
+
+
+def _signature(function, skip=("particles", "iso", "progress")) -> List[str]:
+    return [p for p in inspect.signature(function).parameters if p not in skip]
+
+
 def _extract_parameters() -> List[str]:
     import isobar
 
-    skip = {"particles", "iso", "progress"}
-    return [p for p in inspect.signature(isobar.extract).parameters if p not in skip]
+    adaptive_only = [p for p in _signature(isobar.extract_adaptive) if p not in _signature(isobar.extract)]
+    return ["method"] + _signature(isobar.extract) + adaptive_only
 
 
 def check_extract_options(options: Mapping[str, Any]) -> Dict[str, Any]:
-    """The options for :func:`isobar.extract`; unknown names raise InputError."""
+    """The options for :func:`isobar.extract` (or, with ``method="adaptive"``,
+    :func:`isobar.extract_adaptive`); unknown names raise InputError."""
     allowed = _extract_parameters()
     unknown = [k for k in options if k not in allowed]
     if unknown:
@@ -118,6 +128,9 @@ def check_extract_options(options: Mapping[str, Any]) -> Dict[str, Any]:
             f"unknown extraction option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} "
             f"(isobar.extract takes {', '.join(allowed)})"
         )
+    method = options.get("method", "correctors")
+    if method not in METHODS:
+        raise InputError(f"unknown extraction method '{method}' (methods: {', '.join(METHODS)})")
     out = dict(options)
     attributes = out.get("attributes")
     if isinstance(attributes, (str, bytes)):
@@ -225,7 +238,9 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         if job.velocities is not None and not isinstance(job.velocities, str):
             raise InputError("a velocities array applies to in-memory surfaces, not to particle files")
         if job.velocities == "auto":
-            velocity = VELOCITY_ARRAY if infos.get(VELOCITY_ARRAY) == 3 else None
+            # Adaptive surfaces carry no particle attributes, so no velocities by default.
+            adaptive = options.get("method") == "adaptive"
+            velocity = VELOCITY_ARRAY if infos.get(VELOCITY_ARRAY) == 3 and not adaptive else None
         elif job.velocities is not None:
             if job.velocities not in infos:
                 raise InputError(
@@ -248,10 +263,12 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         for name in primvars + ([velocity] if velocity else []):
             if name not in wanted and name not in CORE_ATTRIBUTES:
                 wanted.append(name)
+        keep_going = lambda _f, _p: not _STOP.is_set()  # noqa: E731
         try:
-            surface = isobar.extract(
-                particles, job.iso, attributes=wanted, progress=lambda _f, _p: not _STOP.is_set(), **options
-            )
+            if options.pop("method", "correctors") == "adaptive":
+                surface = _extract_adaptive(particles, job, options, wanted, velocity, keep_going)
+            else:
+                surface = isobar.extract(particles, job.iso, attributes=wanted, progress=keep_going, **options)
         except isobar.Cancelled:
             _check_stop()
             raise
@@ -261,6 +278,28 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         return to_mesh(surface, primvars=primvars, velocities=velocity)
     finally:
         surface.release()
+
+
+def _extract_adaptive(particles, job: Job, options: Dict[str, Any], wanted, velocity, progress):
+    """The adaptive 3-level surface: one isovalue, the SPH field options only (it places
+    vertices by bisection on its own grids, and carries no particle attributes yet)."""
+    import isobar
+
+    if len(job.iso) != 1:
+        raise InputError(f"the adaptive method extracts one isovalue at a time, got {len(job.iso)}")
+    if wanted:
+        raise InputError(
+            "the adaptive method carries no particle attributes onto the surface yet "
+            f"(asked for {', '.join(wanted)}); use method 'correctors'"
+        )
+    if not options.get("correct", True) or options.get("full_grid", False):
+        raise InputError("preview and full-grid apply to method 'correctors', not 'adaptive'")
+    if options.get("trim", "auto") not in ("auto", None, False):
+        raise InputError("trimming applies to method 'correctors', not 'adaptive'")
+    accepted = set(_signature(isobar.extract_adaptive))
+    chosen = {k: v for k, v in options.items() if k in accepted and v is not None}
+    surface, _stats = isobar.extract_adaptive(particles, job.iso[0], progress=progress, **chosen)
+    return surface
 
 
 def produce(item, job: Job) -> FrameMesh:

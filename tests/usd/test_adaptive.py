@@ -1,0 +1,64 @@
+"""The adaptive 3-level method through the USD writer: the stage holds exactly the core's
+adaptive surface, closed, and the options that do not apply to it are refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import CLI_DAM, DAM, FRAME_26, ISO, assert_same_mesh, link_frames, mesh_at, need, open_stage, run_cli
+
+import isobar
+import isobar_usd
+
+
+def _closed_and_oriented(triangles: np.ndarray) -> bool:
+    """Every directed edge appears once and its reverse once: watertight, consistently wound."""
+    directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    keys = directed[:, 0].astype(np.int64) << 32 | directed[:, 1]
+    reverse = directed[:, 1].astype(np.int64) << 32 | directed[:, 0]
+    return len(np.unique(keys)) == len(keys) and np.array_equal(np.sort(keys), np.sort(reverse))
+
+
+def test_cli_writes_the_cores_adaptive_surface(cli, tmp_path):
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    out = tmp_path / "adaptive.usd"
+    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", "-o", out, "-q")
+    with isobar.Particles.read(str(FRAME_26)) as particles:
+        surface, stats = isobar.extract_adaptive(particles, ISO, **DAM)
+        corrected = isobar.extract(particles, ISO, **DAM)
+    got = mesh_at(open_stage(out), 26)
+    # No 'velocity' primvar or velocities: the adaptive surface carries no particle arrays.
+    assert_same_mesh(got, surface, velocity=False)
+    assert got["velocities"] is None or len(got["velocities"]) == 0
+    assert _closed_and_oriented(surface.triangles.astype(np.int64))
+    # What the method is for: fewer triangles than Marching Correctors on the finest grid.
+    assert stats["triangles"] == surface.n_triangles < corrected.n_triangles
+    corrected.release()
+    surface.release()
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--attributes", "velocity"], "carries no particle attributes"),
+        (["--preview"], "preview and full-grid"),
+        (["--trim", "0.1,0.5"], "trimming applies"),
+    ],
+)
+def test_cli_refuses_options_the_adaptive_method_lacks(cli, tmp_path, extra, message):
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    proc = run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", *extra,
+                   "-o", tmp_path / "x.usd", check=False)
+    assert proc.returncode != 0
+    assert message in proc.stderr, proc.stderr
+    assert not (tmp_path / "x.usd").exists()
+
+
+def test_api_refuses_an_unknown_method(tmp_path):
+    with pytest.raises(isobar_usd.Error, match="unknown extraction method 'marching'"):
+        isobar_usd.write_sequence(str(need(FRAME_26)), tmp_path / "x.usd", ISO, method="marching", **DAM)
+
+
+def test_api_refuses_several_isovalues_for_the_adaptive_method(tmp_path):
+    with pytest.raises(isobar_usd.Error, match="one isovalue at a time"):
+        isobar_usd.write_sequence(str(need(FRAME_26)), tmp_path / "x.usd", [0.5, 0.6], method="adaptive", **DAM)
