@@ -63,6 +63,8 @@ class Params:
     h_array: str = "h"
     h_scale: float = 1.0
     grid_factor: float = 0.5
+    method: str = "CORRECTORS"  # or "ADAPTIVE"
+    splash_threshold: int = 1
     correct: bool = True
     trim: str = "AUTO"  # AUTO, OFF, ON, CUSTOM
     trim_node: float = 0.1
@@ -216,6 +218,8 @@ def extract(particles, params: Params, progress: Optional[ProgressFn] = None) ->
             array, file or parameter), isobar.Cancelled when `progress` returned False.
     """
     isobar = isobar_module()
+    if params.method == "ADAPTIVE":
+        return _extract_adaptive(particles, params, progress)
     names = array_infos(particles)
     velocity = velocity_name(names, params.velocity_array)
     if not velocity:
@@ -230,6 +234,21 @@ def extract(particles, params: Params, progress: Optional[ProgressFn] = None) ->
     surface = isobar.extract(particles, progress=progress, attributes=arrays, **_isobar_kwargs(params))
     try:
         return frame_mesh_from_surface(surface, velocity if params.motion_blur else "", params.velocity_scale)
+    finally:
+        surface.release()
+
+
+def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn]) -> FrameMesh:
+    """The adaptive 3-level surface: the same SPH field settings, vertices by bisection on
+    its own grids; it carries no particle arrays yet, so no attributes or motion blur."""
+    kwargs = _isobar_kwargs(params)
+    for correctors_only in ("correct", "trim"):
+        kwargs.pop(correctors_only)
+    surface, _stats = isobar_module().extract_adaptive(
+        particles, progress=progress, splash_threshold=int(params.splash_threshold), **kwargs
+    )
+    try:
+        return frame_mesh_from_surface(surface)
     finally:
         surface.release()
 

@@ -93,6 +93,10 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
             layout.prop(settings, "h")
         layout.prop(settings, "h_scale")
         layout.prop(settings, "grid_factor")
+        layout.prop(settings, "method")
+        if settings.method == "ADAPTIVE":
+            layout.prop(settings, "splash_threshold")
+            return
         layout.prop(settings, "correct")
         layout.prop(settings, "trim")
         if settings.trim == "CUSTOM":

@@ -50,6 +50,11 @@ KERNELS = [
     ("quadratic", "Quadratic", "Quadratic kernel, support 2h"),
 ]
 
+METHODS = [
+    ("CORRECTORS", "Marching Correctors", "Every vertex on the SPH level set; attributes, trimming, motion blur"),
+    ("ADAPTIVE", "Adaptive", "Crack-free 3-level grid: far fewer triangles, splashes kept fine; no attributes"),
+]
+
 TRIM_MODES = [
     ("AUTO", "Auto", "Trim at the free surface except when extracting the free surface itself"),
     ("OFF", "Off", "No free-surface trimming"),
@@ -174,6 +179,15 @@ class IsobarSettings(bpy.types.PropertyGroup):
         min=0.01,
         soft_min=0.1,
         soft_max=2.0,
+        update=_changed,
+    )
+    method: EnumProperty(name="Method", items=METHODS, default="CORRECTORS", update=_changed)
+    splash_threshold: IntProperty(
+        name="Splash Threshold",
+        description="Adaptive: coarse cells holding 1 to this many particles are refined to the finest level",
+        default=1,
+        min=0,
+        soft_max=8,
         update=_changed,
     )
     correct: BoolProperty(

@@ -226,3 +226,33 @@ def test_import_errors_are_reported(scene, tmp_path):
     assert len(bpy.data.objects) == 0  # nothing half-made is left behind
     with pytest.raises(RuntimeError, match="frame number"):
         bpy.ops.isobar.import_sequence(filepath=str(FRAME_01.parent / "LICENSE"))
+
+
+def test_adaptive_method(scene, isobar, demo_sequence):
+    """Method 'Adaptive' puts the core's adaptive 3-level surface in the object: closed,
+    with fewer triangles than Marching Correctors, and back to Correctors on request."""
+    obj = import_sequence(demo_sequence[0])
+    scene.frame_set(2)
+    settings = obj.isobar
+    path = demo_sequence[1]
+    correctors = reference(isobar, path)
+    settings.method = "ADAPTIVE"
+    assert not settings.status_error, settings.status
+    with isobar.Particles.read(str(path)) as particles:
+        adaptive, stats = isobar.extract_adaptive(particles, ISO, h=H, grid_factor=GRID_FACTOR)
+    assert_mesh_equals(obj, adaptive)
+    assert stats["triangles"] == adaptive.n_triangles < correctors.n_triangles
+    # Closed and consistently wound: each directed edge once, its reverse once.
+    _, triangles = mesh_arrays(obj)
+    directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]).astype(np.int64)
+    forward = np.sort(directed[:, 0] << 32 | directed[:, 1])
+    assert len(np.unique(forward)) == len(forward)
+    assert np.array_equal(forward, np.sort(directed[:, 1] << 32 | directed[:, 0]))
+    # The adaptive surface carries no particle arrays: no stale SPH attributes stay behind.
+    assert not [a.name for a in obj.data.attributes if a.name.startswith("sph_") or a.name == "velocity"]
+    settings.splash_threshold = 0
+    with isobar.Particles.read(str(path)) as particles:
+        coarse, _ = isobar.extract_adaptive(particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0)
+    assert_mesh_equals(obj, coarse)
+    settings.method = "CORRECTORS"
+    assert_mesh_equals(obj, correctors)
