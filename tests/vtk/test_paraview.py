@@ -142,6 +142,8 @@ ROUND_TRIP = {
     "MassArray": ("id", "id"),
     "Mass": (0.125, "0.125"),
     "GridFactor": (0.4375, "0.4375"),
+    "Method": ("Adaptive", "1"),
+    "SplashThreshold": (3, "3"),
     "Correct": (0, "0"),
     "ComputeNormals": (0, "0"),
     "CarriedArrays": (["velocity", "id"], "id velocity"),

@@ -92,6 +92,31 @@ def test_free_surface_watertight_and_volume_equals_core():
 
 
 @test
+def test_adaptive_method_equals_the_cli_and_is_closed():
+    import subprocess
+
+    f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE)
+    f.Update()
+    out = f.GetOutput()
+    assert f.GetErrorMessage() == "", f.GetErrorMessage()
+    assert h.open_edges(out) == 0, f"{h.open_edges(out)} boundary/non-manifold edges"
+    ref_path = os.path.join(TMP, "adaptive.vtp")
+    subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
+                    "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR)], check=True, capture_output=True)
+    ref = h.read_vtp(ref_path)
+    h.assert_same_surface(out, ref, 1e-12, "adaptive")
+    corrected = free_surface_filter(reader(h.FRAME_26))
+    corrected.Update()
+    assert 0 < out.GetNumberOfCells() < corrected.GetOutput().GetNumberOfCells()
+    # One isovalue only: a clear error and an empty output, not a silent first isovalue.
+    f.SetIsovalue(1, 0.7)
+    errors = Errors(f)
+    f.Update()
+    assert f.GetOutput().GetNumberOfCells() == 0
+    assert any("one isovalue at a time" in m for m in errors.messages), errors.messages
+
+
+@test
 def test_vector_magnitude_component_and_carried_arrays_match_cli():
     r = reader(h.FRAME_26)
     speed = np.linalg.norm(h.point_array(r.GetOutput(), "velocity"), axis=1)

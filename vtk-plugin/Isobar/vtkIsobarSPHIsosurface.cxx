@@ -592,6 +592,11 @@ vtkIsobarSPHIsosurface::vtkIsobarSPHIsosurface()
   this->Shepard = defaults.shepard != 0;
   this->Kernel = static_cast<int>(defaults.kernel);
   this->GridFactor = defaults.grid_factor;
+  this->Method = MARCHING_CORRECTORS;
+  IsobarAdaptiveParams adaptive;
+  std::memset(&adaptive, 0, sizeof(adaptive));
+  isobar_adaptive_params_default(&adaptive);
+  this->SplashThreshold = static_cast<int>(adaptive.splash_threshold);
   this->Correct = defaults.correct != 0;
   this->Tolerance = defaults.tolerance;
   this->Trim = defaults.trim != 0;
@@ -763,9 +768,25 @@ int vtkIsobarSPHIsosurface::RequestData(
     this->Fail("Field Mode is 'Point array' but no input array is selected");
     return 1;
   }
+  const bool adaptive = this->Method == ADAPTIVE;
+  if (adaptive && this->Controller && this->Controller->GetNumberOfProcesses() > 1)
+  {
+    // Every rank sees the same Method, so every rank returns here alike.
+    this->Fail("Method 'Adaptive' runs in one process (its grids are not split into "
+               "pieces yet); choose 'Marching Correctors' for parallel runs");
+    return 1;
+  }
+  if (adaptive && this->Isovalues.size() != 1)
+  {
+    this->Fail("Method 'Adaptive' extracts one isovalue at a time, got " +
+      std::to_string(this->Isovalues.size()));
+    return 1;
+  }
   const bool hFromArray = NonEmpty(this->SmoothingLengthArrayName);
   const bool hAuto = !hFromArray && this->SmoothingLength <= 0.0;
-  const std::vector<std::string> carried = this->CarriedArrayNames();
+  // The adaptive surface carries no particle arrays: do not gather them.
+  const std::vector<std::string> carried =
+    adaptive ? std::vector<std::string>() : this->CarriedArrayNames();
   std::vector<Request> requests;
   if (!fieldArray.empty())
   {
@@ -983,15 +1004,31 @@ int vtkIsobarSPHIsosurface::RequestData(
     if (failure.empty())
     {
       this->UpdateProgress(0.0);
-      const IsobarStatus status = isobar_sph_extract(
-        handle.Ptr, &params, &vtkIsobarSPHIsosurfaceProgress::Call, this, &surface.Ptr);
+      IsobarStatus status;
+      const char* call;
+      if (this->Method == ADAPTIVE)
+      {
+        IsobarAdaptiveParams adaptive;
+        std::memset(&adaptive, 0, sizeof(adaptive));
+        isobar_adaptive_params_default(&adaptive);
+        adaptive.splash_threshold = static_cast<uint32_t>(this->SplashThreshold);
+        call = "isobar_adaptive_extract";
+        status = isobar_adaptive_extract(handle.Ptr, &params, &adaptive,
+          &vtkIsobarSPHIsosurfaceProgress::Call, this, &surface.Ptr, nullptr);
+      }
+      else
+      {
+        call = "isobar_sph_extract";
+        status = isobar_sph_extract(
+          handle.Ptr, &params, &vtkIsobarSPHIsosurfaceProgress::Call, this, &surface.Ptr);
+      }
       if (status == ISOBAR_STATUS_CANCELLED)
       {
         failure = "cancelled";
       }
       else if (status != ISOBAR_STATUS_OK)
       {
-        failure = CoreError("isobar_sph_extract", status);
+        failure = CoreError(call, status);
       }
     }
     if (failure.empty())
@@ -1103,6 +1140,8 @@ void vtkIsobarSPHIsosurface::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Mass: " << this->Mass << "\n";
   os << indent << "Shepard: " << this->Shepard << "\n";
   os << indent << "GridFactor: " << this->GridFactor << "\n";
+  os << indent << "Method: " << this->Method << "\n";
+  os << indent << "SplashThreshold: " << this->SplashThreshold << "\n";
   os << indent << "Correct: " << this->Correct << "\n";
   os << indent << "Tolerance: " << this->Tolerance << "\n";
   os << indent << "Trim: " << this->Trim << "\n";

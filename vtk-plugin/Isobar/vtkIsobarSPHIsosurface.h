@@ -142,6 +142,29 @@ public:
   vtkGetMacro(GridFactor, double);
   ///@}
 
+  /// How the surface is extracted.
+  enum Methods
+  {
+    MARCHING_CORRECTORS = 0, ///< vertices on the level set, carried arrays, trimming, MPI pieces
+    ADAPTIVE = 1             ///< crack-free 3-level grid: far fewer triangles, one process
+  };
+
+  ///@{
+  /// MARCHING_CORRECTORS (default) or ADAPTIVE. The adaptive surface (isobar's 3-level
+  /// grid, cells of GridFactor at the finest level, four times that at the coarsest) uses
+  /// one isovalue, carries no arrays besides Normals and SumOfWeights and runs in one
+  /// process; Correct, Trim, FullGrid and the carried arrays apply to Marching Correctors.
+  vtkSetClampMacro(Method, int, MARCHING_CORRECTORS, ADAPTIVE);
+  vtkGetMacro(Method, int);
+  ///@}
+
+  ///@{
+  /// Adaptive method: coarse cells holding 1 to this many particles (splashes) are refined
+  /// to the finest level (core default 1; 0 refines none).
+  vtkSetClampMacro(SplashThreshold, int, 0, VTK_INT_MAX);
+  vtkGetMacro(SplashThreshold, int);
+  ///@}
+
   ///@{
   /// Correct vertices onto the level set (default on); off gives a linear preview.
   vtkSetMacro(Correct, vtkTypeBool);
@@ -267,6 +290,8 @@ protected:
   vtkTypeBool Shepard;
   int Kernel;
   double GridFactor;
+  int Method;
+  int SplashThreshold;
   vtkTypeBool Correct;
   double Tolerance;
   vtkTypeBool Trim;
