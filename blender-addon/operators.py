@@ -10,7 +10,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import bake, extraction, importer, sequence, usd_export
+from . import bake, extraction, importer, sequence, usd_export, volume_slider
 
 
 def _fluid_object(context, name: str = ""):
@@ -156,6 +156,40 @@ class ISOBAR_OT_import_sequence(bpy.types.Operator, ImportHelper, _SurfaceParame
             self.report({"WARNING"}, f"Imported '{obj.name}', but the current frame failed: {message}")
         else:
             self.report({"INFO"}, f"Imported {len(seq.numbers)} files as '{obj.name}': {message}")
+        return {"FINISHED"}
+
+
+class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
+    """Import a volume for isovalue sliding: pre-encode it once, then drag the isovalue"""
+
+    bl_idname = "isobar.import_volume"
+    bl_label = "Import Volume for Isovalue Sliding"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filter_glob: StringProperty(
+        default=";".join("*" + e for e in volume_slider.VOLUME_EXTENSIONS + (volume_slider.STORE_EXTENSION,)),
+        options={"HIDDEN"},
+    )
+
+    def execute(self, context):
+        path = bpy.path.abspath(self.filepath)
+        try:
+            store = volume_slider.ensure_store(path)
+            with extraction.isobar_module().Slider(store) as probe:
+                lo, hi = probe.value_range
+        except Exception as error:  # noqa: BLE001 - reported, not raised
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+        stem = os.path.splitext(os.path.basename(path))[0] or "volume"
+        obj = _new_surface_object(context, f"{stem}_isosurface")
+        settings = obj.isobar_slider
+        settings.volume, settings.store = path, store
+        settings.value_min, settings.value_max = lo, hi
+        settings.enabled = True
+        settings.isovalue = 0.5 * (lo + hi)  # slides: the mesh appears
+        if settings.status_error:
+            self.report({"ERROR"}, settings.status)
+            return {"CANCELLED"}
         return {"FINISHED"}
 
 
@@ -543,6 +577,7 @@ class ISOBAR_OT_export_usd(bpy.types.Operator, ExportHelper):
 
 def menu_import(self, context):
     self.layout.operator(ISOBAR_OT_import_sequence.bl_idname, text="SPH Particle Sequence (isobar)")
+    self.layout.operator(ISOBAR_OT_import_volume.bl_idname, text="Volume for Isovalue Sliding (isobar)")
 
 
 def menu_export(self, context):
@@ -550,6 +585,7 @@ def menu_export(self, context):
 
 
 classes = (
+    ISOBAR_OT_import_volume,
     ISOBAR_OT_import_sequence,
     ISOBAR_OT_surface_from_object,
     ISOBAR_OT_refresh,

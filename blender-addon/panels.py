@@ -149,7 +149,26 @@ class ISOBAR_PT_cache(_Sidebar, bpy.types.Panel):
         row.operator("isobar.free_bake", text="Free", icon="TRASH")
 
 
-classes = (ISOBAR_PT_main, ISOBAR_PT_source, ISOBAR_PT_surface, ISOBAR_PT_attributes, ISOBAR_PT_cache)
+class ISOBAR_PT_slider(_Sidebar, bpy.types.Panel):
+    bl_label = "Isovalue Slider"
+    bl_idname = "ISOBAR_PT_slider"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("isobar.import_volume", text="Import Volume", icon="IMPORT")
+        obj = getattr(context, "active_object", None)
+        if obj is None or not obj.isobar_slider.enabled:
+            return
+        settings = obj.isobar_slider
+        layout.prop(settings, "isovalue", slider=True)
+        layout.label(text=f"Range {settings.value_min:.6g} .. {settings.value_max:.6g}")
+        if settings.status:
+            row = layout.row()
+            row.alert = settings.status_error
+            row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+
+
+classes = (ISOBAR_PT_main, ISOBAR_PT_source, ISOBAR_PT_surface, ISOBAR_PT_attributes, ISOBAR_PT_cache, ISOBAR_PT_slider)
 
 
 def register():

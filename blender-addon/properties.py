@@ -273,11 +273,55 @@ class IsobarSettings(bpy.types.PropertyGroup):
     status_error: BoolProperty(name="Status Is Error", default=False)
 
 
+def _slide(self, context):
+    from . import volume_slider  # late: keeps this module free of the core
+
+    obj = self.id_data
+    if not self.enabled or not self.store:
+        return
+    try:
+        update = volume_slider.slide(obj, bpy.path.abspath(self.store), self.isovalue)
+    except Exception as error:  # noqa: BLE001 - shown in the panel, never raised into Blender
+        self.status, self.status_error = str(error), True
+        return
+    self.triangles = int(update.triangles.shape[0])
+    self.update_ms = 1e3 * float(update.seconds)
+    self.status, self.status_error = f"{self.triangles:,} triangles in {self.update_ms:.2f} ms", False
+
+
+class IsobarSliderSettings(bpy.types.PropertyGroup):
+    """Isovalue sliding on a volume (an object whose mesh follows its isovalue)."""
+
+    enabled: BoolProperty(name="Volume Slider", description="This object's mesh is an isobar volume isosurface", default=False)
+    volume: StringProperty(name="Volume", description="The volume file the store was built from", subtype="FILE_PATH")
+    store: StringProperty(name="Store", description="The pre-encoded isovalue store (.isoslider)", subtype="FILE_PATH")
+    isovalue: FloatProperty(
+        name="Isovalue",
+        description="Drag to slide the isosurface: each change updates the mesh from the store",
+        default=0.0,
+        precision=4,
+        update=_slide,
+    )
+    value_min: FloatProperty(name="Minimum", description="Smallest value in the volume")
+    value_max: FloatProperty(name="Maximum", description="Largest value in the volume")
+    triangles: IntProperty(name="Triangles", description="Triangles of the current surface")
+    update_ms: FloatProperty(name="Update (ms)", description="Core time of the last isovalue change")
+    status: StringProperty(name="Status", description="Result of the last isovalue change")
+    status_error: BoolProperty(name="Status Is Error", default=False)
+
+
 def register():
     bpy.utils.register_class(IsobarSettings)
+    bpy.utils.register_class(IsobarSliderSettings)
     bpy.types.Object.isobar = PointerProperty(type=IsobarSettings)
+    bpy.types.Object.isobar_slider = PointerProperty(type=IsobarSliderSettings)
 
 
 def unregister():
+    from . import volume_slider
+
+    volume_slider.close_all()
+    del bpy.types.Object.isobar_slider
     del bpy.types.Object.isobar
+    bpy.utils.unregister_class(IsobarSliderSettings)
     bpy.utils.unregister_class(IsobarSettings)
