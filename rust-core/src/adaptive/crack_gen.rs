@@ -103,6 +103,21 @@ fn chords(inside: [bool; 4], cut: [Option<Node>; 4]) -> Vec<(Node, Node)> {
     out
 }
 
+/// The chords the fine side draws on the face (its four quads), counter-clockwise.
+fn fine_chords(config: usize) -> Vec<(Node, Node)> {
+    let inside = |(i, j): (usize, usize)| config >> (i + 3 * j) & 1 == 1;
+    let mut out = Vec::new();
+    for sj in 0..2 {
+        for si in 0..2 {
+            let ring = fine_ring(si, sj);
+            let ins = ring.map(|(a, _, _)| inside(a));
+            let cut = ring.map(|(a, b, p)| (inside(a) != inside(b)).then_some(p));
+            out.extend(chords(ins, cut));
+        }
+    }
+    out
+}
+
 /// The signed crack region's boundary for configuration `config`, as directed edges
 /// between surface points (counter-clockwise in (u, v) around coarse-inside regions).
 pub fn crack_boundary(config: usize) -> Vec<(Node, Node)> {
@@ -117,15 +132,8 @@ pub fn crack_boundary(config: usize) -> Vec<(Node, Node)> {
         *chain.entry(key).or_default() += m;
     };
     // Fine side: every quad's chords, negated.
-    for sj in 0..2 {
-        for si in 0..2 {
-            let ring = fine_ring(si, sj);
-            let ins = ring.map(|(a, _, _)| inside(a));
-            let cut = ring.map(|(a, b, p)| (inside(a) != inside(b)).then_some(p));
-            for (a, b) in chords(ins, cut) {
-                add(a, b, -1);
-            }
-        }
+    for (a, b) in fine_chords(config) {
+        add(a, b, -1);
     }
     // Coarse side: corners and edges (each coarse edge = two fine halves through M).
     let corners = [(0, 0), (2, 0), (2, 2), (0, 2)];
@@ -453,21 +461,13 @@ mod tests {
         assert!(needed <= MAX_TRIANGLES, "{needed}");
     }
 
-    /// Every chord either side draws on the face, as unordered pairs.
+    /// Every chord the fine side draws on the face, as unordered pairs (the coarse
+    /// side's chords join points the fine side also joins or the crack boundary holds).
     fn all_chords(config: usize) -> BTreeSet<(Node, Node)> {
-        let inside = |(i, j): (usize, usize)| config >> (i + 3 * j) & 1 == 1;
-        let mut out = BTreeSet::new();
-        for sj in 0..2 {
-            for si in 0..2 {
-                let ring = fine_ring(si, sj);
-                let ins = ring.map(|(a, _, _)| inside(a));
-                let cut = ring.map(|(a, b, p)| (inside(a) != inside(b)).then_some(p));
-                for (a, b) in chords(ins, cut) {
-                    out.insert((a.min(b), a.max(b)));
-                }
-            }
-        }
-        out
+        fine_chords(config)
+            .into_iter()
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect()
     }
 
     #[test]

@@ -3,14 +3,14 @@
 //! sets the finest cell); the adaptive options sit in their own versioned struct.
 
 use super::particles::IsobarParticles;
-use super::sph::{read_params, settings, IsobarProgressFn};
+use super::sph::{c_progress, read_params, settings, IsobarProgressFn};
 use super::surface::IsobarSurface;
 use super::{guard, invalid, non_null, put, IsobarSphParams, IsobarStatus};
 use crate::adaptive::{self, Params};
 use crate::correctors;
 use crate::field::sph::SphField;
 use crate::progress::Progress;
-use std::ffi::{c_void, CString};
+use std::ffi::c_void;
 
 /// Options of `isobar_adaptive_extract`. Fill with `isobar_adaptive_params_default`,
 /// which sets `struct_size`; later versions only append fields.
@@ -69,27 +69,12 @@ pub extern "C" fn isobar_adaptive_params_default(out: *mut IsobarAdaptiveParams)
 }
 
 fn read_adaptive(p: *const IsobarAdaptiveParams) -> Result<IsobarAdaptiveParams, crate::Error> {
-    let given = non_null(p, "adaptive")?;
-    let size = given.struct_size as usize;
-    let ours = std::mem::size_of::<IsobarAdaptiveParams>();
-    if !(ADAPTIVE_PARAMS_V1_SIZE..=ours).contains(&size) {
-        return Err(invalid(
-            "adaptive.struct_size",
-            format!(
-                "is {size}; this library accepts {ADAPTIVE_PARAMS_V1_SIZE} to {ours} bytes: fill the struct with isobar_adaptive_params_default"
-            ),
-        ));
-    }
-    let mut out = IsobarAdaptiveParams::default();
-    // SAFETY: both point to at least `size` bytes of IsobarAdaptiveParams layout.
-    unsafe {
-        std::ptr::copy_nonoverlapping(
-            (given as *const IsobarAdaptiveParams).cast::<u8>(),
-            (&mut out as *mut IsobarAdaptiveParams).cast::<u8>(),
-            size,
-        )
-    };
-    Ok(out)
+    super::read_versioned(
+        p,
+        "adaptive",
+        ADAPTIVE_PARAMS_V1_SIZE,
+        "isobar_adaptive_params_default",
+    )
 }
 
 /// Extracts the adaptive crack-free surface of the particles' SPH field. `progress` and
@@ -132,13 +117,7 @@ pub extern "C" fn isobar_adaptive_extract(
             normals: sph_params.normals,
             memory_budget: sph_params.memory_budget,
         };
-        let mut report = |fraction: f64, phase: &str| match progress {
-            Some(f) => {
-                let phase = CString::new(phase).unwrap_or_default();
-                f(user, fraction, phase.as_ptr()) == 0
-            }
-            None => true,
-        };
+        let mut report = c_progress(progress, user);
         let mut sink = Progress::new(&mut report);
         sink.window(0.0, 0.1);
         let field = SphField::build(&particles.data, &field_settings, &mut sink)?;

@@ -138,6 +138,41 @@ pub(crate) fn slice<'a, T>(p: *const T, len: usize, name: &'static str) -> Resul
     Ok(unsafe { std::slice::from_raw_parts(p, len) })
 }
 
+/// A caller's versioned parameter struct laid over our defaults: `T` is `#[repr(C)]` and
+/// starts with `struct_size: u32`; the caller's first `struct_size` bytes are taken, fields
+/// beyond them keep their defaults, so callers built against an older, shorter struct keep
+/// working. `min_size` is the first version's size; `filler` names the defaults function.
+pub(crate) fn read_versioned<T: Copy + Default>(
+    p: *const T,
+    name: &'static str,
+    min_size: usize,
+    filler: &str,
+) -> Result<T, Error> {
+    let given = non_null(p, name)?;
+    // SAFETY: T is repr(C) with a leading u32 struct_size (the callers' contract).
+    let size = unsafe { *(given as *const T).cast::<u32>() } as usize;
+    let ours = std::mem::size_of::<T>();
+    if !(min_size..=ours).contains(&size) {
+        return Err(invalid(
+            name,
+            format!(
+                "struct_size is {size}; this library accepts {min_size} to {ours} bytes: fill the struct with {filler}"
+            ),
+        ));
+    }
+    let mut out = T::default();
+    // SAFETY: both point to at least `size` bytes of T's layout; then struct_size is ours.
+    unsafe {
+        std::ptr::copy_nonoverlapping(
+            (given as *const T).cast::<u8>(),
+            (&mut out as *mut T).cast::<u8>(),
+            size,
+        );
+        *(&mut out as *mut T).cast::<u32>() = ours as u32;
+    }
+    Ok(out)
+}
+
 /// Writes `value` through an out-pointer.
 pub(crate) fn put<T>(out: *mut T, value: T, name: &'static str) -> Result<(), Error> {
     if out.is_null() {

@@ -140,28 +140,12 @@ pub extern "C" fn isobar_sph_params_default(out: *mut IsobarSphParams) -> Isobar
 
 /// The caller's struct over the defaults: fields beyond its `struct_size` keep defaults.
 pub(super) fn read_params(params: *const IsobarSphParams) -> Result<IsobarSphParams, crate::Error> {
-    let given = non_null(params, "params")?;
-    let size = given.struct_size as usize;
-    let ours = std::mem::size_of::<IsobarSphParams>();
-    if !(SPH_PARAMS_V1_SIZE..=ours).contains(&size) {
-        return Err(invalid(
-            "params.struct_size",
-            format!(
-                "is {size}; this library accepts {SPH_PARAMS_V1_SIZE} (ABI 1) to {ours} bytes: fill the struct with isobar_sph_params_default"
-            ),
-        ));
-    }
-    let mut out = IsobarSphParams::default();
-    // SAFETY: both point to at least `size` bytes of IsobarSphParams layout.
-    unsafe {
-        std::ptr::copy_nonoverlapping(
-            (given as *const IsobarSphParams).cast::<u8>(),
-            (&mut out as *mut IsobarSphParams).cast::<u8>(),
-            size,
-        )
-    };
-    out.struct_size = ours as u32;
-    Ok(out)
+    super::read_versioned(
+        params,
+        "params",
+        SPH_PARAMS_V1_SIZE,
+        "isobar_sph_params_default",
+    )
 }
 
 pub(super) fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), crate::Error> {
@@ -250,6 +234,20 @@ pub(super) fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), cra
     Ok((sph, params))
 }
 
+/// The core's progress callback, forwarding to the caller's C one (NULL never cancels).
+pub(super) fn c_progress(
+    progress: IsobarProgressFn,
+    user: *mut c_void,
+) -> impl FnMut(f64, &str) -> bool {
+    move |fraction, phase| match progress {
+        Some(f) => {
+            let phase = CString::new(phase).unwrap_or_default();
+            f(user, fraction, phase.as_ptr()) == 0
+        }
+        None => true,
+    }
+}
+
 /// Extracts isosurfaces of the particles' SPH field. `progress` may be NULL; it is called
 /// on the calling thread only. On success `*out` owns a surface to free with
 /// `isobar_surface_free`; on failure `*out` is left untouched.
@@ -269,13 +267,7 @@ pub extern "C" fn isobar_sph_extract(
         let p = read_params(params)?;
         let (sph, params) = settings(&p)?;
         let data = &particles.data;
-        let mut report = |fraction: f64, phase: &str| match progress {
-            Some(f) => {
-                let phase = CString::new(phase).unwrap_or_default();
-                f(user, fraction, phase.as_ptr()) == 0
-            }
-            None => true,
-        };
+        let mut report = c_progress(progress, user);
         let mut sink = Progress::new(&mut report);
         sink.window(0.0, 0.1);
         let field = SphField::build(data, &sph, &mut sink)?;

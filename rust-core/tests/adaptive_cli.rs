@@ -1,0 +1,93 @@
+//! `isobar adaptive` as a user runs it: a real frame in, a closed mesh and its statistics
+//! out; bad options refused with a message naming them.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn isobar() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_isobar"))
+}
+
+fn temp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("isobar_adaptive_cli_{}_{name}", std::process::id()))
+}
+
+fn frame() -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/splashsurf/double_dam_break_frame_01_4732_particles.vtk")
+        .to_string_lossy()
+        .into_owned()
+}
+
+#[test]
+fn adaptive_command_writes_a_closed_surface_and_stats() {
+    let (mesh_path, json_path) = (temp("surface.ply"), temp("stats.json"));
+    let out = isobar()
+        .args([
+            "adaptive",
+            &frame(),
+            "--h",
+            "0.05",
+            "--iso",
+            "0.6",
+            "--quiet",
+        ])
+        .arg("-o")
+        .arg(&mesh_path)
+        .arg("--stats-json")
+        .arg(&json_path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mesh = isobar::io::read_mesh(&mesh_path).unwrap();
+    let topo = mesh.topology();
+    assert!(topo.is_watertight_oriented(), "{topo:?}");
+    let json = std::fs::read_to_string(&json_path).unwrap();
+    let triangles: usize = json
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("\"triangles\": "))
+        .and_then(|v| v.trim_end_matches(',').parse().ok())
+        .unwrap_or_else(|| panic!("no triangle count in {json}"));
+    assert_eq!(triangles, mesh.triangles.len());
+    for key in [
+        "level_1_triangles",
+        "level_3_cells",
+        "crack_triangles",
+        "time_adaptive_total_s",
+    ] {
+        assert!(
+            json.contains(&format!("\"{key}\"")),
+            "{key} missing from {json}"
+        );
+    }
+    let _ = std::fs::remove_file(&mesh_path);
+    let _ = std::fs::remove_file(&json_path);
+}
+
+#[test]
+fn adaptive_command_refuses_bad_options() {
+    let mesh_path = temp("never.ply");
+    for (args, expected) in [
+        (vec!["--iso", "0.5,0.6"], "one isovalue"),
+        (
+            vec!["--iso", "0.6", "--bisection-iterations", "0"],
+            "bisection_iterations",
+        ),
+    ] {
+        let out = isobar()
+            .args(["adaptive", &frame(), "--h", "0.05", "--quiet"])
+            .args(&args)
+            .arg("-o")
+            .arg(&mesh_path)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expected), "{args:?}: {err}");
+        assert!(!mesh_path.exists(), "{args:?} wrote a mesh");
+    }
+}
