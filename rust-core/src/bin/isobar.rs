@@ -41,6 +41,9 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Sample an isosurface of high-order finite elements (Lagrange cells in a .vtu) with a
+    /// particle system; writes oriented points with radii.
+    Fe(Box<isobar::highorder::cli::FeArgs>),
     /// List the particles and arrays of a file.
     Info { input: PathBuf },
 }
@@ -143,6 +146,7 @@ fn main() -> ExitCode {
         Command::Sph(args) => run_sph(&args),
         Command::Demo { output, quiet } => run_demo(&output, quiet),
         Command::Info { input } => run_info(&input),
+        Command::Fe(args) => isobar::highorder::cli::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -10,7 +10,7 @@ use glam::{DMat3, DVec3};
 use rustc_hash::FxHashMap;
 
 /// No neighbour across a face (the domain boundary).
-pub const NO_NEIGHBOUR: u32 = u32::MAX;
+pub(crate) const NO_NEIGHBOUR: u32 = u32::MAX;
 
 /// Lagrange cells over shared points, with per-point arrays.
 #[derive(Clone, Debug)]

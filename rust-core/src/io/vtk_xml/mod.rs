@@ -8,6 +8,7 @@
 
 mod cells;
 mod document;
+mod points;
 #[cfg(test)]
 mod tests;
 mod write;
@@ -18,6 +19,7 @@ use crate::mesh::Mesh;
 use document::Document;
 
 pub(crate) use cells::read_fe_mesh;
+pub(crate) use points::write_points;
 pub(crate) use write::write_mesh;
 
 /// Reads the points and point arrays of every piece of a VTK XML dataset (pieces are
