@@ -167,3 +167,56 @@ fn broken_files_are_named_errors() {
         .to_string();
     assert!(err.contains("x.vtu"), "{err}");
 }
+
+/// `isobar fe` end to end on the VTK-written file: every sample's (Element, Reference)
+/// maps to its position and lies on F = C within ε_T; byte-identical for 1 and 2 threads.
+#[test]
+fn cli_samples_vtk_written_cells() {
+    let mut outputs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = write(&format!("samples_{threads}.vtp"), "");
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_isobar"))
+            .args(["fe", "--field", "p", "--iso", "0.5", "--quiet", "-o"])
+            .arg(&out)
+            .arg(data("mixed_lagrange.vtu"))
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert!(String::from_utf8_lossy(&run.stdout).contains("samples on 3 cells"));
+        outputs.push(std::fs::read(&out).unwrap());
+        let samples = isobar::io::read_mesh(&out).unwrap();
+        assert!(samples.vertex_count() > 50);
+        assert_eq!(samples.normals.len(), samples.vertex_count());
+        let mesh = read_fe_mesh(&data("mixed_lagrange.vtu")).unwrap();
+        let p = &mesh.point_data[0].data;
+        let cell = &samples.attribute("Element").unwrap().data;
+        let reference = &samples.attribute("Reference").unwrap().data;
+        let mut sc = Scratch::default();
+        for (i, x) in samples.positions.iter().enumerate() {
+            let u = DVec3::new(reference[3 * i], reference[3 * i + 1], reference[3 * i + 2]);
+            let e = mesh.evaluate(p, cell[i] as usize, u, &mut sc);
+            assert!((e.x - DVec3::from(*x)).length() < 1e-12, "sample {i}");
+            assert!(
+                (e.value - 0.5).abs() <= 1e-6,
+                "sample {i}: |F - C| = {}",
+                (e.value - 0.5).abs()
+            );
+        }
+    }
+    assert!(
+        outputs[0] == outputs[1],
+        "output differs between 1 and 2 threads"
+    );
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_isobar"))
+        .args(["fe", "--field", "nope", "--iso", "0", "-o", "/tmp/x.vtp"])
+        .arg(data("mixed_lagrange.vtu"))
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("'nope'"));
+}

@@ -48,6 +48,9 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Sample an isosurface of high-order finite elements (Lagrange cells in a .vtu) with a
+    /// particle system; writes oriented points with radii.
+    Fe(Box<isobar::highorder::cli::FeArgs>),
     /// List the particles and arrays of a file.
     Info { input: PathBuf },
     /// Precompute an isovalue-slider store from a volume (.vti, .nrrd, .npy, .raw).
@@ -157,6 +160,7 @@ fn main() -> ExitCode {
         Command::Info { input } => run_info(&input),
         Command::SlideBuild(args) => isobar::slider::cli::run_build(&args),
         Command::Slide(args) => isobar::slider::cli::run_slide(&args),
+        Command::Fe(args) => isobar::highorder::cli::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

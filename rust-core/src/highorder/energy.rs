@@ -4,7 +4,7 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// β = 0.5 / cos(π/6) = 1/√3: the hexagonal-packing constant of eq. 6.
-pub const BETA: f64 = 0.577_350_269_189_625_8;
+pub(crate) const BETA: f64 = 0.577_350_269_189_625_8;
 
 /// E(r) = cot(rπ/2) + rπ/2 − π/2 for r < 1, else 0: infinite at 0, zero with zero slope at 1.
 pub fn energy(r: f64) -> f64 {

@@ -12,6 +12,7 @@
 //! result for any thread count. Coarse-to-fine levels, then split/delete against the
 //! ideal hexagonal energy with a seeded random bias, until the count settles.
 
+pub mod cli;
 mod energy;
 mod neighbours;
 mod particle;
@@ -20,7 +21,8 @@ mod system;
 #[cfg(test)]
 mod tests;
 
-pub use energy::{alpha, energy, energy_derivative, ideal_energy, BETA};
+use energy::BETA;
+pub use energy::{alpha, energy, energy_derivative, ideal_energy};
 
 use crate::error::{Error, Result};
 use crate::field::fe::FeMesh;

@@ -29,7 +29,7 @@ fn cell_seeds(surface: &Surface, c: usize, lambda: f64, sc: &mut Scratch) -> Vec
         return Vec::new();
     }
     let shape = mesh.shape(c);
-    let m = (2 * shape.order.iter().max().copied().unwrap_or(1)).max(3) as i32;
+    let m = (shape.order.iter().max().copied().unwrap_or(1) + 1).max(3) as i32;
     let inside = |i: i32, j: i32, k: i32| -> bool {
         let ok = |v: i32| (0..=m).contains(&v);
         ok(i)
@@ -88,6 +88,6 @@ impl Surface<'_> {
     pub(crate) fn value(&self, c: usize, u: DVec3, sc: &mut Scratch) -> f64 {
         self.evaluations
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        self.mesh.evaluate(self.values, c, u, sc).value
+        self.mesh.value(self.values, c, u, sc)
     }
 }

@@ -156,6 +156,32 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
     Ok(mesh)
 }
 
+/// Writes oriented point samples as `.vtp` (vertex cells with Normals, Radius and every
+/// array), atomically like [`write_mesh`].
+pub fn write_samples(path: &Path, samples: &crate::samples::PointSamples) -> Result<()> {
+    let format = extension_of(path);
+    if format != "vtp" {
+        return Err(Error::format(
+            path,
+            format!("cannot write point samples as '.{format}'; supported: .vtp"),
+        ));
+    }
+    let n = samples.len();
+    if samples.normals.len() != n
+        || samples.radii.len() != n
+        || samples
+            .attributes
+            .iter()
+            .any(|a| a.data.len() != n * a.components)
+    {
+        return Err(Error::InvalidInput(format!(
+            "{}: point samples with arrays of inconsistent lengths",
+            path.display()
+        )));
+    }
+    atomic::write_atomically(path, |w| vtk_xml::write_points(w, samples))
+}
+
 /// Reads high-order finite elements: a `.vtu` UnstructuredGrid with Lagrange hexahedra,
 /// tetrahedra and wedges (VTK types 72, 71, 73) and its point arrays. Every cell is checked
 /// (node count, point indices, det J > 0) and a failure names the cell.

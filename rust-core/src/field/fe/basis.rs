@@ -72,6 +72,12 @@ pub struct BasisValues {
 impl Shape {
     /// Evaluates every basis function, its gradient and its Hessian at `u` into `out`.
     pub fn evaluate(&self, u: DVec3, out: &mut BasisValues) {
+        self.evaluate_to(u, 2, out)
+    }
+
+    /// Evaluates derivatives up to `order` (0: values, 1: + gradients, 2: + Hessians);
+    /// the arrays of higher derivatives are left empty.
+    pub fn evaluate_to(&self, u: DVec3, order: u8, out: &mut BasisValues) {
         let nv = self.variables.len();
         out.jets.resize_with(nv, Vec::new);
         for (var, jets) in self.variables.iter().zip(out.jets.iter_mut()) {
@@ -100,6 +106,21 @@ impl Shape {
             for j in f.iter().take(nv) {
                 value *= j.v;
             }
+            out.values.push(value);
+            if order == 0 {
+                continue;
+            }
+            if order == 1 {
+                let g: DVec3 = self
+                    .variables
+                    .iter()
+                    .zip(&f)
+                    .enumerate()
+                    .map(|(m, (var, fm))| var.direction * (fm.d1 * prod_except(&[m])))
+                    .sum();
+                out.gradients.push(g);
+                continue;
+            }
             let mut g = DVec3::ZERO;
             let mut h = DMat3::ZERO;
             for m in 0..nv {
@@ -113,7 +134,6 @@ impl Shape {
                     h += (outer(dm, dk) + outer(dk, dm)) * c;
                 }
             }
-            out.values.push(value);
             out.gradients.push(g);
             out.hessians.push(h);
         }

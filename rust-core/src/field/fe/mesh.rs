@@ -10,7 +10,7 @@ use glam::{DMat3, DVec3};
 use rustc_hash::FxHashMap;
 
 /// No neighbour across a face (the domain boundary).
-pub const NO_NEIGHBOUR: u32 = u32::MAX;
+pub(crate) const NO_NEIGHBOUR: u32 = u32::MAX;
 
 /// Lagrange cells over shared points, with per-point arrays.
 #[derive(Clone, Debug)]
@@ -202,7 +202,7 @@ impl FeMesh {
 
     /// World position and Jacobian of cell `c` at reference point `u`.
     pub fn map(&self, c: usize, u: DVec3, scratch: &mut Scratch) -> (DVec3, DMat3) {
-        self.shape(c).evaluate(u, &mut scratch.basis);
+        self.shape(c).evaluate_to(u, 1, &mut scratch.basis);
         let b = &scratch.basis;
         let mut x = DVec3::ZERO;
         let mut j = DMat3::ZERO;
@@ -212,6 +212,16 @@ impl FeMesh {
             j += outer(p, b.gradients[k]);
         }
         (x, j)
+    }
+
+    /// F* of the point array `values` in cell `c` at `u` (no derivatives).
+    pub fn value(&self, values: &[f64], c: usize, u: DVec3, scratch: &mut Scratch) -> f64 {
+        self.shape(c).evaluate_to(u, 0, &mut scratch.basis);
+        self.nodes(c)
+            .iter()
+            .zip(&scratch.basis.values)
+            .map(|(&n, &phi)| values[n as usize] * phi)
+            .sum()
     }
 
     /// T, J, F*, F*_u, F_x and F_xx of the point array `values` in cell `c` at `u`.

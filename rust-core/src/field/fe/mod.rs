@@ -16,7 +16,5 @@ mod shape;
 mod tests;
 
 pub use basis::BasisValues;
-pub use mesh::{Evaluation, FeMesh, Scratch, NO_NEIGHBOUR};
-pub use shape::{
-    Kind, Shape, VTK_LAGRANGE_HEXAHEDRON, VTK_LAGRANGE_TETRAHEDRON, VTK_LAGRANGE_WEDGE,
-};
+pub use mesh::{Evaluation, FeMesh, Scratch};
+pub use shape::{Kind, Shape};

@@ -14,12 +14,11 @@
 
 use glam::DVec3;
 
-/// VTK cell type of a Lagrange tetrahedron.
-pub const VTK_LAGRANGE_TETRAHEDRON: u8 = 71;
-/// VTK cell type of a Lagrange hexahedron.
-pub const VTK_LAGRANGE_HEXAHEDRON: u8 = 72;
-/// VTK cell type of a Lagrange wedge (prism).
-pub const VTK_LAGRANGE_WEDGE: u8 = 73;
+// VTK cell types (kept out of the crate's top-level constants, which cbindgen would put
+// into the C header).
+const VTK_LAGRANGE_TETRAHEDRON: u8 = 71;
+const VTK_LAGRANGE_HEXAHEDRON: u8 = 72;
+const VTK_LAGRANGE_WEDGE: u8 = 73;
 
 /// The three element families.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

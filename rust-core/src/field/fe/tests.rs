@@ -343,3 +343,21 @@ fn points_cross_faces_into_neighbours_at_the_same_world_point() {
         .relocate(0, DVec3::new(0.5, -0.2, 0.5), &mut sc)
         .is_none());
 }
+
+#[test]
+fn lower_order_evaluations_agree_with_the_full_one() {
+    let (mut full, mut low) = (BasisValues::default(), BasisValues::default());
+    for kind in KINDS {
+        let s = shape(kind, 3);
+        for u in inside_points(kind) {
+            s.evaluate(u, &mut full);
+            s.evaluate_to(u, 1, &mut low);
+            assert_eq!(full.values, low.values);
+            assert_eq!(full.gradients, low.gradients);
+            assert!(low.hessians.is_empty());
+            s.evaluate_to(u, 0, &mut low);
+            assert_eq!(full.values, low.values);
+            assert!(low.gradients.is_empty());
+        }
+    }
+}

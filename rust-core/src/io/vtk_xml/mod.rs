@@ -9,6 +9,7 @@
 mod cells;
 mod document;
 mod image;
+mod points;
 #[cfg(test)]
 mod tests;
 mod write;
@@ -21,6 +22,7 @@ use document::Document;
 pub(crate) use cells::read_fe_mesh;
 pub(crate) use document::find as find_bytes;
 pub(crate) use image::read_image;
+pub(crate) use points::write_points;
 pub(crate) use write::write_mesh;
 
 /// Reads the points and point arrays of every piece of a VTK XML dataset (pieces are

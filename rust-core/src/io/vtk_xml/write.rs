@@ -103,20 +103,20 @@ pub(crate) fn write_mesh(w: &mut dyn Write, mesh: &Mesh) -> std::io::Result<()> 
 }
 
 /// Gathers small little-endian values into 64 KiB writes.
-struct Chunked<'w> {
+pub(super) struct Chunked<'w> {
     w: &'w mut dyn Write,
     buf: Vec<u8>,
 }
 
 impl<'w> Chunked<'w> {
-    fn new(w: &'w mut dyn Write) -> Self {
+    pub(super) fn new(w: &'w mut dyn Write) -> Self {
         Chunked {
             w,
             buf: Vec::with_capacity(1 << 16),
         }
     }
 
-    fn bytes(&mut self, b: &[u8]) -> std::io::Result<()> {
+    pub(super) fn bytes(&mut self, b: &[u8]) -> std::io::Result<()> {
         if self.buf.len() + b.len() > self.buf.capacity() {
             self.flush()?;
         }
@@ -124,14 +124,14 @@ impl<'w> Chunked<'w> {
         Ok(())
     }
 
-    fn flush(&mut self) -> std::io::Result<()> {
+    pub(super) fn flush(&mut self) -> std::io::Result<()> {
         self.w.write_all(&self.buf)?;
         self.buf.clear();
         Ok(())
     }
 }
 
-fn xml_escape(s: &str) -> Cow<'_, str> {
+pub(super) fn xml_escape(s: &str) -> Cow<'_, str> {
     if !s.contains(['&', '<', '>', '"', '\'']) {
         return Cow::Borrowed(s);
     }
