@@ -2,14 +2,13 @@
 
 use super::particles::IsobarParticles;
 use super::surface::IsobarSurface;
-use super::{guard, invalid, non_null, opt_str, put, slice, IsobarStatus};
+use super::{guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarStatus};
 use crate::correctors::{self, Lattice, Params, Trim};
 use crate::field::kernel::Kernel;
 use crate::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
 use crate::field::DEFAULT_MEMORY_BUDGET;
-use crate::progress::Progress;
 use glam::DVec3;
-use std::ffi::{c_char, c_void, CString};
+use std::ffi::{c_char, c_void};
 
 /// Kernel: Monaghan's cubic spline (support 2h).
 pub const ISOBAR_KERNEL_CUBIC: u32 = 0;
@@ -269,22 +268,16 @@ pub extern "C" fn isobar_sph_extract(
         let p = read_params(params)?;
         let (sph, params) = settings(&p)?;
         let data = &particles.data;
-        let mut report = |fraction: f64, phase: &str| match progress {
-            Some(f) => {
-                let phase = CString::new(phase).unwrap_or_default();
-                f(user, fraction, phase.as_ptr()) == 0
+        let extraction = with_progress(progress, user, |sink| {
+            sink.window(0.0, 0.1);
+            let field = SphField::build(data, &sph, sink)?;
+            sink.window(0.1, 1.0);
+            if p.full_grid != 0 {
+                crate::baseline::extract(&field, data, &params, sink)
+            } else {
+                correctors::extract(&field, data, &params, sink)
             }
-            None => true,
-        };
-        let mut sink = Progress::new(&mut report);
-        sink.window(0.0, 0.1);
-        let field = SphField::build(data, &sph, &mut sink)?;
-        sink.window(0.1, 1.0);
-        let extraction = if p.full_grid != 0 {
-            crate::baseline::extract(&field, data, &params, &mut sink)?
-        } else {
-            correctors::extract(&field, data, &params, &mut sink)?
-        };
+        })?;
         put(out, Box::into_raw(IsobarSurface::new(extraction)), "out")
     })
 }
