@@ -43,21 +43,6 @@
 // Kernel: Johnson's quadratic kernel (support 2h).
 #define ISOBAR_KERNEL_QUADRATIC 3
 
-// No neighbour across a face (the domain boundary).
-#define NO_NEIGHBOUR UINT32_MAX
-
-// VTK cell type of a Lagrange tetrahedron.
-#define VTK_LAGRANGE_TETRAHEDRON 71
-
-// VTK cell type of a Lagrange hexahedron.
-#define VTK_LAGRANGE_HEXAHEDRON 72
-
-// VTK cell type of a Lagrange wedge (prism).
-#define VTK_LAGRANGE_WEDGE 73
-
-// β = 0.5 / cos(π/6) = 1/√3: the hexagonal-packing constant of eq. 6.
-#define BETA 0.5773502691896258
-
 // The version this build writes and reads.
 #define VERSION 1
 

@@ -17,6 +17,20 @@ fn temp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// Runs `isobar slide STORE` with `input` on stdin.
+fn slide(store: &std::path::Path, input: &[u8]) -> std::process::Output {
+    let mut child = isobar()
+        .arg("slide")
+        .arg(store)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(input).unwrap();
+    child.wait_with_output().unwrap()
+}
+
 #[test]
 fn build_then_slide_from_stdin_matches_marching_cubes() {
     // A u16 raw volume: a ring-shaped bump with a ramp.
@@ -58,21 +72,8 @@ fn build_then_slide_from_stdin_matches_marching_cubes() {
     assert!(text.contains("18×15×13 u16 volume"), "{text}");
 
     let isos = [1500.0, 1510.0, 800.0, 2900.0, 1500.0, 100.0];
-    let mut child = isobar()
-        .arg("slide")
-        .arg(&store)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    {
-        let mut stdin = child.stdin.take().unwrap();
-        for iso in isos {
-            writeln!(stdin, "{iso}").unwrap();
-        }
-    }
-    let out = child.wait_with_output().unwrap();
+    let input: String = isos.iter().map(|v| format!("{v}\n")).collect();
+    let out = slide(&store, input.as_bytes());
     assert!(
         out.status.success(),
         "{}",
@@ -138,21 +139,7 @@ fn bad_inputs_fail_with_a_clear_message() {
         .unwrap()
         .status
         .success());
-    let mut child = isobar()
-        .arg("slide")
-        .arg(&store)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(b"3.5\nabc\n")
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = slide(&store, b"3.5\nabc\n");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line 2") && err.contains("'abc'"), "{err}");

@@ -3,13 +3,12 @@
 //! sets the finest cell); the adaptive options sit in their own versioned struct.
 
 use super::particles::IsobarParticles;
-use super::sph::{c_progress, read_params, settings, IsobarProgressFn};
+use super::sph::{read_params, settings, IsobarProgressFn};
 use super::surface::IsobarSurface;
-use super::{guard, invalid, non_null, put, IsobarSphParams, IsobarStatus};
+use super::{guard, invalid, non_null, put, with_progress, IsobarSphParams, IsobarStatus};
 use crate::adaptive::{self, Params};
 use crate::correctors;
 use crate::field::sph::SphField;
-use crate::progress::Progress;
 use std::ffi::c_void;
 
 /// Options of `isobar_adaptive_extract`. Fill with `isobar_adaptive_params_default`,
@@ -117,12 +116,12 @@ pub extern "C" fn isobar_adaptive_extract(
             normals: sph_params.normals,
             memory_budget: sph_params.memory_budget,
         };
-        let mut report = c_progress(progress, user);
-        let mut sink = Progress::new(&mut report);
-        sink.window(0.0, 0.1);
-        let field = SphField::build(&particles.data, &field_settings, &mut sink)?;
-        sink.window(0.1, 1.0);
-        let extraction = adaptive::extract_sph(&field, &params, &mut sink)?;
+        let extraction = with_progress(progress, user, |sink| {
+            sink.window(0.0, 0.1);
+            let field = SphField::build(&particles.data, &field_settings, sink)?;
+            sink.window(0.1, 1.0);
+            adaptive::extract_sph(&field, &params, sink)
+        })?;
         let s = &extraction.stats;
         if !stats.is_null() {
             // SAFETY: non-null, and the caller promises a struct of at least struct_size.
@@ -175,6 +174,7 @@ mod tests {
     };
     use crate::field::particles::ParticleData;
     use crate::field::sph::{SmoothingLength, SphSettings};
+    use crate::progress::Progress;
     use glam::DVec3;
 
     fn ball() -> Vec<DVec3> {

@@ -173,6 +173,24 @@ pub(crate) fn read_versioned<T: Copy + Default>(
     Ok(out)
 }
 
+/// Runs `body` with a progress sink that calls the C callback (NULL: no reporting); a
+/// non-zero return from the callback cancels.
+pub(crate) fn with_progress<R>(
+    progress: IsobarProgressFn,
+    user: *mut std::ffi::c_void,
+    body: impl FnOnce(&mut crate::progress::Progress) -> Result<R, Error>,
+) -> Result<R, Error> {
+    let mut report = |fraction: f64, phase: &str| match progress {
+        Some(f) => {
+            let phase = CString::new(phase).unwrap_or_default();
+            f(user, fraction, phase.as_ptr()) == 0
+        }
+        None => true,
+    };
+    let mut sink = crate::progress::Progress::new(&mut report);
+    body(&mut sink)
+}
+
 /// Writes `value` through an out-pointer.
 pub(crate) fn put<T>(out: *mut T, value: T, name: &'static str) -> Result<(), Error> {
     if out.is_null() {

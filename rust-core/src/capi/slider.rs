@@ -5,12 +5,13 @@
 //! the accessors stay valid until the next `isobar_slider_set_isovalue` or
 //! `isobar_slider_free` on that handle.
 
-use super::{guard, invalid, non_null, opt_str, put, slice, IsobarProgressFn, IsobarStatus};
+use super::{
+    guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarProgressFn, IsobarStatus,
+};
 use crate::field::grid::{Lattice, Values, Volume};
-use crate::progress::Progress;
 use crate::slider::{build_store, BuildParams, Change, Slider};
 use glam::DVec3;
-use std::ffi::{c_char, c_void, CString};
+use std::ffi::{c_char, c_void};
 use std::path::Path;
 
 /// Opaque slider: a memory-mapped store and the surface at the current isovalue.
@@ -35,22 +36,6 @@ pub struct IsobarSliderChange {
     pub seconds: f64,
 }
 
-fn with_progress<R>(
-    progress: IsobarProgressFn,
-    user: *mut c_void,
-    body: impl FnOnce(&mut Progress) -> crate::Result<R>,
-) -> crate::Result<R> {
-    let mut report = |fraction: f64, phase: &str| match progress {
-        Some(f) => {
-            let phase = CString::new(phase).unwrap_or_default();
-            f(user, fraction, phase.as_ptr()) == 0
-        }
-        None => true,
-    };
-    let mut sink = Progress::new(&mut report);
-    body(&mut sink)
-}
-
 fn build_params(threshold: f64, max_levels: u32) -> BuildParams {
     let d = BuildParams::default();
     BuildParams {
@@ -66,6 +51,27 @@ fn build_params(threshold: f64, max_levels: u32) -> BuildParams {
         },
         ..d
     }
+}
+
+/// Builds the store of `volume` at `store_path` with the C progress callback.
+fn build_to(
+    volume: &Volume,
+    store_path: *const c_char,
+    threshold: f64,
+    max_levels: u32,
+    progress: IsobarProgressFn,
+    user: *mut c_void,
+) -> crate::Result<()> {
+    let output = required(store_path, "store_path")?;
+    with_progress(progress, user, |p| {
+        build_store(
+            volume,
+            Path::new(&output),
+            &build_params(threshold, max_levels),
+            p,
+        )
+    })?;
+    Ok(())
 }
 
 fn required(p: *const c_char, name: &'static str) -> crate::Result<String> {
@@ -87,18 +93,10 @@ pub extern "C" fn isobar_slider_build_file(
 ) -> IsobarStatus {
     guard(|| {
         let input = required(volume_path, "volume_path")?;
-        let output = required(store_path, "store_path")?;
+        required(store_path, "store_path")?;
         let array = opt_str(array, "array")?;
         let volume = crate::io::read_volume(Path::new(&input), array.as_deref(), None)?;
-        with_progress(progress, user, |p| {
-            build_store(
-                &volume,
-                Path::new(&output),
-                &build_params(threshold, max_levels),
-                p,
-            )
-        })?;
-        Ok(())
+        build_to(&volume, store_path, threshold, max_levels, progress, user)
     })
 }
 
@@ -139,16 +137,7 @@ pub extern "C" fn isobar_slider_build_f32(
             .ok_or_else(|| invalid("dims", "product overflows"))?;
         let values = slice(values, n, "values")?.to_vec();
         let volume = Volume::new(lattice, Values::F32(values))?;
-        let output = required(store_path, "store_path")?;
-        with_progress(progress, user, |p| {
-            build_store(
-                &volume,
-                Path::new(&output),
-                &build_params(threshold, max_levels),
-                p,
-            )
-        })?;
-        Ok(())
+        build_to(&volume, store_path, threshold, max_levels, progress, user)
     })
 }
 

@@ -2,14 +2,13 @@
 
 use super::particles::IsobarParticles;
 use super::surface::IsobarSurface;
-use super::{guard, invalid, non_null, opt_str, put, slice, IsobarStatus};
+use super::{guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarStatus};
 use crate::correctors::{self, Lattice, Params, Trim};
 use crate::field::kernel::Kernel;
 use crate::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
 use crate::field::DEFAULT_MEMORY_BUDGET;
-use crate::progress::Progress;
 use glam::DVec3;
-use std::ffi::{c_char, c_void, CString};
+use std::ffi::{c_char, c_void};
 
 /// Kernel: Monaghan's cubic spline (support 2h).
 pub const ISOBAR_KERNEL_CUBIC: u32 = 0;
@@ -234,20 +233,6 @@ pub(super) fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), cra
     Ok((sph, params))
 }
 
-/// The core's progress callback, forwarding to the caller's C one (NULL never cancels).
-pub(super) fn c_progress(
-    progress: IsobarProgressFn,
-    user: *mut c_void,
-) -> impl FnMut(f64, &str) -> bool {
-    move |fraction, phase| match progress {
-        Some(f) => {
-            let phase = CString::new(phase).unwrap_or_default();
-            f(user, fraction, phase.as_ptr()) == 0
-        }
-        None => true,
-    }
-}
-
 /// Extracts isosurfaces of the particles' SPH field. `progress` may be NULL; it is called
 /// on the calling thread only. On success `*out` owns a surface to free with
 /// `isobar_surface_free`; on failure `*out` is left untouched.
@@ -267,16 +252,16 @@ pub extern "C" fn isobar_sph_extract(
         let p = read_params(params)?;
         let (sph, params) = settings(&p)?;
         let data = &particles.data;
-        let mut report = c_progress(progress, user);
-        let mut sink = Progress::new(&mut report);
-        sink.window(0.0, 0.1);
-        let field = SphField::build(data, &sph, &mut sink)?;
-        sink.window(0.1, 1.0);
-        let extraction = if p.full_grid != 0 {
-            crate::baseline::extract(&field, data, &params, &mut sink)?
-        } else {
-            correctors::extract(&field, data, &params, &mut sink)?
-        };
+        let extraction = with_progress(progress, user, |sink| {
+            sink.window(0.0, 0.1);
+            let field = SphField::build(data, &sph, sink)?;
+            sink.window(0.1, 1.0);
+            if p.full_grid != 0 {
+                crate::baseline::extract(&field, data, &params, sink)
+            } else {
+                correctors::extract(&field, data, &params, sink)
+            }
+        })?;
         put(out, Box::into_raw(IsobarSurface::new(extraction)), "out")
     })
 }

@@ -380,8 +380,12 @@ impl Slider {
         // ... that edges in fill first.
         holes.sort_unstable_by(|a, b| b.cmp(a));
         for &e in &added {
-            if self.he.contains_key(&e) || e as usize >= 3 * self.store.nodes {
+            if self.he.contains_key(&e) {
                 return Err(self.corrupt(format!("edge {e} turns on but is already on")));
+            }
+            let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+            if node >= self.store.nodes || lattice.coords(node)[axis] + 1 >= lattice.dims[axis] {
+                return Err(self.corrupt(format!("edge {e} is not a lattice edge")));
             }
             let data = self.edge_data(e);
             let v = match holes.pop() {

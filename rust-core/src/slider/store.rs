@@ -239,6 +239,12 @@ impl Store {
                     .map_err(|m| err(format!("corrupt: skip-list level {l}: {m}")))?,
             );
         }
+        // Verifying read every page; hand them back so that resident memory follows what
+        // the slider touches, not the file size. The map is read-only and file-backed, so
+        // dropped pages are read again from the file when needed.
+        // SAFETY: no reference into the map's pages is held across this call that could
+        // observe different contents: the file is not written while mapped (see `open`).
+        let _ = unsafe { map.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
         Ok(Store {
             path: path.to_path_buf(),
             lattice,
