@@ -195,6 +195,26 @@ def test_every_xml_property_exists_and_round_trips():
 
 
 @test
+def test_volume_slider_in_paraview_slides_without_rebuilding():
+    from paraview.simple import Wavelet
+
+    IsovalueSlider = globals()["IsovalueSlider"]
+    source = Wavelet(WholeExtent=[-12, 12, -12, 12, -12, 12])
+    f = IsovalueSlider(Input=source)
+    f.Scalars = ["POINTS", "RTData"]
+    counts = []
+    for iso in (150.0, 160.0, 150.5, 200.0):
+        f.Isovalue = iso
+        out = sm.Fetch(f)
+        assert out.GetNumberOfCells() > 100, iso
+        f.UpdatePropertyInformation()
+        counts.append((f.GetPropertyValue("NumberOfStoreBuilds"), f.GetPropertyValue("NumberOfUpdates")))
+    assert counts == [(1, 1), (1, 2), (1, 3), (1, 4)], counts
+    assert f.SMProxy.GetHints().FindNestedElementByName("ShowInMenu").GetAttribute("category") == "isobar"
+    Delete(f)
+
+
+@test
 def test_filter_is_in_the_isobar_menu_category():
     r = LegacyVTKReader(FileNames=[h.FRAME_26])
     f = SPHIsosurface(Input=r)

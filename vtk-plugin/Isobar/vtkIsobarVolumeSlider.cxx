@@ -1,0 +1,209 @@
+#include "vtkIsobarVolumeSlider.h"
+
+#include "vtkCellArray.h"
+#include "vtkDataArray.h"
+#include "vtkFloatArray.h"
+#include "vtkImageData.h"
+#include "vtkInformation.h"
+#include "vtkInformationVector.h"
+#include "vtkNew.h"
+#include "vtkObjectFactory.h"
+#include "vtkPointData.h"
+#include "vtkPoints.h"
+#include "vtkPolyData.h"
+
+#include "isobar.h"
+
+#include <atomic>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+#include <vector>
+
+#include <unistd.h>
+
+vtkStandardNewMacro(vtkIsobarVolumeSlider);
+
+namespace
+{
+/// A store path no other filter (in this or another process) uses.
+std::string NewStorePath()
+{
+  static std::atomic<unsigned> counter{ 0 };
+  std::ostringstream name;
+  name << "isobar-slider-" << ::getpid() << "-" << counter++ << ".isoslider";
+  return (std::filesystem::temp_directory_path() / name.str()).string();
+}
+
+std::string CoreError(const char* call, IsobarStatus status)
+{
+  std::ostringstream msg;
+  msg << call << " failed (status " << static_cast<int>(status)
+      << "): " << isobar_last_error_message();
+  return msg.str();
+}
+} // namespace
+
+//------------------------------------------------------------------------------
+vtkIsobarVolumeSlider::vtkIsobarVolumeSlider()
+  : Isovalue(0.0)
+  , NumberOfStoreBuilds(0)
+  , NumberOfUpdates(0)
+  , LastUpdateSeconds(0.0)
+  , Slider(nullptr)
+{
+  this->SetInputArrayToProcess(
+    0, 0, 0, vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
+}
+
+//------------------------------------------------------------------------------
+vtkIsobarVolumeSlider::~vtkIsobarVolumeSlider()
+{
+  this->CloseStore();
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarVolumeSlider::CloseStore()
+{
+  isobar_slider_free(this->Slider);
+  this->Slider = nullptr;
+  if (!this->StorePath.empty())
+  {
+    std::error_code ignored;
+    std::filesystem::remove(this->StorePath, ignored);
+    this->StorePath.clear();
+  }
+  this->BuiltFrom.clear();
+}
+
+//------------------------------------------------------------------------------
+int vtkIsobarVolumeSlider::FillInputPortInformation(int, vtkInformation* info)
+{
+  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkImageData");
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarVolumeSlider::Fail(const std::string& message)
+{
+  this->ErrorMessage = message;
+  vtkErrorMacro(<< message);
+}
+
+//------------------------------------------------------------------------------
+int vtkIsobarVolumeSlider::RequestData(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
+{
+  vtkImageData* input = vtkImageData::GetData(inputVector[0], 0);
+  vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
+  this->ErrorMessage.clear();
+  output->Initialize();
+
+  vtkDataArray* values = this->GetInputArrayToProcess(0, inputVector);
+  if (!values)
+  {
+    this->Fail("the input image has no point scalars: choose a point array");
+    return 1;
+  }
+  int dims[3];
+  input->GetDimensions(dims);
+  double origin[3], spacing[3];
+  input->GetOrigin(origin);
+  input->GetSpacing(spacing);
+  if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2)
+  {
+    this->Fail("the input image must have at least 2 points along each axis");
+    return 1;
+  }
+
+  // 1. Pre-encode the volume, unless the open store was built from this very data.
+  std::ostringstream key;
+  key.precision(17);
+  key << values << " " << values->GetMTime() << " " << (values->GetName() ? values->GetName() : "")
+      << " " << dims[0] << " " << dims[1] << " " << dims[2];
+  for (int a = 0; a < 3; ++a)
+  {
+    key << " " << origin[a] << " " << spacing[a];
+  }
+  if (!this->Slider || key.str() != this->BuiltFrom)
+  {
+    this->CloseStore();
+    const vtkIdType n = values->GetNumberOfTuples();
+    std::vector<float> scalars(static_cast<size_t>(n));
+    for (vtkIdType i = 0; i < n; ++i)
+    {
+      scalars[static_cast<size_t>(i)] = static_cast<float>(values->GetComponent(i, 0));
+    }
+    const size_t sizes[3] = { static_cast<size_t>(dims[0]), static_cast<size_t>(dims[1]),
+      static_cast<size_t>(dims[2]) };
+    const std::string path = NewStorePath();
+    IsobarStatus status = isobar_slider_build_f32(
+      scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, nullptr, nullptr);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->Fail(CoreError("isobar_slider_build_f32", status));
+      return 1;
+    }
+    this->StorePath = path;
+    status = isobar_slider_open(path.c_str(), &this->Slider);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->Fail(CoreError("isobar_slider_open", status));
+      this->CloseStore();
+      return 1;
+    }
+    this->BuiltFrom = key.str();
+    ++this->NumberOfStoreBuilds;
+  }
+
+  // 2. Slide to the isovalue: the slider applies only the change since the last one.
+  IsobarSliderChange change;
+  const IsobarStatus status =
+    isobar_slider_set_isovalue(this->Slider, this->Isovalue, nullptr, nullptr, &change);
+  if (status != ISOBAR_STATUS_OK)
+  {
+    this->Fail(CoreError("isobar_slider_set_isovalue", status));
+    return 1;
+  }
+  ++this->NumberOfUpdates;
+  this->LastUpdateSeconds = change.seconds;
+
+  // 3. The slider's arrays into the output.
+  const vtkIdType nv = static_cast<vtkIdType>(isobar_slider_vertex_count(this->Slider));
+  const vtkIdType nt = static_cast<vtkIdType>(isobar_slider_triangle_count(this->Slider));
+  vtkNew<vtkFloatArray> xyz;
+  xyz->SetNumberOfComponents(3);
+  xyz->SetNumberOfTuples(nv);
+  vtkNew<vtkFloatArray> normals;
+  normals->SetName("Normals");
+  normals->SetNumberOfComponents(3);
+  normals->SetNumberOfTuples(nv);
+  if (nv > 0)
+  {
+    std::copy_n(isobar_slider_positions(this->Slider), 3 * nv, xyz->GetPointer(0));
+    std::copy_n(isobar_slider_normals(this->Slider), 3 * nv, normals->GetPointer(0));
+  }
+  vtkNew<vtkPoints> points;
+  points->SetData(xyz);
+  vtkNew<vtkCellArray> polys;
+  polys->AllocateExact(nt, 3 * nt);
+  const uint32_t* tris = isobar_slider_triangles(this->Slider);
+  for (vtkIdType t = 0; t < nt; ++t)
+  {
+    const vtkIdType ids[3] = { tris[3 * t], tris[3 * t + 1], tris[3 * t + 2] };
+    polys->InsertNextCell(3, ids);
+  }
+  output->SetPoints(points);
+  output->SetPolys(polys);
+  output->GetPointData()->SetNormals(normals);
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarVolumeSlider::PrintSelf(ostream& os, vtkIndent indent)
+{
+  this->Superclass::PrintSelf(os, indent);
+  os << indent << "Isovalue: " << this->Isovalue << "\n";
+  os << indent << "NumberOfStoreBuilds: " << this->NumberOfStoreBuilds << "\n";
+  os << indent << "NumberOfUpdates: " << this->NumberOfUpdates << "\n";
+}

@@ -1,0 +1,75 @@
+/**
+ * @class   vtkIsobarVolumeSlider
+ * @brief   isovalue sliding on image data (isobar's ISOSLIDER)
+ *
+ * The input is a vtkImageData with a point scalar array (the one chosen with
+ * SetInputArrayToProcess(0, ...), else the active scalars; component 0 of a vector).
+ * The first update pre-encodes the volume into an isobar store (a temporary file, removed
+ * with the filter); later updates that only change Isovalue reuse the open slider, which
+ * applies just the change since the last isovalue: the triangles of cells that stop or
+ * start crossing and the moved vertices. The output is the marching-cubes surface of the
+ * trilinear volume (float points, "Normals" from the volume's gradient).
+ *
+ * A new input array, new values or new geometry rebuild the store. NumberOfStoreBuilds
+ * and NumberOfUpdates count the work done, so that scripts (and tests) can tell a slide
+ * from a start-over.
+ */
+
+#ifndef vtkIsobarVolumeSlider_h
+#define vtkIsobarVolumeSlider_h
+
+#include "IsobarVTKModule.h" // For export macro
+#include "vtkPolyDataAlgorithm.h"
+
+#include <string> // For members
+
+struct IsobarSlider;
+
+class ISOBARVTK_EXPORT vtkIsobarVolumeSlider : public vtkPolyDataAlgorithm
+{
+public:
+  static vtkIsobarVolumeSlider* New();
+  vtkTypeMacro(vtkIsobarVolumeSlider, vtkPolyDataAlgorithm);
+  void PrintSelf(ostream& os, vtkIndent indent) override;
+
+  ///@{
+  /// The isovalue shown (default 0).
+  vtkSetMacro(Isovalue, double);
+  vtkGetMacro(Isovalue, double);
+  ///@}
+
+  /// Times the volume was pre-encoded (once per input volume).
+  vtkGetMacro(NumberOfStoreBuilds, int);
+  /// Isovalue changes applied by the slider.
+  vtkGetMacro(NumberOfUpdates, int);
+  /// Core time of the last isovalue change, in seconds.
+  vtkGetMacro(LastUpdateSeconds, double);
+  /// The last error ("" when the last update succeeded).
+  const char* GetErrorMessage() const { return this->ErrorMessage.c_str(); }
+
+protected:
+  vtkIsobarVolumeSlider();
+  ~vtkIsobarVolumeSlider() override;
+
+  int FillInputPortInformation(int port, vtkInformation* info) override;
+  int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
+
+private:
+  vtkIsobarVolumeSlider(const vtkIsobarVolumeSlider&) = delete;
+  void operator=(const vtkIsobarVolumeSlider&) = delete;
+
+  void Fail(const std::string& message);
+  void CloseStore();
+
+  double Isovalue;
+  int NumberOfStoreBuilds;
+  int NumberOfUpdates;
+  double LastUpdateSeconds;
+  std::string ErrorMessage;
+  IsobarSlider* Slider;
+  std::string StorePath;
+  /// What the open store was built from: array identity, its MTime, the geometry.
+  std::string BuiltFrom;
+};
+
+#endif
