@@ -105,6 +105,48 @@ int main(void) {
     CHECK(isobar_surface_attribute(surface, 99, &name, &components, &weights) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "index 99");
     isobar_surface_free(surface);
 
+    /* The adaptive 3-level surface of the same particle: every vertex within the
+     * bisection accuracy (finest cell / 2^n, n = the level-3 halvings) of the sphere
+     * where the kernel sum equals iso, and one isovalue only. */
+    {
+        double lo = 0.0, hi = 2.0 * h;
+        for (int k = 0; k < 200; k++) {
+            double mid = 0.5 * (lo + hi);
+            if (value * volume * cubic(mid, h) > iso) lo = mid; else hi = mid;
+        }
+        const double radius = 0.5 * (lo + hi);
+        IsobarAdaptiveParams adaptive;
+        CHECK(isobar_adaptive_params_default(&adaptive) == ISOBAR_STATUS_OK, "adaptive defaults");
+        CHECK(adaptive.struct_size == sizeof adaptive, "adaptive struct_size");
+        IsobarAdaptiveStats astats;
+        memset(&astats, 0, sizeof astats);
+        astats.struct_size = sizeof astats;
+        IsobarSurface *coarse = NULL;
+        CHECK(isobar_adaptive_extract(particles, &params, &adaptive, NULL, NULL, &coarse, &astats) == ISOBAR_STATUS_OK,
+              "adaptive extract: %s", isobar_last_error_message());
+        size_t anv = isobar_surface_vertex_count(coarse), ant = isobar_surface_triangle_count(coarse);
+        CHECK(anv > 20 && ant > 40 && astats.triangles == ant && astats.vertices == anv, "adaptive counts");
+        const double *axyz = isobar_surface_positions(coarse);
+        const double accuracy = params.grid_factor * h / (double)(1u << adaptive.bisection_iterations);
+        double off = 0.0;
+        for (size_t i = 0; i < anv; i++) {
+            double d[3] = {axyz[3 * i] - centre[0], axyz[3 * i + 1] - centre[1], axyz[3 * i + 2] - centre[2]};
+            double e = fabs(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - radius);
+            if (e > off) off = e;
+        }
+        CHECK(off <= 1.001 * accuracy, "adaptive vertex %g off the sphere (accuracy %g)", off, accuracy);
+        isobar_surface_free(coarse);
+        const double two[2] = {iso, 0.5 * iso};
+        params.isovalues = two;
+        params.isovalue_count = 2;
+        coarse = NULL;
+        CHECK(isobar_adaptive_extract(particles, &params, &adaptive, NULL, NULL, &coarse, NULL) ==
+                  ISOBAR_STATUS_ERR_INVALID_ARGUMENT && coarse == NULL, "adaptive: two isovalues refused");
+        CHECK(strstr(isobar_last_error_message(), "one isovalue") != NULL, "message: %s", isobar_last_error_message());
+        params.isovalues = &iso;
+        params.isovalue_count = 1;
+    }
+
     /* Cancel: the callback's non-zero return stops the work with a distinct status. */
     int cancels = 0;
     surface = NULL;
