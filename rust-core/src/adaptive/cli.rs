@@ -1,7 +1,7 @@
 //! The `isobar adaptive` subcommand's body: the binary parses the SPH field options
 //! shared with `isobar sph` and hands them here with these adaptive ones.
 
-use super::{extract, extract_sph, grid_for, hausdorff, Extraction, Params, Stats};
+use super::{extract, extract_sph, grid_for, Extraction, Params, Stats};
 use crate::correctors;
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
@@ -84,7 +84,7 @@ pub fn run(
     }
     for path in &frames {
         let number = io::frame_number(path).unwrap_or(0);
-        let output = PathBuf::from(fill_frame(&out_text, number));
+        let output = PathBuf::from(io::fill_frame(&out_text, number));
         let data = io::read_particles(path)?;
         let t = Instant::now();
         let field = SphField::new(&data, &settings(&data)?)?;
@@ -104,7 +104,7 @@ pub fn run(
             print!("{text}");
         }
         if let Some(json) = common.stats_json {
-            let json = PathBuf::from(fill_frame(&json.to_string_lossy(), number));
+            let json = PathBuf::from(io::fill_frame(&json.to_string_lossy(), number));
             write_json(&json, &rows)?;
         }
     }
@@ -190,7 +190,7 @@ fn compare(
         crate::baseline::extract(field, &empty, &baseline_params, &mut Progress::none())?;
     let baseline_s = t.elapsed().as_secs_f64();
     let fine = grid.fine;
-    let d = hausdorff::hausdorff(&adaptive.mesh, &uniform.mesh, 8.0 * fine);
+    let d = crate::mesh::hausdorff::hausdorff(&adaptive.mesh, &uniform.mesh, 8.0 * fine);
     let baseline_nodes = baseline.stats.node_evaluations;
     let ratio = |n: u64| n as f64 / adaptive.mesh.triangles.len().max(1) as f64;
     Ok(vec![
@@ -253,18 +253,4 @@ fn write_json(path: &Path, rows: &[(String, String)]) -> Result<()> {
         .collect();
     let text = format!("{{\n{}\n}}\n", body.join(",\n"));
     io::write_atomically(path, |w| std::io::Write::write_all(w, text.as_bytes()))
-}
-
-/// `pattern` with its run of '#' replaced by the zero-padded frame number.
-fn fill_frame(pattern: &str, frame: u64) -> String {
-    let Some(start) = pattern.find('#') else {
-        return pattern.to_string();
-    };
-    let width = pattern[start..].chars().take_while(|&c| c == '#').count();
-    format!(
-        "{}{:0width$}{}",
-        &pattern[..start],
-        frame,
-        &pattern[start + width..]
-    )
 }

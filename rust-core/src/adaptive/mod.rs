@@ -12,7 +12,6 @@ pub mod crack_gen;
 pub mod crack_table;
 pub mod cracks;
 pub mod grid;
-pub mod hausdorff;
 pub mod levels;
 
 use crate::error::{Error, Result};

@@ -2,11 +2,11 @@
 //! mix of levels, and the distance to the uniform finest-level surface.
 
 use super::grid::{CoarseGrid, FINE_PER_COARSE};
-use super::hausdorff::hausdorff;
 use super::*;
 use crate::field::kernel::Kernel;
 use crate::field::particles::ParticleData;
 use crate::field::sph::{SmoothingLength, SphSettings};
+use crate::mesh::hausdorff::hausdorff;
 use glam::DVec3;
 
 /// Trilinear interpolation of values on a lattice of spacing `cell` from `origin`: a

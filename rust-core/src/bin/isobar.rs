@@ -294,7 +294,10 @@ fn run_sph(args: &SphArgs) -> Result<()> {
     }
     for path in &frames {
         let output = if sequence {
-            PathBuf::from(fill_frame(&out_text, io::frame_number(path).unwrap_or(0)))
+            PathBuf::from(io::fill_frame(
+                &out_text,
+                io::frame_number(path).unwrap_or(0),
+            ))
         } else {
             args.output.clone()
         };
@@ -311,7 +314,7 @@ fn run_sph(args: &SphArgs) -> Result<()> {
         }
         if let Some(json) = &args.stats_json {
             let json = if sequence {
-                PathBuf::from(fill_frame(
+                PathBuf::from(io::fill_frame(
                     &json.to_string_lossy(),
                     io::frame_number(path).unwrap_or(0),
                 ))
@@ -451,17 +454,6 @@ fn extract(
     };
     bar.finish_and_clear();
     Ok((result?, build_s))
-}
-
-fn fill_frame(pattern: &str, frame: u64) -> String {
-    let start = pattern.find('#').unwrap_or(pattern.len());
-    let width = pattern[start..].chars().take_while(|&c| c == '#').count();
-    format!(
-        "{}{:0width$}{}",
-        &pattern[..start],
-        frame,
-        &pattern[start + width..]
-    )
 }
 
 fn stats_rows(

@@ -44,7 +44,7 @@ use std::path::Path;
 
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::write_atomically;
-pub use sequence::{expand_sequence, frame_number};
+pub use sequence::{expand_sequence, fill_frame, frame_number};
 pub use volume::{read_volume, RawLayout, RawType};
 
 /// Extensions [`read_particles`] understands (each may also carry a trailing `.gz`).

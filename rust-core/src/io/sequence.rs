@@ -120,6 +120,21 @@ pub fn frame_number(path: &Path) -> Option<u64> {
 }
 
 /// Splits `name` into stem and extension, treating `.x.gz` as one extension.
+/// An output path for frame `frame`: the first run of `#` in `pattern` replaced by the
+/// frame number, zero-padded to the run's width (a pattern without `#` is used as is).
+pub fn fill_frame(pattern: &str, frame: u64) -> String {
+    let Some(start) = pattern.find('#') else {
+        return pattern.to_string();
+    };
+    let width = pattern[start..].chars().take_while(|&c| c == '#').count();
+    format!(
+        "{}{:0width$}{}",
+        &pattern[..start],
+        frame,
+        &pattern[start + width..]
+    )
+}
+
 fn split_extension(name: &str) -> (&str, &str) {
     let Some(dot) = name.rfind('.').filter(|&i| i > 0) else {
         return (name, "");
@@ -266,6 +281,13 @@ mod tests {
         let p = super::super::test_support::shared_data_dir().join("cube_2366_particles.vtk");
         let s = expand_sequence(p.to_str().unwrap()).unwrap();
         assert_eq!(s, vec![p]);
+    }
+
+    #[test]
+    fn output_patterns_take_the_frame_number() {
+        assert_eq!(fill_frame("surf/f_####.ply", 7), "surf/f_0007.ply");
+        assert_eq!(fill_frame("f_##.vtp", 1234), "f_1234.vtp");
+        assert_eq!(fill_frame("plain.ply", 3), "plain.ply");
     }
 
     #[test]

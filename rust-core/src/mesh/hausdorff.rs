@@ -1,5 +1,5 @@
-//! Sampled Hausdorff distance between two triangle meshes, for the tests' and the
-//! benchmark's comparison with the uniform finest-level surface.
+//! Sampled Hausdorff distance between two triangle meshes: how far one extraction's
+//! surface strays from another's (the adaptive surface against the uniform finest one).
 
 use crate::mesh::Mesh;
 use glam::{DVec3, IVec3};

@@ -1,5 +1,7 @@
 //! Output triangle meshes and the checks every extractor's tests share.
 
+pub mod hausdorff;
+
 use crate::field::particles::Attribute;
 use std::collections::HashMap;
 
