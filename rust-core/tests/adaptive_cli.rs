@@ -77,6 +77,20 @@ fn adaptive_command_refuses_bad_options() {
             vec!["--iso", "0.6", "--bisection-iterations", "0"],
             "bisection_iterations",
         ),
+        // Marching Correctors' own options are refused, not silently ignored.
+        (vec!["--iso", "0.6", "--preview"], "--preview applies to"),
+        (
+            vec!["--iso", "0.6", "--attributes", "velocity"],
+            "--attributes applies to",
+        ),
+        (
+            vec!["--iso", "0.6", "--full-grid"],
+            "--full-grid applies to",
+        ),
+        (
+            vec!["--iso", "0.6", "--trim", "0.1,0.5"],
+            "--trim applies to",
+        ),
     ] {
         let out = isobar()
             .args(["adaptive", &frame(), "--h", "0.05", "--quiet"])

@@ -328,6 +328,24 @@ fn run_sph(args: &SphArgs) -> Result<()> {
 }
 
 fn run_adaptive(sph: &SphArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -> Result<()> {
+    // The shared SPH options include Marching Correctors' own; silently ignoring one would
+    // give a surface other than the one asked for (the hosts refuse them the same way).
+    let correctors_only = [
+        ("--preview", sph.preview),
+        ("--trim", sph.trim.is_some()),
+        ("--attributes", !sph.attributes.is_empty()),
+        ("--lattice", sph.lattice.is_some()),
+        ("--clip", sph.clip.is_some()),
+        ("--full-grid", sph.full_grid),
+    ];
+    if let Some((name, _)) = correctors_only.iter().find(|(_, given)| *given) {
+        return Err(Error::InvalidParameter {
+            name: "adaptive",
+            message: format!(
+                "{name} applies to `isobar sph` (Marching Correctors), not to the adaptive surface"
+            ),
+        });
+    }
     let common = isobar::adaptive::cli::Common {
         input: &sph.input,
         output: &sph.output,
