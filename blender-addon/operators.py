@@ -173,15 +173,19 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
 
     def execute(self, context):
         path = bpy.path.abspath(self.filepath)
+        stem = os.path.splitext(os.path.basename(path))[0] or "volume"
+        obj = None
         try:
             store = volume_slider.ensure_store(path)
-            with extraction.isobar_module().Slider(store) as probe:
-                lo, hi = probe.value_range
+            obj = _new_surface_object(context, f"{stem}_isosurface")
+            # The object's own slider: opening a store checks it whole, so open it once.
+            lo, hi = volume_slider.slider_for(obj, store).value_range
         except Exception as error:  # noqa: BLE001 - reported, not raised
+            if obj is not None:
+                volume_slider.close(obj)
+                bpy.data.objects.remove(obj)
             self.report({"ERROR"}, importer.describe_error(error))
             return {"CANCELLED"}
-        stem = os.path.splitext(os.path.basename(path))[0] or "volume"
-        obj = _new_surface_object(context, f"{stem}_isosurface")
         settings = obj.isobar_slider
         settings.volume, settings.store = path, store
         settings.value_min, settings.value_max = lo, hi
@@ -189,7 +193,6 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         settings.isovalue = 0.5 * (lo + hi)  # slides: the mesh appears
         if settings.status_error:
             self.report({"ERROR"}, settings.status)
-            return {"CANCELLED"}
         return {"FINISHED"}
 
 
