@@ -272,25 +272,42 @@ impl FeMesh {
     /// Fails naming the first cell whose Jacobian determinant is not positive at one of its
     /// nodes or its centroid (inverted, flat or collapsed).
     fn check_elements(&self, name: &str) -> Result<()> {
-        let mut scratch = Scratch::default();
+        // The probe points and the basis gradients there depend only on the shape: evaluate
+        // them once per shape, so each cell costs only its J = Σ_k x_k ⊗ ∇φ_k sums.
+        let mut basis = BasisValues::default();
+        let probes: Vec<Vec<(DVec3, Vec<DVec3>)>> = self
+            .shapes
+            .iter()
+            .map(|shape| {
+                (0..shape.len())
+                    .map(|n| shape.node_coords(n))
+                    .chain(std::iter::once(shape.kind.centroid()))
+                    .map(|u| {
+                        shape.evaluate_to(u, 1, &mut basis);
+                        (u, basis.gradients.clone())
+                    })
+                    .collect()
+            })
+            .collect();
         for c in 0..self.cell_count() {
             let shape = self.shape(c);
+            let nodes = self.nodes(c);
             // Scale-free test: det J relative to the cube of the cell's extent.
-            let pts: Vec<DVec3> = self
-                .nodes(c)
-                .iter()
-                .map(|&n| self.points[n as usize])
-                .collect();
-            let (lo, hi) = pts
-                .iter()
-                .fold((pts[0], pts[0]), |(a, b), &p| (a.min(p), b.max(p)));
+            let first = self.points[nodes[0] as usize];
+            let (lo, hi) = nodes.iter().fold((first, first), |(a, b), &n| {
+                let p = self.points[n as usize];
+                (a.min(p), b.max(p))
+            });
             let size = (hi - lo).max_element();
             let floor = 1e-12 * size * size * size;
-            let probe = (0..shape.len())
-                .map(|n| shape.node_coords(n))
-                .chain(std::iter::once(shape.kind.centroid()));
-            for u in probe {
-                let (_, j) = self.map(c, u, &mut scratch);
+            for (u, gradients) in &probes[self.cell_shape[c] as usize] {
+                // Summed in node order, as `map` does, so det J is the same to the bit.
+                let j = nodes
+                    .iter()
+                    .zip(gradients)
+                    .fold(DMat3::ZERO, |j, (&n, &g)| {
+                        j + outer(self.points[n as usize], g)
+                    });
                 let det = j.determinant();
                 if det <= floor || det.is_nan() {
                     let what = if det < -floor {
