@@ -17,14 +17,14 @@ use std::time::Instant;
 pub struct AdaptiveArgs {
     /// Splash criterion: coarse cells holding 1..=N particles become level 3 (paper: 1;
     /// 0 keeps every cell at level 1).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = Params::default().splash_threshold)]
     pub splash_threshold: u32,
     /// Layers of neighbour cells raised to level 3 around each splash cell (0 = the
     /// paper's criterion alone).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = Params::default().splash_dilation)]
     pub splash_dilation: u32,
     /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = Params::default().bisection_iterations)]
     pub bisection_iterations: u32,
     /// Also run uniform marching cubes at the finest level (the full-grid baseline and the
     /// adaptive code with every cell at level 3) and print time, triangles, memory and

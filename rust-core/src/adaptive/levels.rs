@@ -16,6 +16,7 @@ use crate::mc::{case_index, case_table, corner_offset, edge_corner_axis, edge_ke
 use crate::progress::{chunked, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// A point on the surface, found on a grid edge.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -104,23 +105,59 @@ pub fn build_level<F: ScalarField + ?Sized>(
     let cells: Vec<u32> = (0..levels.len() as u32)
         .filter(|&i| levels[i as usize] == level)
         .collect();
-    // Step 4: vertex values, cell by cell (vertices shared by neighbours are evaluated by
-    // each, as on the GPU; the values agree bit for bit).
+    // Step 4: vertex values, cell by cell. A node shared by several cells of this level is
+    // evaluated once, by the one of lowest index (its `node_owner`), and copied to the
+    // others; the values are those each cell would compute, bit for bit.
+    let nnn = n * n * n;
+    let local = |v: usize| [v % n, v / n % n, v / (n * n)].map(|x| x as u32);
     let values: Vec<f64> = chunked(&cells, progress, |part| {
         part.par_iter()
             .flat_map_iter(|&cell| {
                 let c = grid.coords(cell as usize);
-                (0..n * n * n).map(move |v| {
-                    let l = [v % n, v / n % n, v / (n * n)];
+                (0..nnn).map(move |v| {
+                    let l = local(v);
+                    if node_owner(grid, levels, level, k, c, l).is_some() {
+                        return 0.0; // copied from the owner below
+                    }
                     let sub: [i64; 3] = std::array::from_fn(|a| {
-                        ((c[a] * FINE_PER_COARSE + l[a] as u32 * step) as i64) << iterations
+                        ((c[a] * FINE_PER_COARSE + l[a] * step) as i64) << iterations
                     });
                     field.value(grid.point(sub, iterations))
                 })
             })
             .collect()
     })?;
-    let mut evaluations = values.len() as u64;
+    // Owners have lower slots than the cells they serve and keep their own values, so the
+    // copies read only finished entries.
+    let values: Vec<AtomicU64> = values
+        .into_iter()
+        .map(|v| AtomicU64::new(v.to_bits()))
+        .collect();
+    let copied: u64 = (0..cells.len())
+        .into_par_iter()
+        .map(|slot| {
+            let c = grid.coords(cells[slot] as usize);
+            let mut copied = 0;
+            for v in 0..nnn {
+                let l = local(v);
+                if let Some((owner, m)) = node_owner(grid, levels, level, k, c, l) {
+                    let o = cells
+                        .binary_search(&(owner as u32))
+                        .expect("a node's owner has the level");
+                    let from = o * nnn + m[0] as usize + n * (m[1] as usize + n * m[2] as usize);
+                    let bits = values[from].load(Ordering::Relaxed);
+                    values[slot * nnn + v].store(bits, Ordering::Relaxed);
+                    copied += 1;
+                }
+            }
+            copied
+        })
+        .sum();
+    let values: Vec<f64> = values
+        .into_iter()
+        .map(|v| f64::from_bits(v.into_inner()))
+        .collect();
+    let mut evaluations = values.len() as u64 - copied;
     // Step 5: cases and triangle counts of the sub-cells.
     let kk = (k * k * k) as usize;
     let table = case_table();
@@ -234,6 +271,41 @@ pub fn build_level<F: ScalarField + ?Sized>(
     })
 }
 
+/// The cell that evaluates node `l` (local coordinates 0..=k) of coarse cell `c`: of the
+/// cells of `level` holding the node, the one of lowest index, with the node's local
+/// coordinates there; None when that is `c` itself.
+fn node_owner(
+    grid: &CoarseGrid,
+    levels: &[u8],
+    level: u8,
+    k: u32,
+    c: [u32; 3],
+    l: [u32; 3],
+) -> Option<(usize, [u32; 3])> {
+    let mut best: Option<(usize, [u32; 3])> = None;
+    let mut lowest = grid.index(c);
+    // The other cells holding the node: c moved by one along any non-empty subset of the
+    // axes where the node lies on c's faces.
+    'subsets: for d in 1..8usize {
+        let (mut n, mut m) = (c, l);
+        for a in (0..3).filter(|a| d >> a & 1 == 1) {
+            if l[a] == 0 && c[a] > 0 {
+                (n[a], m[a]) = (c[a] - 1, k);
+            } else if l[a] == k && c[a] + 1 < grid.cells[a] {
+                (n[a], m[a]) = (c[a] + 1, 0);
+            } else {
+                continue 'subsets;
+            }
+        }
+        let i = grid.index(n);
+        if i < lowest && levels[i] == level {
+            lowest = i;
+            best = Some((i, m));
+        }
+    }
+    best
+}
+
 /// Bisection on the edge `key` (length `step` finest cells, end values `f0`, `f1` on
 /// either side of `iso`) in units of 2^-`shift` finest cells, `steps` halvings, then linear
 /// interpolation in the last interval of one unit.
@@ -310,4 +382,70 @@ pub fn check_budget(levels: &[u8], budget: u64) -> Result<()> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::progress::Progress;
+    use std::collections::HashSet;
+
+    /// A field with no surface (every edge uncut), distinct at every point.
+    struct Below;
+
+    impl ScalarField for Below {
+        fn value(&self, x: DVec3) -> f64 {
+            -1.0 - x.x - 3.0 * x.y - 7.0 * x.z
+        }
+
+        fn value_and_gradient(&self, x: DVec3) -> (f64, DVec3) {
+            (self.value(x), DVec3::new(-1.0, -3.0, -7.0))
+        }
+    }
+
+    #[test]
+    fn each_node_of_a_level_is_evaluated_once_and_every_cell_gets_its_value() {
+        let grid = CoarseGrid {
+            origin: DVec3::new(0.1, -0.2, 0.3),
+            fine: 0.25,
+            cells: [3, 3, 2],
+        };
+        // Every level, with cells of each level touching across faces, edges and corners.
+        let levels: Vec<u8> = (0..grid.cell_count())
+            .map(|i| [1, 2, 3, 2, 3, 3][i % 6])
+            .collect();
+        for level in 1..=3u8 {
+            let a = build_level(
+                &Below,
+                &grid,
+                &levels,
+                level,
+                0.0,
+                5,
+                false,
+                &mut Progress::none(),
+            )
+            .unwrap();
+            let k = subdivisions(level);
+            let step = FINE_PER_COARSE / k;
+            let mut distinct = HashSet::new();
+            for (slot, &cell) in a.cells.iter().enumerate() {
+                let c = grid.coords(cell as usize);
+                for v in 0..(k + 1).pow(3) {
+                    let l = [v % (k + 1), v / (k + 1) % (k + 1), v / (k + 1).pow(2)];
+                    let node: [u32; 3] =
+                        std::array::from_fn(|x| c[x] * FINE_PER_COARSE + l[x] * step);
+                    distinct.insert(node);
+                    let sub = node.map(|x| (x as i64) << 5);
+                    assert_eq!(
+                        a.value_at(&grid, slot, node).to_bits(),
+                        Below.value(grid.point(sub, 5)).to_bits(),
+                        "level {level}, cell {cell}, node {node:?}"
+                    );
+                }
+            }
+            assert!(a.edges.is_empty());
+            assert_eq!(a.evaluations, distinct.len() as u64, "level {level}");
+        }
+    }
 }

@@ -256,35 +256,30 @@ mod tests {
         assert_eq!(stats.cells_per_level, rust.stats.cells_per_level);
         assert!(stats.cells_per_level[2] > 0, "the droplet is level 3");
         isobar_surface_free(surface);
-        // Two isovalues: refused with a message, nothing returned.
+        // Refused calls return nothing and leave `out` untouched.
+        let refused = |sph: &IsobarSphParams, adaptive: &IsobarAdaptiveParams| {
+            let mut none = std::ptr::null_mut();
+            let status = isobar_adaptive_extract(
+                handle,
+                sph,
+                adaptive,
+                None,
+                std::ptr::null_mut(),
+                &mut none,
+                std::ptr::null_mut(),
+            );
+            assert!(none.is_null());
+            status
+        };
+        // Two isovalues.
         let two = [0.5f64, 0.6];
         sph.isovalues = two.as_ptr();
         sph.isovalue_count = 2;
-        let mut none = std::ptr::null_mut();
-        let status = isobar_adaptive_extract(
-            handle,
-            &sph,
-            &adaptive,
-            None,
-            std::ptr::null_mut(),
-            &mut none,
-            std::ptr::null_mut(),
-        );
-        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
-        assert!(none.is_null());
+        assert_eq!(refused(&sph, &adaptive), IsobarStatus::ErrInvalidArgument);
         // A struct_size from nowhere.
         sph.isovalue_count = 1;
         adaptive.struct_size = 3;
-        let status = isobar_adaptive_extract(
-            handle,
-            &sph,
-            &adaptive,
-            None,
-            std::ptr::null_mut(),
-            &mut none,
-            std::ptr::null_mut(),
-        );
-        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        assert_eq!(refused(&sph, &adaptive), IsobarStatus::ErrInvalidArgument);
         isobar_particles_free(handle);
     }
 }
