@@ -187,8 +187,10 @@ pub extern "C" fn isobar_slider_set_isovalue(
     guard(|| {
         let h = slider_mut(s)?;
         let c = with_progress(progress, user, |p| h.slider.set_isovalue_with(iso, p))?;
-        h.triangles = h.slider.triangles();
-        h.moved = c.moved_vertices.iter().flat_map(|&(a, b)| [a, b]).collect();
+        h.slider.triangles_into(&mut h.triangles);
+        h.moved.clear();
+        h.moved
+            .extend(c.moved_vertices.iter().flat_map(|&(a, b)| [a, b]));
         let summary = IsobarSliderChange {
             isovalue: c.isovalue,
             triangles_added: c.added_triangles.len() as u64,
