@@ -53,20 +53,19 @@ fn build_params(threshold: f64, max_levels: u32) -> BuildParams {
     }
 }
 
-/// Builds the store of `volume` at `store_path` with the C progress callback.
+/// Builds the store of `volume` at `output` with the C progress callback.
 fn build_to(
     volume: &Volume,
-    store_path: *const c_char,
+    output: &str,
     threshold: f64,
     max_levels: u32,
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> crate::Result<()> {
-    let output = required(store_path, "store_path")?;
     with_progress(progress, user, |p| {
         build_store(
             volume,
-            Path::new(&output),
+            Path::new(output),
             &build_params(threshold, max_levels),
             p,
         )
@@ -93,10 +92,10 @@ pub extern "C" fn isobar_slider_build_file(
 ) -> IsobarStatus {
     guard(|| {
         let input = required(volume_path, "volume_path")?;
-        required(store_path, "store_path")?;
+        let output = required(store_path, "store_path")?;
         let array = opt_str(array, "array")?;
         let volume = crate::io::read_volume(Path::new(&input), array.as_deref(), None)?;
-        build_to(&volume, store_path, threshold, max_levels, progress, user)
+        build_to(&volume, &output, threshold, max_levels, progress, user)
     })
 }
 
@@ -116,6 +115,7 @@ pub extern "C" fn isobar_slider_build_f32(
     user: *mut c_void,
 ) -> IsobarStatus {
     guard(|| {
+        let output = required(store_path, "store_path")?;
         let d = slice(dims, 3, "dims")?;
         let dims = [d[0], d[1], d[2]];
         let three = |p: *const f64, name, default: f64| -> crate::Result<DVec3> {
@@ -137,7 +137,7 @@ pub extern "C" fn isobar_slider_build_f32(
             .ok_or_else(|| invalid("dims", "product overflows"))?;
         let values = slice(values, n, "values")?.to_vec();
         let volume = Volume::new(lattice, Values::F32(values))?;
-        build_to(&volume, store_path, threshold, max_levels, progress, user)
+        build_to(&volume, &output, threshold, max_levels, progress, user)
     })
 }
 
@@ -187,8 +187,10 @@ pub extern "C" fn isobar_slider_set_isovalue(
     guard(|| {
         let h = slider_mut(s)?;
         let c = with_progress(progress, user, |p| h.slider.set_isovalue_with(iso, p))?;
-        h.triangles = h.slider.triangles();
-        h.moved = c.moved_vertices.iter().flat_map(|&(a, b)| [a, b]).collect();
+        h.slider.triangles_into(&mut h.triangles);
+        h.moved.clear();
+        h.moved
+            .extend(c.moved_vertices.iter().flat_map(|&(a, b)| [a, b]));
         let summary = IsobarSliderChange {
             isovalue: c.isovalue,
             triangles_added: c.added_triangles.len() as u64,

@@ -96,12 +96,21 @@ impl Values {
         }
     }
 
-    /// Little-endian bytes of every value, in order.
-    pub fn to_le_bytes(&self) -> Vec<u8> {
+    /// Little-endian bytes of every value, in order, handed to `out` a bounded chunk at a
+    /// time (a store build writes the volume without a second whole copy of it).
+    pub fn write_le<E>(
+        &self,
+        out: &mut dyn FnMut(&[u8]) -> std::result::Result<(), E>,
+    ) -> std::result::Result<(), E> {
+        const CHUNK: usize = 1 << 16;
         match self {
-            Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            Values::U16(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            Values::U8(v) => v.clone(),
+            Values::F32(v) => v.chunks(CHUNK).try_for_each(|c| {
+                out(&c.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>())
+            }),
+            Values::U16(v) => v.chunks(CHUNK).try_for_each(|c| {
+                out(&c.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>())
+            }),
+            Values::U8(v) => out(v),
         }
     }
 }

@@ -273,17 +273,7 @@ pub fn build_store(
             .collect(),
         ..BuildStats::default()
     };
-    let value_bytes = values.to_le_bytes();
-    write_store(
-        path,
-        &lattice,
-        volume,
-        params,
-        &value_bytes,
-        &order,
-        &mask,
-        &levels,
-    )?;
+    write_store(path, volume, params, &order, &mask, &levels)?;
     stats.file_bytes = std::fs::metadata(path)
         .map_err(|e| Error::io(path, e))?
         .len();
@@ -298,17 +288,15 @@ type Sink<'a> = dyn FnMut(&[u8]) -> std::io::Result<()> + 'a;
 type Part<'a> = &'a dyn Fn(&mut Sink) -> std::io::Result<()>;
 
 /// Writes sections after a placeholder header, then the header with their checksums.
-#[allow(clippy::too_many_arguments)]
 fn write_store(
     path: &Path,
-    lattice: &Lattice,
     volume: &Volume,
     params: &BuildParams,
-    value_bytes: &[u8],
     order: &[u32],
     mask: &[u8],
     levels: &[LevelData],
 ) -> Result<()> {
+    let lattice = &volume.lattice;
     let sections = 3 + levels.len();
     let dir_end = FIXED_HEADER + sections * DIRECTORY_ENTRY;
     let header_len = (dir_end + 4).next_multiple_of(8);
@@ -341,7 +329,7 @@ fn write_store(
             at += len + pad as u64;
             Ok(())
         };
-        section(w, Kind::Values, 0, &[&|out| out(value_bytes)])?;
+        section(w, Kind::Values, 0, &[&|out| volume.values.write_le(out)])?;
         section(w, Kind::Order, 0, &[&|out| write_u32s(order, out)])?;
         section(w, Kind::Mask, 0, &[&|out| out(mask)])?;
         for (l, level) in levels.iter().enumerate() {

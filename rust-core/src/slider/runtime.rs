@@ -178,11 +178,19 @@ impl Slider {
 
     /// All triangles (I), bucket after bucket.
     pub fn triangles(&self) -> Vec<[u32; 3]> {
-        let mut out = Vec::with_capacity(self.triangle_count());
+        let mut out = Vec::new();
+        self.triangles_into(&mut out);
+        out
+    }
+
+    /// [`Slider::triangles`] into `out` (cleared first), reusing its allocation: a host
+    /// that reads I after every update need not allocate it anew each time.
+    pub fn triangles_into(&self, out: &mut Vec<[u32; 3]>) {
+        out.clear();
+        out.reserve(self.triangle_count());
         for b in &self.buckets {
             out.extend_from_slice(&b.triangles);
         }
-        out
     }
 
     /// Active cells and their cases, sorted by cell id.
@@ -424,9 +432,11 @@ impl Slider {
         }
         reindex.sort_unstable();
         reindex.dedup();
+        // One scratch list for every cell's triangles, not an allocation per cell.
+        let mut tris = Vec::new();
         for cell in reindex {
             if let Some(&entry) = self.hc.get(&cell) {
-                let tris = self.cell_triangles(cell, entry.case)?;
+                self.cell_triangles(cell, entry.case, &mut tris)?;
                 let b = &mut self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
                 b.triangles[s..s + b.size].copy_from_slice(&tris);
@@ -438,7 +448,7 @@ impl Slider {
             if case == 0 || case == 255 {
                 continue;
             }
-            let tris = self.cell_triangles(cell, case)?;
+            self.cell_triangles(cell, case, &mut tris)?;
             change.added_triangles.extend_from_slice(&tris);
             let b = &mut self.buckets[tris.len()];
             b.triangles.extend_from_slice(&tris);
@@ -488,11 +498,11 @@ impl Slider {
         case
     }
 
-    /// Triangles of `cell` in `case`, as vertex indices through HE.
-    fn cell_triangles(&self, cell: u32, case: u8) -> Result<Vec<[u32; 3]>> {
+    /// Triangles of `cell` in `case`, as vertex indices through HE, into `out` (cleared).
+    fn cell_triangles(&self, cell: u32, case: u8, out: &mut Vec<[u32; 3]>) -> Result<()> {
         let lattice = self.store.lattice();
         let c = lattice.coords(cell as usize);
-        let mut out = Vec::with_capacity(5);
+        out.clear();
         for tri in &case_table().triangles[case as usize] {
             let mut t = [0u32; 3];
             for (k, &local) in tri.iter().enumerate() {
@@ -506,7 +516,7 @@ impl Slider {
             }
             out.push(t);
         }
-        Ok(out)
+        Ok(())
     }
 
     /// Interpolation data of edge `e` from the mapped values.
@@ -521,23 +531,24 @@ impl Slider {
         edge_data_from(lattice, value, c, axis, up)
     }
 
-    /// Recomputes V and N from E (every vertex moves when the isovalue does).
+    /// Recomputes V and N from E (every vertex moves when the isovalue does), in place:
+    /// no per-update allocation once the arrays have grown.
     fn update_vertices(&mut self) {
         let lattice = *self.store.lattice();
         let iso = self.iso;
-        let computed: Vec<([f32; 3], [f32; 3])> = self
-            .data
-            .par_iter()
+        let n = self.data.len();
+        self.positions.resize(n, [0.0; 3]);
+        self.normals.resize(n, [0.0; 3]);
+        self.positions
+            .par_iter_mut()
+            .zip(self.normals.par_iter_mut())
+            .zip(self.data.par_iter())
             .with_min_len(4096)
-            .map(|d| {
-                let (p, n) = d.vertex(&lattice, iso);
-                (p.as_vec3().to_array(), n)
-            })
-            .collect();
-        self.positions.clear();
-        self.normals.clear();
-        self.positions.extend(computed.iter().map(|c| c.0));
-        self.normals.extend(computed.iter().map(|c| c.1));
+            .for_each(|((p, nrm), d)| {
+                let (q, m) = d.vertex(&lattice, iso);
+                *p = q.as_vec3().to_array();
+                *nrm = m;
+            });
     }
 }
 
