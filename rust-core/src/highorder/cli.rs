@@ -1,6 +1,8 @@
-//! `isobar fe`: sample an isosurface of a high-order FE field in a VTU file and write the
-//! oriented points (the subcommand body; `bin/isobar.rs` only dispatches here).
+//! `isobar fe`: sample an isosurface of a high-order FE field in a VTU or Gmsh file and
+//! write the oriented points, or (`--method mc`) extract it as triangles with the paper's
+//! marching-cubes baseline (the subcommand body; `bin/isobar.rs` only dispatches here).
 
+use super::marching::{extract, McParams};
 use super::{sample, Params, Stats};
 use crate::error::{Error, Result};
 use crate::progress::Progress;
@@ -12,7 +14,8 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 #[command(allow_negative_numbers = true)]
 pub struct FeArgs {
-    /// A .vtu with Lagrange hexahedra, tetrahedra or wedges (VTK types 72, 71, 73).
+    /// A .vtu with Lagrange hexahedra, tetrahedra or wedges (VTK types 72, 71, 73), or a
+    /// Gmsh .msh 4.1 with Lagrange tetrahedra, hexahedra or prisms and $NodeData.
     pub input: PathBuf,
     /// The scalar point array to contour.
     #[arg(long)]
@@ -20,11 +23,16 @@ pub struct FeArgs {
     /// The isovalue C.
     #[arg(long)]
     pub iso: f64,
-    /// Output point samples (.vtp: vertices with Normals, Radius, Element, Reference,
-    /// Curvature, Energy).
+    /// Output: point samples (.vtp: vertices with Normals, Radius, Element, Reference,
+    /// Curvature, Energy), or with `--method mc` a triangle mesh (.vtp, .ply, .obj).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Particle spacing s on flat parts, world units (default: 1/40 of the bounding-box diagonal).
+    /// samples: the particle system; mc: marching cubes with numerical inversion and
+    /// Newton along edges (the paper's baseline).
+    #[arg(long, value_enum, default_value_t = Method::Samples)]
+    pub method: Method,
+    /// Particle spacing s on flat parts, or the grid cell size with `--method mc`, world
+    /// units (default: 1/40 of the bounding-box diagonal).
     #[arg(long, default_value_t = 0.0)]
     pub spacing: f64,
     /// Curvature adaptivity ρ (0: uniform spacing).
@@ -44,11 +52,23 @@ pub struct FeArgs {
     pub quiet: bool,
 }
 
-/// Runs `isobar fe`: read, sample, write, print statistics.
+/// How `isobar fe` extracts the surface.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Oriented point samples from the particle system.
+    Samples,
+    /// Triangles from marching cubes with numerical inversion (the paper's baseline).
+    Mc,
+}
+
+/// Runs `isobar fe`: read, sample (or extract), write, print statistics.
 pub fn run(args: &FeArgs) -> Result<()> {
     let t = Instant::now();
     let mesh = crate::io::read_fe_mesh(&args.input)?;
     let read_s = t.elapsed().as_secs_f64();
+    if args.method == Method::Mc {
+        return run_mc(args, &mesh, read_s);
+    }
     let params = Params {
         iso: args.iso,
         spacing: args.spacing,
@@ -58,15 +78,7 @@ pub fn run(args: &FeArgs) -> Result<()> {
         seed: args.seed,
         ..Params::default()
     };
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(1000)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {percent:>3}% {msg}")
-            .map_err(|e| Error::InvalidInput(format!("progress bar: {e}")))?,
-    );
+    let bar = progress_bar(args.quiet)?;
     let mut report = |f: f64, phase: &str| {
         bar.set_position((f * 1000.0) as u64);
         bar.set_message(phase.to_string());
@@ -80,6 +92,59 @@ pub fn run(args: &FeArgs) -> Result<()> {
     let sample_s = t.elapsed().as_secs_f64();
     crate::io::write_samples(&args.output, &samples)?;
     print_stats(&stats, mesh.cell_count(), read_s, sample_s);
+    Ok(())
+}
+
+fn progress_bar(quiet: bool) -> Result<ProgressBar> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(1000)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {percent:>3}% {msg}")
+            .map_err(|e| Error::InvalidInput(format!("progress bar: {e}")))?,
+    );
+    Ok(bar)
+}
+
+fn run_mc(args: &FeArgs, mesh: &crate::field::fe::FeMesh, read_s: f64) -> Result<()> {
+    let params = McParams {
+        iso: args.iso,
+        spacing: args.spacing,
+        tolerance: args.tolerance,
+        ..McParams::default()
+    };
+    let bar = progress_bar(args.quiet)?;
+    let mut report = |f: f64, phase: &str| {
+        bar.set_position((f * 1000.0) as u64);
+        bar.set_message(phase.to_string());
+        true
+    };
+    let mut progress = Progress::new(&mut report);
+    let t = Instant::now();
+    let result = extract(mesh, &args.field, &params, &mut progress);
+    bar.finish_and_clear();
+    let (surface, s) = result?;
+    let extract_s = t.elapsed().as_secs_f64();
+    crate::io::write_mesh(&args.output, &surface)?;
+    println!(
+        "{} vertices, {} triangles on {} cells (grid spacing {:.4}, {} nodes, {} inside): {} active cells, {} forward evaluations, {} unresolved edges; max |F - C| = {:.2e}; read {:.3} s, extracted {:.3} s (nodes {:.3} s, edges {:.3} s)",
+        s.vertices,
+        s.triangles,
+        mesh.cell_count(),
+        s.spacing,
+        s.nodes,
+        s.nodes_inside,
+        s.active_cells,
+        s.evaluations,
+        s.unresolved_edges,
+        s.max_residual,
+        read_s,
+        extract_s,
+        s.node_seconds,
+        s.edge_seconds
+    );
     Ok(())
 }
 

@@ -14,6 +14,7 @@
 
 pub mod cli;
 mod energy;
+pub mod marching;
 mod neighbours;
 mod particle;
 mod seed;
@@ -170,15 +171,24 @@ fn check(p: &Params) -> Result<()> {
 
 /// The scalar point array `name` ("NAME:K" for component K of a vector array).
 fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]> {
-    let missing = || Error::MissingArray {
-        name: name.to_string(),
-        available: mesh
+    let missing = || {
+        let available = mesh
             .point_data
             .iter()
-            .filter(|a| a.components == 1)
-            .map(|a| a.name.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
+            .map(|a| match a.components {
+                1 => a.name.clone(),
+                c => format!("{} ({c} components)", a.name),
+            })
+            .collect::<Vec<_>>();
+        Error::InvalidInput(format!(
+            "{}: no point array named '{name}' in the finite elements (point arrays: {})",
+            mesh.name(),
+            if available.is_empty() {
+                "none".to_string()
+            } else {
+                available.join(", ")
+            }
+        ))
     };
     let a = mesh
         .point_data
@@ -187,13 +197,15 @@ fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]> {
         .ok_or_else(missing)?;
     if a.components != 1 {
         return Err(Error::InvalidInput(format!(
-            "point array '{name}' has {} components; the field must be a scalar array",
+            "{}: point array '{name}' has {} components; the field must be a scalar array",
+            mesh.name(),
             a.components
         )));
     }
     if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
         return Err(Error::InvalidInput(format!(
-            "point array '{name}' has a non-finite value at point {i}"
+            "{}: point array '{name}' has a non-finite value at point {i}",
+            mesh.name()
         )));
     }
     Ok(&a.data)

@@ -11,6 +11,7 @@
 //! | `.vtk` | legacy VTK, ASCII or BINARY | |
 //! | `.vtu`, `.vtp` | VTK XML (ascii, base64, appended, zlib) | `.vtp` |
 //! | `.vtu` (Lagrange cells) | finite elements: [`read_fe_mesh`] | |
+//! | `.msh` (Gmsh 4.1, ASCII or binary) | finite elements: [`read_fe_mesh`] | |
 //! | `.ply` | ascii and binary | binary little endian |
 //! | `.obj` | | yes |
 //! | `.bgeo` | Houdini classic geometry (gzip or not) | |
@@ -23,6 +24,7 @@
 mod atomic;
 mod bgeo;
 mod csv;
+mod gmsh;
 mod npy;
 mod numeric;
 mod obj;
@@ -183,21 +185,27 @@ pub fn write_samples(path: &Path, samples: &crate::samples::PointSamples) -> Res
 }
 
 /// Reads high-order finite elements: a `.vtu` UnstructuredGrid with Lagrange hexahedra,
-/// tetrahedra and wedges (VTK types 72, 71, 73) and its point arrays. Every cell is checked
+/// tetrahedra and wedges (VTK types 72, 71, 73) and its point arrays, or a Gmsh `.msh`
+/// 4.1 file with Lagrange tetrahedra, hexahedra and prisms and its `$NodeData`. Every cell is checked
 /// (node count, point indices, det J > 0) and a failure names the cell.
 pub fn read_fe_mesh(path: &Path) -> Result<crate::field::fe::FeMesh> {
     let format = extension_of(path);
-    if format != "vtu" {
+    if format != "vtu" && format != "msh" {
         return Err(Error::format(
             path,
-            format!("cannot read finite elements from '.{format}'; supported: .vtu"),
+            format!("cannot read finite elements from '.{format}'; supported: .vtu, .msh"),
         ));
     }
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     if bytes.is_empty() {
         return Err(Error::format(path, "the file is empty"));
     }
-    vtk_xml::read_fe_mesh(&bytes, &path.display().to_string())
+    let name = path.display().to_string();
+    if format == "msh" {
+        gmsh::read_fe_mesh(&bytes, &name)
+    } else {
+        vtk_xml::read_fe_mesh(&bytes, &name)
+    }
 }
 
 /// Lower-case extension; for `x.bgeo.gz` it is `bgeo.gz` so that the inner format is known.

@@ -9,7 +9,7 @@ use super::mesh::{FeMesh, Scratch};
 use glam::{DMat2, DVec2, DVec3};
 
 /// Slack on the reference domain: points this far outside still count as inside.
-const INSIDE_SLACK: f64 = 1e-9;
+pub(crate) const INSIDE_SLACK: f64 = 1e-9;
 
 impl FeMesh {
     /// The cell whose reference domain holds the point `u` of cell `c` (extended past its
@@ -41,8 +41,32 @@ impl FeMesh {
 
     /// Newton's method on T_c(u) = x from `guess`.
     pub fn invert(&self, c: usize, x: DVec3, guess: DVec3, scratch: &mut Scratch) -> Option<DVec3> {
+        let mut evaluations = 0;
+        self.invert_counted(c, x, guess, f64::INFINITY, scratch, &mut evaluations)
+    }
+
+    /// [`FeMesh::invert`] that adds its forward evaluations (mappings) to `evaluations`
+    /// and gives up once an iterate lies further than `give_up` outside the reference
+    /// domain (x is then in another cell; saves iterations when searching).
+    pub fn invert_counted(
+        &self,
+        c: usize,
+        x: DVec3,
+        guess: DVec3,
+        give_up: f64,
+        scratch: &mut Scratch,
+        evaluations: &mut u64,
+    ) -> Option<DVec3> {
         let mut u = guess;
+        let kind = self.shape(c).kind;
         for _ in 0..30 {
+            if give_up.is_finite() {
+                let (d, nf) = kind.face_distances(u);
+                if d[..nf].iter().any(|&d| d < -give_up) {
+                    return None;
+                }
+            }
+            *evaluations += 1;
             let (y, j) = self.map(c, u, scratch);
             let det = j.determinant();
             if det == 0.0 || !det.is_finite() {
@@ -73,8 +97,12 @@ impl FeMesh {
         let rn: Vec<DVec3> = fc
             .iter()
             .map(|&i| {
-                let id = nc[i];
-                let j = fnb.iter().copied().find(|&j| nn[j] == id).unwrap_or(fnb[0]);
+                let id = self.welded(nc[i]);
+                let j = fnb
+                    .iter()
+                    .copied()
+                    .find(|&j| self.welded(nn[j]) == id)
+                    .unwrap_or(fnb[0]);
                 DVec3::from(kn.corners()[j])
             })
             .collect();

@@ -24,8 +24,13 @@ pub struct FeMesh {
     connectivity: Vec<u32>,
     /// For cell c and face f: (neighbour cell, its face index), or NO_NEIGHBOUR.
     neighbours: Vec<[(u32, u8); 6]>,
+    /// Each point's representative among the cell corners at the same place (itself
+    /// unless the file repeats shared nodes per cell, as MFEM's ParaView output does).
+    weld: Vec<u32>,
     /// Arrays given per point (the candidates for the field).
     pub point_data: Vec<Attribute>,
+    /// What error messages call the data (the file name).
+    name: String,
 }
 
 /// Everything the particle system needs at one point of one cell.
@@ -172,11 +177,19 @@ impl FeMesh {
             offsets: offsets.to_vec(),
             connectivity,
             neighbours: Vec::new(),
+            weld: Vec::new(),
             point_data,
+            name: name.to_string(),
         };
         mesh.check_elements(name)?;
+        mesh.weld = mesh.weld_corners();
         mesh.neighbours = mesh.face_adjacency();
         Ok(mesh)
+    }
+
+    /// What error messages call the data (the file it was read from).
+    pub fn name(&self) -> &str {
+        &self.name
     }
 
     /// Number of cells.
@@ -329,7 +342,59 @@ impl FeMesh {
         Ok(())
     }
 
-    /// Pairs cell faces through their shared corner points.
+    /// The representative of point `p` among the corners at the same place.
+    pub(crate) fn welded(&self, p: u32) -> u32 {
+        self.weld[p as usize]
+    }
+
+    /// Gives corner points that coincide (within 1e-10 of the mesh's extent) one id, the
+    /// first in cell order, so faces pair even where each cell has its own copy of its
+    /// nodes. Only corners matter: faces are keyed by them.
+    fn weld_corners(&self) -> Vec<u32> {
+        let n = self.points.len();
+        let mut weld: Vec<u32> = (0..n as u32).collect();
+        let (lo, hi) = self
+            .points
+            .iter()
+            .fold((self.points[0], self.points[0]), |(a, b), &p| {
+                (a.min(p), b.max(p))
+            });
+        let tol = 1e-10 * (hi - lo).length().max(1e-300);
+        let key = |p: DVec3| ((p - lo) / tol).floor().as_i64vec3();
+        let mut grid: FxHashMap<glam::I64Vec3, Vec<u32>> = FxHashMap::default();
+        let mut seen = vec![false; n];
+        for c in 0..self.cell_count() {
+            let corners = self.shape(c).kind.corners().len();
+            for &i in &self.nodes(c)[..corners] {
+                if std::mem::replace(&mut seen[i as usize], true) {
+                    continue;
+                }
+                let p = self.points[i as usize];
+                let k = key(p);
+                let mut rep = None;
+                'search: for dz in -1..=1 {
+                    for dy in -1..=1 {
+                        for dx in -1..=1 {
+                            let near = grid.get(&(k + glam::I64Vec3::new(dx, dy, dz)));
+                            for &j in near.into_iter().flatten() {
+                                if self.points[j as usize].distance(p) <= tol {
+                                    rep = Some(j);
+                                    break 'search;
+                                }
+                            }
+                        }
+                    }
+                }
+                match rep {
+                    Some(j) => weld[i as usize] = j,
+                    None => grid.entry(k).or_default().push(i),
+                }
+            }
+        }
+        weld
+    }
+
+    /// Pairs cell faces through their shared (welded) corner points.
     fn face_adjacency(&self) -> Vec<[(u32, u8); 6]> {
         let none = (NO_NEIGHBOUR, 0u8);
         let mut out = vec![[none; 6]; self.cell_count()];
@@ -339,7 +404,7 @@ impl FeMesh {
             for (f, corners) in self.shape(c).kind.faces().iter().enumerate() {
                 let mut key = [u32::MAX; 4];
                 for (k, &i) in corners.iter().enumerate() {
-                    key[k] = nodes[i];
+                    key[k] = self.weld[nodes[i] as usize];
                 }
                 key.sort_unstable();
                 match open.remove(&key) {

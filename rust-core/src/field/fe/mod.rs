@@ -5,16 +5,20 @@
 //! `shape` numbers the nodes, `basis` evaluates basis functions with first and second
 //! derivatives, `mesh` assembles T, J, ∂J, the world-space gradient and Hessian (the
 //! paper's eqs. 19–20), checks elements and pairs faces, `locate` carries a reference
-//! point across a face into the neighbouring cell, `curvature` gives principal curvatures.
+//! point across a face into the neighbouring cell, `search` finds the cell and reference
+//! point of a world point (T⁻¹, for the marching-cubes baseline), `curvature` gives
+//! principal curvatures.
 
 mod basis;
 pub mod curvature;
 mod locate;
 mod mesh;
+mod search;
 mod shape;
 #[cfg(test)]
 mod tests;
 
 pub use basis::BasisValues;
 pub use mesh::{Evaluation, FeMesh, Scratch};
+pub use search::CellIndex;
 pub use shape::{Kind, Shape};

@@ -1,0 +1,136 @@
+//! World-point location: the cell holding a world point x and its reference coordinates
+//! there (T⁻¹ by Newton), over a uniform binning of the cells' bounding boxes. This is the
+//! numerical inversion the particle system avoids and the marching-cubes baseline needs
+//! (the paper's Sect. 2: "the world-space location of each grid node is numerically
+//! inverted within each potential element").
+
+use super::locate::INSIDE_SLACK;
+use super::mesh::{FeMesh, Scratch};
+use glam::DVec3;
+
+/// Bounding boxes of the cells are widened by this fraction of their extent: a curved
+/// Lagrange cell may bulge past the hull of its nodes.
+const BOX_PAD: f64 = 0.1;
+
+/// Cells binned by bounding box, for [`CellIndex::locate`].
+#[derive(Clone, Debug)]
+pub struct CellIndex {
+    lo: DVec3,
+    bin: f64,
+    dims: [usize; 3],
+    /// Bin b's cells are `cells[starts[b]..starts[b + 1]]`, ascending.
+    starts: Vec<u32>,
+    cells: Vec<u32>,
+    boxes: Vec<(DVec3, DVec3)>,
+}
+
+impl CellIndex {
+    /// Bins every cell of `mesh` (about one cell per bin).
+    pub fn new(mesh: &FeMesh) -> CellIndex {
+        let boxes: Vec<(DVec3, DVec3)> = (0..mesh.cell_count())
+            .map(|c| {
+                let nodes = mesh.nodes(c);
+                let first = mesh.points[nodes[0] as usize];
+                let (a, b) = nodes.iter().fold((first, first), |(a, b), &n| {
+                    let p = mesh.points[n as usize];
+                    (a.min(p), b.max(p))
+                });
+                let pad = (b - a) * BOX_PAD;
+                (a - pad, b + pad)
+            })
+            .collect();
+        let (lo, hi) = boxes.iter().fold((boxes[0].0, boxes[0].1), |(l, h), b| {
+            (l.min(b.0), h.max(b.1))
+        });
+        let extent = (hi - lo).max(DVec3::splat(1e-300));
+        // About one cell per bin, never more than a few million bins.
+        let n = (boxes.len() as f64).clamp(1.0, 4e6);
+        let bin = (extent.x * extent.y * extent.z / n)
+            .cbrt()
+            .max(extent.max_element() / 256.0);
+        let dims = [0, 1, 2].map(|a| ((extent[a] / bin).ceil() as usize).clamp(1, 256));
+        let bin_of = |p: DVec3, a: usize| (((p[a] - lo[a]) / bin) as usize).min(dims[a] - 1);
+        let total = dims[0] * dims[1] * dims[2];
+        let mut counts = vec![0u32; total + 1];
+        let each = |b: &(DVec3, DVec3), f: &mut dyn FnMut(usize)| {
+            for z in bin_of(b.0, 2)..=bin_of(b.1, 2) {
+                for y in bin_of(b.0, 1)..=bin_of(b.1, 1) {
+                    for x in bin_of(b.0, 0)..=bin_of(b.1, 0) {
+                        f(x + dims[0] * (y + dims[1] * z));
+                    }
+                }
+            }
+        };
+        for b in &boxes {
+            each(b, &mut |k| counts[k + 1] += 1);
+        }
+        for k in 0..total {
+            counts[k + 1] += counts[k];
+        }
+        let mut fill = counts.clone();
+        let mut cells = vec![0u32; counts[total] as usize];
+        for (c, b) in boxes.iter().enumerate() {
+            each(b, &mut |k| {
+                cells[fill[k] as usize] = c as u32;
+                fill[k] += 1;
+            });
+        }
+        CellIndex {
+            lo,
+            bin,
+            dims,
+            starts: counts,
+            cells,
+            boxes,
+        }
+    }
+
+    /// The cell holding world point `x` and the reference point there, or None when no
+    /// cell does (x is outside the mesh). `hint` (a cell and reference point near x) is
+    /// tried first; then the binned cells in ascending order, so the answer does not
+    /// depend on threads. Adds the forward evaluations (mappings) it makes to
+    /// `evaluations`.
+    pub fn locate(
+        &self,
+        mesh: &FeMesh,
+        x: DVec3,
+        hint: Option<(usize, DVec3)>,
+        scratch: &mut Scratch,
+        evaluations: &mut u64,
+    ) -> Option<(usize, DVec3)> {
+        let inside = |c: usize, u: DVec3| {
+            let (d, nf) = mesh.shape(c).kind.face_distances(u);
+            d[..nf].iter().all(|&d| d >= -INSIDE_SLACK)
+        };
+        if let Some((c, guess)) = hint {
+            if let Some(u) = mesh.invert_counted(c, x, guess, 1.0, scratch, evaluations) {
+                if inside(c, u) {
+                    return Some((c, u));
+                }
+            }
+        }
+        let mut k = 0;
+        for a in 0..3 {
+            let f = (x[a] - self.lo[a]) / self.bin;
+            if !(f >= 0.0 && f < self.dims[a] as f64) {
+                return None;
+            }
+            k += f as usize * [1, self.dims[0], self.dims[0] * self.dims[1]][a];
+        }
+        let range = self.starts[k] as usize..self.starts[k + 1] as usize;
+        for &c in &self.cells[range] {
+            let c = c as usize;
+            let (a, b) = self.boxes[c];
+            if hint.is_some_and(|h| h.0 == c) || x.cmplt(a).any() || x.cmpgt(b).any() {
+                continue;
+            }
+            let guess = mesh.shape(c).kind.centroid();
+            if let Some(u) = mesh.invert_counted(c, x, guess, 1.0, scratch, evaluations) {
+                if inside(c, u) {
+                    return Some((c, u));
+                }
+            }
+        }
+        None
+    }
+}
