@@ -30,12 +30,25 @@ fn residuals(mesh: &FeMesh, field: &str, points: &[[f64; 3]], iso: f64) -> Vec<f
     points
         .iter()
         .map(|&x| {
+            let x = DVec3::from(x);
             let (c, u) = index
-                .locate(mesh, DVec3::from(x), None, &mut scratch, &mut 0)
+                .locate(mesh, x, None, &mut scratch, &mut 0)
+                .or_else(|| on_boundary(mesh, x, &mut scratch))
                 .unwrap_or_else(|| panic!("{x:?} is in no cell"));
             (mesh.value(values, c, u, &mut scratch) - iso).abs()
         })
         .collect()
+}
+
+/// A point on the mesh boundary but a rounding error outside it (surfaces that reach the
+/// boundary have samples there): the cell whose reference domain it misses by < 1e-8.
+fn on_boundary(mesh: &FeMesh, x: DVec3, scratch: &mut Scratch) -> Option<(usize, DVec3)> {
+    (0..mesh.cell_count()).find_map(|c| {
+        let kind = mesh.shape(c).kind;
+        let u = mesh.invert(c, x, kind.centroid(), scratch)?;
+        let (d, nf) = kind.face_distances(u);
+        d[..nf].iter().all(|&d| d > -1e-8).then_some((c, u))
+    })
 }
 
 /// Cells whose field crosses `iso` at some point of a reference lattice.
@@ -65,6 +78,38 @@ fn cut_cells(mesh: &FeMesh, values: &[f64], iso: f64) -> Vec<usize> {
         .collect()
 }
 
+/// Asserts that more than `min_cut` cells are cut by the isosurface and each holds a sample.
+fn every_cut_cell_holds_samples(
+    mesh: &FeMesh,
+    field: &str,
+    iso: f64,
+    s: &isobar::samples::PointSamples,
+    min_cut: usize,
+) {
+    let values = &mesh
+        .point_data
+        .iter()
+        .find(|a| a.name == field)
+        .unwrap()
+        .data;
+    let cut = cut_cells(mesh, values, iso);
+    let held: std::collections::BTreeSet<usize> = s
+        .attribute("Element")
+        .unwrap()
+        .data
+        .iter()
+        .map(|&c| c as usize)
+        .collect();
+    assert!(cut.len() > min_cut, "{}: {cut:?}", mesh.name());
+    for c in &cut {
+        assert!(
+            held.contains(c),
+            "{}: cell {c} is cut but holds no sample",
+            mesh.name()
+        );
+    }
+}
+
 #[test]
 fn mfem_poisson_solution_sampled_and_contoured_end_to_end() {
     let mesh = isobar::io::read_fe_mesh(&data("mfem_poisson_q3.vtu")).unwrap();
@@ -86,22 +131,7 @@ fn mfem_poisson_solution_sampled_and_contoured_end_to_end() {
     }
     // Every cell the surface cuts holds samples (particles crossed the repeated-node
     // faces).
-    let values = &mesh.point_data.iter().find(|a| a.name == "u").unwrap().data;
-    let cut = cut_cells(&mesh, values, iso);
-    let held: std::collections::BTreeSet<usize> = s
-        .attribute("Element")
-        .unwrap()
-        .data
-        .iter()
-        .map(|&c| c as usize)
-        .collect();
-    assert!(cut.len() > 8, "{cut:?}");
-    for c in &cut {
-        assert!(
-            held.contains(c),
-            "cell {c} is cut but holds no sample ({held:?})"
-        );
-    }
+    every_cut_cell_holds_samples(&mesh, "u", iso, &s, 8);
 
     let mc = McParams {
         iso,
@@ -158,4 +188,30 @@ fn gmsh_files_work_through_the_cli_by_extension() {
         assert!(r <= 1e-6, "{r}");
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The particle system on tetrahedra and on wedges (gmsh's third-order tetrahedra of a
+/// ball, second-order prisms of a cylinder): every sample within ε_T by an independent
+/// evaluation, and every cell the surface cuts holds samples.
+#[test]
+fn particles_on_tetrahedra_and_wedges_cover_every_cut_cell() {
+    for name in ["gmsh/ball_tet3.msh", "gmsh/cylinder_prism2.msh"] {
+        let mesh = isobar::io::read_fe_mesh(&data(name)).unwrap();
+        let iso = 0.4;
+        let params = Params {
+            iso,
+            spacing: 0.06,
+            ..Params::default()
+        };
+        let (s, stats) = sample(&mesh, "p", &params, &mut Progress::none()).unwrap();
+        eprintln!("{name}: {stats:?}");
+        assert!(s.len() > 100, "{name}: {stats:?}");
+        for (i, r) in residuals(&mesh, "p", &s.positions, iso).iter().enumerate() {
+            assert!(
+                *r <= params.tolerance * (1.0 + 1e-6),
+                "{name} sample {i}: {r}"
+            );
+        }
+        every_cut_cell_holds_samples(&mesh, "p", iso, &s, 5);
+    }
 }

@@ -78,21 +78,29 @@ pub fn run(args: &FeArgs) -> Result<()> {
         seed: args.seed,
         ..Params::default()
     };
-    let bar = progress_bar(args.quiet)?;
+    let t = Instant::now();
+    let result = with_progress(args.quiet, |progress| {
+        sample(&mesh, &args.field, &params, progress)
+    })?;
+    let (samples, stats) = result?;
+    let sample_s = t.elapsed().as_secs_f64();
+    crate::io::write_samples(&args.output, &samples)?;
+    print_stats(&stats, mesh.cell_count(), read_s, sample_s);
+    Ok(())
+}
+
+/// Runs `work` with a terminal progress bar (hidden when `quiet`), cleared afterwards.
+fn with_progress<T>(quiet: bool, work: impl FnOnce(&mut Progress) -> T) -> Result<T> {
+    let bar = progress_bar(quiet)?;
     let mut report = |f: f64, phase: &str| {
         bar.set_position((f * 1000.0) as u64);
         bar.set_message(phase.to_string());
         true
     };
     let mut progress = Progress::new(&mut report);
-    let t = Instant::now();
-    let result = sample(&mesh, &args.field, &params, &mut progress);
+    let out = work(&mut progress);
     bar.finish_and_clear();
-    let (samples, stats) = result?;
-    let sample_s = t.elapsed().as_secs_f64();
-    crate::io::write_samples(&args.output, &samples)?;
-    print_stats(&stats, mesh.cell_count(), read_s, sample_s);
-    Ok(())
+    Ok(out)
 }
 
 fn progress_bar(quiet: bool) -> Result<ProgressBar> {
@@ -115,16 +123,10 @@ fn run_mc(args: &FeArgs, mesh: &crate::field::fe::FeMesh, read_s: f64) -> Result
         tolerance: args.tolerance,
         ..McParams::default()
     };
-    let bar = progress_bar(args.quiet)?;
-    let mut report = |f: f64, phase: &str| {
-        bar.set_position((f * 1000.0) as u64);
-        bar.set_message(phase.to_string());
-        true
-    };
-    let mut progress = Progress::new(&mut report);
     let t = Instant::now();
-    let result = extract(mesh, &args.field, &params, &mut progress);
-    bar.finish_and_clear();
+    let result = with_progress(args.quiet, |progress| {
+        extract(mesh, &args.field, &params, progress)
+    })?;
     let (surface, s) = result?;
     let extract_s = t.elapsed().as_secs_f64();
     crate::io::write_mesh(&args.output, &surface)?;
