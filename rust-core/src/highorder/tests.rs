@@ -52,17 +52,17 @@ pub(crate) fn grid_mesh(
 
 /// The teardrop: a sphere |y| = R in y mapped by the quadratic x = (y.x w, y.y w, y.z),
 /// w = a + b y.z (so the narrow end is strongly curved).
-const TEAR_A: f64 = 0.6;
-const TEAR_B: f64 = 0.45;
-const TEAR_R: f64 = 0.8;
+pub(crate) const TEAR_A: f64 = 0.6;
+pub(crate) const TEAR_B: f64 = 0.45;
+pub(crate) const TEAR_R: f64 = 0.8;
 
-fn teardrop_map(y: DVec3) -> DVec3 {
+pub(crate) fn teardrop_map(y: DVec3) -> DVec3 {
     let w = TEAR_A + TEAR_B * y.z;
     DVec3::new(y.x * w, y.y * w, y.z)
 }
 
 /// The analytic field of the teardrop at a world point (the map inverted in closed form).
-fn teardrop_field(x: DVec3) -> f64 {
+pub(crate) fn teardrop_field(x: DVec3) -> f64 {
     let w = TEAR_A + TEAR_B * x.z;
     DVec3::new(x.x / w, x.y / w, x.z).length_squared() - TEAR_R * TEAR_R
 }
