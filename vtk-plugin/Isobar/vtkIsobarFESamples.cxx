@@ -15,6 +15,7 @@
 #include "vtkPointData.h"
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
+#include "vtkUnsignedCharArray.h"
 #include "vtkUnstructuredGrid.h"
 
 #include "isobar.h"
@@ -76,7 +77,13 @@ MeshArrays Collect(vtkUnstructuredGrid* input)
     }
     m.Offsets.push_back(static_cast<int64_t>(m.Connectivity.size()));
   }
+  // Readers do not always mark the array as the HigherOrderDegrees attribute (VTK 9.1's
+  // XML reader does not): take it by its conventional name too.
   vtkDataArray* degrees = input->GetCellData()->GetHigherOrderDegrees();
+  if (!degrees)
+  {
+    degrees = input->GetCellData()->GetArray("HigherOrderDegrees");
+  }
   if (degrees && degrees->GetNumberOfComponents() == 3 && degrees->GetNumberOfTuples() == nc)
   {
     m.Degrees.resize(3 * static_cast<size_t>(nc));
@@ -204,10 +211,17 @@ int vtkIsobarFESamples::RequestData(
   }
   const std::string field = values->GetName() ? values->GetName() : "field";
 
-  // 1. The core's copy of the mesh, made again only when the input or its array changed.
+  // 1. The core's copy of the mesh, made again only when the points, the cells or the
+  // array changed. The arrays themselves are the key, not the data set: ParaView touches
+  // the data set's MTime on re-execution without changing what it holds.
   std::ostringstream key;
-  key << input << " " << input->GetMTime() << " " << values << " " << values->GetMTime() << " "
-      << field;
+  auto identify = [&key](vtkObject* o) { key << o << "@" << (o ? o->GetMTime() : 0) << " "; };
+  identify(input->GetPoints() ? input->GetPoints()->GetData() : nullptr);
+  identify(input->GetCells());
+  identify(input->GetCellTypesArray());
+  identify(input->GetCellData()->GetArray("HigherOrderDegrees"));
+  identify(values);
+  key << field;
   if (!this->Mesh || key.str() != this->BuiltFrom)
   {
     this->FreeMesh();
