@@ -63,7 +63,7 @@ def test_import_makes_a_point_cloud_on_the_sphere_and_resamples_on_isovalue_chan
         assert not settings.status_error, settings.status
         cloud = obj.data
         n = len(cloud.points)
-        assert n == settings.samples > 50
+        assert n == settings.samples > 50, (settings.status, settings.isovalue, settings.spacing, settings.field)
         points = _attribute(cloud, "position", 3).astype(np.float64)
         # Independent evaluation: f = |x|², so every point is on the sphere of radius
         # sqrt(iso) (float32 positions in Blender: 1e-6 relative).
