@@ -45,9 +45,13 @@ def close_all() -> None:
     _OPEN.clear()
 
 
-def scalar_fields(mesh) -> List[Tuple[str, float, float]]:
-    """(name, min, max) of each scalar point array of `mesh`."""
-    return [(name, float(v.min()), float(v.max())) for name, v in mesh.arrays.items() if v.ndim == 1 and v.size]
+def scalar_fields(mesh) -> List[Tuple[str, float, float, float]]:
+    """(name, min, max, median) of each scalar point array of `mesh`."""
+    return [
+        (name, float(v.min()), float(v.max()), float(np.median(v)))
+        for name, v in mesh.arrays.items()
+        if v.ndim == 1 and v.size
+    ]
 
 
 def point_cloud(name: str, samples) -> "bpy.types.PointCloud":

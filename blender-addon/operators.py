@@ -205,7 +205,7 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
 
     filter_glob: StringProperty(default=";".join("*" + e for e in fe_samples.FE_EXTENSIONS), options={"HIDDEN"})
     field: StringProperty(name="Field", description="Scalar point array to contour (empty: the first one)")
-    isovalue: FloatProperty(name="Isovalue", description="Isovalue (NaN: the middle of the field's range)", default=float("nan"))
+    isovalue: FloatProperty(name="Isovalue", description="Isovalue (NaN: the median of the field's node values)", default=float("nan"))
     spacing: FloatProperty(name="Spacing", description="Sample spacing on flat parts (0: 1/40 of the diagonal)", default=0.0, min=0.0)
 
     def execute(self, context):
@@ -222,8 +222,9 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
             chosen = [f for f in fields if f[0] == self.field] if self.field else fields[:1]
             if not chosen:
                 raise ValueError(f"{path}: no scalar point array '{self.field}'; it has {', '.join(f[0] for f in fields)}")
-            name, lo, hi = chosen[0]
-            iso = 0.5 * (lo + hi) if self.isovalue != self.isovalue else self.isovalue
+            # The median node value: half the nodes on each side, so the surface cuts cells.
+            name, lo, hi, median = chosen[0]
+            iso = median if self.isovalue != self.isovalue else self.isovalue
         except Exception as error:  # noqa: BLE001 - reported, not raised
             if obj is not None:
                 fe_samples.close(obj)
