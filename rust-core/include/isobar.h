@@ -44,7 +44,7 @@
 #define ISOBAR_KERNEL_QUADRATIC 3
 
 // The version this build writes and reads.
-#define VERSION 1
+#define VERSION 2
 
 // Status of a fallible call.
 typedef enum IsobarStatus {
