@@ -13,21 +13,6 @@
 #include <stdint.h>
 #include <stdlib.h>
 
-// Number of sign configurations of a transition face (9 fine vertices).
-#define CONFIGURATIONS 512
-
-// Most fill triangles a configuration may need (the paper's bound).
-#define MAX_TRIANGLES 12
-
-// Integers per table row: the triangle count, then 3 × `MAX_TRIANGLES` point indices.
-#define ROW (1 + (3 * MAX_TRIANGLES))
-
-// Finest-lattice cells per coarse cell along an axis.
-#define FINE_PER_COARSE 4
-
-// Levels of the scheme.
-#define LEVELS 3
-
 // Bumped whenever a function's signature or a struct's prefix changes incompatibly.
 #define ISOBAR_ABI_VERSION 1
 
@@ -42,9 +27,6 @@
 
 // Kernel: Johnson's quadratic kernel (support 2h).
 #define ISOBAR_KERNEL_QUADRATIC 3
-
-// The version this build writes and reads.
-#define VERSION 2
 
 // Status of a fallible call.
 typedef enum IsobarStatus {
