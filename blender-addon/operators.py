@@ -10,7 +10,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import bake, extraction, importer, sequence, usd_export, volume_slider
+from . import bake, extraction, fe_samples, importer, sequence, usd_export, volume_slider
 
 
 def _fluid_object(context, name: str = ""):
@@ -193,6 +193,61 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         settings.isovalue = 0.5 * (lo + hi)  # slides: the mesh appears
         if settings.status_error:
             self.report({"ERROR"}, settings.status)
+        return {"FINISHED"}
+
+
+class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
+    """Import the isosurface of a high-order finite-element field as a point cloud"""
+
+    bl_idname = "isobar.import_fe"
+    bl_label = "Import High-Order FE Isosurface"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filter_glob: StringProperty(default=";".join("*" + e for e in fe_samples.FE_EXTENSIONS), options={"HIDDEN"})
+    field: StringProperty(name="Field", description="Scalar point array to contour (empty: the first one)")
+    isovalue: FloatProperty(name="Isovalue", description="Isovalue (NaN: the median of the field's node values)", default=float("nan"))
+    spacing: FloatProperty(name="Spacing", description="Sample spacing on flat parts (0: 1/40 of the diagonal)", default=0.0, min=0.0)
+
+    def execute(self, context):
+        path = bpy.path.abspath(self.filepath)
+        stem = os.path.splitext(os.path.basename(path))[0] or "fe"
+        obj = None
+        try:
+            # An empty point cloud that the settings below sample into; its FE mesh is read
+            # once here and kept for every later isovalue change.
+            obj = bpy.data.objects.new(f"{stem}_samples", bpy.data.pointclouds.new(f"{stem}_samples"))
+            fields = fe_samples.scalar_fields(fe_samples.mesh_for(obj, path))
+            if not fields:
+                raise ValueError(f"{path}: no scalar point array to contour")
+            chosen = [f for f in fields if f[0] == self.field] if self.field else fields[:1]
+            if not chosen:
+                raise ValueError(f"{path}: no scalar point array '{self.field}'; it has {', '.join(f[0] for f in fields)}")
+            # The median node value: half the nodes on each side, so the surface cuts cells.
+            name, lo, hi, median = chosen[0]
+            iso = median if self.isovalue != self.isovalue else self.isovalue
+        except Exception as error:  # noqa: BLE001 - reported, not raised
+            if obj is not None:
+                fe_samples.close(obj)
+                bpy.data.objects.remove(obj)
+            self.report({"ERROR"}, importer.describe_error(error))
+            return {"CANCELLED"}
+        collection = getattr(context, "collection", None) or context.scene.collection
+        collection.objects.link(obj)
+        for other in context.view_layer.objects:
+            other.select_set(False)
+        obj.select_set(True)
+        context.view_layer.objects.active = obj
+        settings = obj.isobar_fe
+        settings.value_min, settings.value_max = lo, hi
+        settings.filepath = path
+        settings.spacing = self.spacing
+        settings.isovalue = iso
+        settings.enabled = True
+        settings.field = name  # samples: the points appear
+        if settings.status_error:
+            self.report({"ERROR"}, settings.status)
+            return {"FINISHED"}
+        self.report({"INFO"}, f"'{obj.name}': {settings.status}")
         return {"FINISHED"}
 
 
@@ -581,6 +636,7 @@ class ISOBAR_OT_export_usd(bpy.types.Operator, ExportHelper):
 def menu_import(self, context):
     self.layout.operator(ISOBAR_OT_import_sequence.bl_idname, text="SPH Particle Sequence (isobar)")
     self.layout.operator(ISOBAR_OT_import_volume.bl_idname, text="Volume for Isovalue Sliding (isobar)")
+    self.layout.operator(ISOBAR_OT_import_fe.bl_idname, text="High-Order FE Isosurface (isobar)")
 
 
 def menu_export(self, context):
@@ -589,6 +645,7 @@ def menu_export(self, context):
 
 classes = (
     ISOBAR_OT_import_volume,
+    ISOBAR_OT_import_fe,
     ISOBAR_OT_import_sequence,
     ISOBAR_OT_surface_from_object,
     ISOBAR_OT_refresh,

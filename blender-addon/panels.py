@@ -168,7 +168,29 @@ class ISOBAR_PT_slider(_Sidebar, bpy.types.Panel):
             row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
 
 
-classes = (ISOBAR_PT_main, ISOBAR_PT_source, ISOBAR_PT_surface, ISOBAR_PT_attributes, ISOBAR_PT_cache, ISOBAR_PT_slider)
+class ISOBAR_PT_fe(_Sidebar, bpy.types.Panel):
+    bl_label = "High-Order FE Isosurface"
+    bl_idname = "ISOBAR_PT_fe"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("isobar.import_fe", text="Import FE Field", icon="IMPORT")
+        obj = getattr(context, "active_object", None)
+        if obj is None or not obj.isobar_fe.enabled:
+            return
+        settings = obj.isobar_fe
+        layout.prop(settings, "field")
+        layout.prop(settings, "isovalue", slider=True)
+        layout.label(text=f"Range {settings.value_min:.6g} .. {settings.value_max:.6g}")
+        layout.prop(settings, "spacing")
+        layout.prop(settings, "curvature_adaptivity")
+        if settings.status:
+            row = layout.row()
+            row.alert = settings.status_error
+            row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+
+
+classes = (ISOBAR_PT_main, ISOBAR_PT_source, ISOBAR_PT_surface, ISOBAR_PT_attributes, ISOBAR_PT_cache, ISOBAR_PT_slider, ISOBAR_PT_fe)
 
 
 def register():

@@ -310,18 +310,75 @@ class IsobarSliderSettings(bpy.types.PropertyGroup):
     status_error: BoolProperty(name="Status Is Error", default=False)
 
 
+def _resample(self, context):
+    from . import fe_samples  # late: keeps this module free of the core
+
+    if not self.enabled or not self.filepath or not self.field:
+        return
+    import time
+
+    obj = self.id_data
+    start = time.perf_counter()
+    try:
+        samples = fe_samples.resample(
+            obj, bpy.path.abspath(self.filepath), self.field, self.isovalue, self.spacing, self.curvature_adaptivity
+        )
+    except Exception as error:  # noqa: BLE001 - shown in the panel, never raised into Blender
+        self.status, self.status_error = str(error), True
+        return
+    self.samples = len(samples)
+    seconds = time.perf_counter() - start
+    self.status = f"{self.samples:,} samples, max |F - C| {samples.stats['max_residual']:.1e}, {seconds:.2f} s"
+    self.status_error = False
+
+
+class IsobarFESettings(bpy.types.PropertyGroup):
+    """Isosurface samples of a high-order FE field (a point-cloud object that follows its
+    isovalue)."""
+
+    enabled: BoolProperty(name="FE Samples", description="This object is an isobar high-order FE isosurface", default=False)
+    filepath: StringProperty(name="File", description="The .vtu of Lagrange cells", subtype="FILE_PATH")
+    field: StringProperty(name="Field", description="The scalar point array to contour", update=_resample)
+    isovalue: FloatProperty(name="Isovalue", description="The isovalue C", default=0.0, precision=4, update=_resample)
+    spacing: FloatProperty(
+        name="Spacing",
+        description="Distance between samples on flat parts (0: 1/40 of the mesh's diagonal)",
+        default=0.0,
+        min=0.0,
+        precision=4,
+        update=_resample,
+    )
+    curvature_adaptivity: FloatProperty(
+        name="Curvature Adaptivity",
+        description="Extra sample density on curved parts (0: uniform)",
+        default=0.0,
+        min=0.0,
+        update=_resample,
+    )
+    value_min: FloatProperty(name="Minimum", description="Smallest value of the field")
+    value_max: FloatProperty(name="Maximum", description="Largest value of the field")
+    samples: IntProperty(name="Samples", description="Points of the current isosurface")
+    status: StringProperty(name="Status", description="Result of the last sampling")
+    status_error: BoolProperty(name="Status Is Error", default=False)
+
+
 def register():
     bpy.utils.register_class(IsobarSettings)
     bpy.utils.register_class(IsobarSliderSettings)
+    bpy.utils.register_class(IsobarFESettings)
     bpy.types.Object.isobar = PointerProperty(type=IsobarSettings)
     bpy.types.Object.isobar_slider = PointerProperty(type=IsobarSliderSettings)
+    bpy.types.Object.isobar_fe = PointerProperty(type=IsobarFESettings)
 
 
 def unregister():
-    from . import volume_slider
+    from . import fe_samples, volume_slider
 
     volume_slider.close_all()
+    fe_samples.close_all()
+    del bpy.types.Object.isobar_fe
     del bpy.types.Object.isobar_slider
     del bpy.types.Object.isobar
+    bpy.utils.unregister_class(IsobarFESettings)
     bpy.utils.unregister_class(IsobarSliderSettings)
     bpy.utils.unregister_class(IsobarSettings)

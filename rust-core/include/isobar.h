@@ -13,21 +13,6 @@
 #include <stdint.h>
 #include <stdlib.h>
 
-// Number of sign configurations of a transition face (9 fine vertices).
-#define CONFIGURATIONS 512
-
-// Most fill triangles a configuration may need (the paper's bound).
-#define MAX_TRIANGLES 12
-
-// Integers per table row: the triangle count, then 3 × `MAX_TRIANGLES` point indices.
-#define ROW (1 + (3 * MAX_TRIANGLES))
-
-// Finest-lattice cells per coarse cell along an axis.
-#define FINE_PER_COARSE 4
-
-// Levels of the scheme.
-#define LEVELS 3
-
 // Bumped whenever a function's signature or a struct's prefix changes incompatibly.
 #define ISOBAR_ABI_VERSION 1
 
@@ -42,9 +27,6 @@
 
 // Kernel: Johnson's quadratic kernel (support 2h).
 #define ISOBAR_KERNEL_QUADRATIC 3
-
-// The version this build writes and reads.
-#define VERSION 1
 
 // Status of a fallible call.
 typedef enum IsobarStatus {
@@ -65,8 +47,15 @@ typedef enum IsobarStatus {
   ISOBAR_STATUS_ERR_INTERNAL = 7,
 } IsobarStatus;
 
+// Opaque mesh of Lagrange cells with per-point arrays.
+typedef struct IsobarFeMesh IsobarFeMesh;
+
 // Opaque particle set.
 typedef struct IsobarParticles IsobarParticles;
+
+// Opaque point samples of an isosurface: positions, normals, radii and named arrays;
+// arrays stay valid until `isobar_samples_free`.
+typedef struct IsobarSamples IsobarSamples;
 
 // Opaque slider: a memory-mapped store and the surface at the current isovalue.
 typedef struct IsobarSlider IsobarSlider;
@@ -169,6 +158,56 @@ typedef struct IsobarAdaptiveStats {
   double seconds_total;
 } IsobarAdaptiveStats;
 
+// Options of the particle system (the paper's s, ρ, ε_T ...). Fill with
+// `isobar_fe_params_default`, then change fields; `struct_size` lets later versions add
+// fields at the end.
+typedef struct IsobarFeParams {
+  uint32_t struct_size;
+  // Coarse-to-fine levels above the final spacing (each halves s; at most 8).
+  uint32_t levels;
+  // The isovalue C.
+  double iso;
+  // s: particle spacing on flat parts, world units; <= 0 picks 1/40 of the bounding-box
+  // diagonal.
+  double spacing;
+  // ρ: extra density on curved parts (0: uniform spacing).
+  double rho;
+  // ε_T: every sample has |F - C| at most this.
+  double tolerance;
+  // Upper bound of the curvature scaling, as a multiple of the flat density.
+  double max_density;
+  // Steady state: relative change of the system energy below this.
+  double steady_fraction;
+  // Most sweeps per relaxation.
+  uint32_t max_iterations;
+  // Neighbour lists are rebuilt every this many sweeps.
+  uint32_t neighbour_refresh;
+  // Most split/delete rounds at the final spacing.
+  uint32_t split_rounds;
+  uint32_t _reserved;
+  // Seed of the random bias of split/delete decisions.
+  uint64_t seed;
+} IsobarFeParams;
+
+// What a sampling run did. Set `struct_size` before `isobar_samples_stats`; fields beyond
+// it are not written.
+typedef struct IsobarFeStats {
+  uint32_t struct_size;
+  uint64_t particles;
+  // Projected seeds before thinning.
+  uint64_t seeds;
+  // Relaxation sweeps over all levels.
+  uint64_t iterations;
+  // Forward evaluations (basis, mapping and field at one reference point).
+  uint64_t evaluations;
+  uint64_t splits;
+  uint64_t deletes;
+  // The spacing s used.
+  double spacing;
+  // Largest |F - C| over the samples.
+  double max_residual;
+} IsobarFeStats;
+
 // Summary of one isovalue change (`isobar_slider_set_isovalue`).
 typedef struct IsobarSliderChange {
   double isovalue;
@@ -238,6 +277,96 @@ enum IsobarStatus isobar_adaptive_extract(const struct IsobarParticles *particle
                                           void *user,
                                           struct IsobarSurface **out,
                                           struct IsobarAdaptiveStats *stats);
+
+// Fills `out` with the core's default particle-system options.
+enum IsobarStatus isobar_fe_params_default(struct IsobarFeParams *out);
+
+// Builds a mesh from VTK-style arrays (copied): `point_count` xyz f64 triples; per cell a
+// VTK type (71 Lagrange tetrahedron, 72 hexahedron, 73 wedge); `offsets` (cell_count + 1
+// entries, cell c's nodes are `connectivity[offsets[c]..offsets[c+1]]`, in VTK's node
+// order); `degrees` is NULL or cell_count × 3 orders (VTK's HigherOrderDegrees). Elements
+// that are inverted or degenerate are refused, naming the cell.
+enum IsobarStatus isobar_fe_mesh_create(const double *points,
+                                        size_t point_count,
+                                        const uint8_t *types,
+                                        size_t cell_count,
+                                        const int64_t *offsets,
+                                        const int64_t *connectivity,
+                                        size_t connectivity_len,
+                                        const uint32_t *degrees,
+                                        struct IsobarFeMesh **out);
+
+// Reads a mesh with its point arrays from a file (.vtu with Lagrange cells).
+enum IsobarStatus isobar_fe_mesh_read(const char *path, struct IsobarFeMesh **out);
+
+// Adds (or replaces) a per-point array: `count` items × `components` f64, item-major;
+// `count` must equal the number of points.
+enum IsobarStatus isobar_fe_mesh_add_array(struct IsobarFeMesh *mesh,
+                                           const char *name,
+                                           const double *data,
+                                           size_t count,
+                                           size_t components);
+
+// Number of per-point arrays of a mesh (0 for NULL).
+size_t isobar_fe_mesh_array_count(const struct IsobarFeMesh *mesh);
+
+// Name, components and data (point_count × components f64) of point array `index`; valid
+// until the mesh is freed or an array is added.
+enum IsobarStatus isobar_fe_mesh_array(const struct IsobarFeMesh *mesh,
+                                       size_t index,
+                                       const char **name,
+                                       size_t *components,
+                                       const double **data);
+
+// Number of points of a mesh (0 for NULL).
+size_t isobar_fe_mesh_point_count(const struct IsobarFeMesh *mesh);
+
+// Number of cells of a mesh (0 for NULL).
+size_t isobar_fe_mesh_cell_count(const struct IsobarFeMesh *mesh);
+
+// Frees a mesh (NULL is ignored).
+void isobar_fe_mesh_free(struct IsobarFeMesh *mesh);
+
+// Samples the isosurface `params.iso` of the scalar point array `field` with the particle
+// system. The samples carry the arrays Element, Reference (3), Curvature and Energy.
+enum IsobarStatus isobar_fe_sample(const struct IsobarFeMesh *mesh,
+                                   const char *field,
+                                   const struct IsobarFeParams *params,
+                                   IsobarProgressFn progress,
+                                   void *user,
+                                   struct IsobarSamples **out);
+
+// Number of samples (0 for NULL).
+size_t isobar_samples_count(const struct IsobarSamples *s);
+
+// count × 3 f64 world positions, or NULL.
+const double *isobar_samples_positions(const struct IsobarSamples *s);
+
+// count × 3 f32 unit normals (along the field's gradient), or NULL.
+const float *isobar_samples_normals(const struct IsobarSamples *s);
+
+// count f64 splat radii (disks of these radii cover the surface), or NULL.
+const double *isobar_samples_radii(const struct IsobarSamples *s);
+
+// Number of per-sample arrays.
+size_t isobar_samples_attribute_count(const struct IsobarSamples *s);
+
+// Name, components and data (count × components f64) of array `index`.
+enum IsobarStatus isobar_samples_attribute(const struct IsobarSamples *s,
+                                           size_t index,
+                                           const char **name,
+                                           size_t *components,
+                                           const double **data);
+
+// Copies the run's statistics into `out` (whose `struct_size` the caller sets).
+enum IsobarStatus isobar_samples_stats(const struct IsobarSamples *s, struct IsobarFeStats *out);
+
+// Writes the samples to a .vtp file (vertices with Normals, Radius and the arrays),
+// through a temporary file.
+enum IsobarStatus isobar_samples_write(const struct IsobarSamples *s, const char *path);
+
+// Frees samples (NULL is ignored).
+void isobar_samples_free(struct IsobarSamples *s);
 
 // Creates a particle set from `count` xyz triples of f64 (copied). NaN or infinite
 // coordinates are reported when a field is built, naming the particle.

@@ -304,11 +304,14 @@ fn damaged_or_foreign_stores_are_refused_clearly() {
     let volume = blobs([10, 9, 8], 0.1);
     let path = store_of(&volume, "good.isoslider", 0.25);
     let good = std::fs::read(&path).unwrap();
-    Store::open(&path).unwrap();
+    Store::open(&path).unwrap().verify().unwrap();
     let bad = temp("bad.isoslider");
+    // Opening checks sizes and tables; the data is checked on first touch, or whole by
+    // `verify`.
     let refuse = |bytes: &[u8], want: &str| {
         std::fs::write(&bad, bytes).unwrap();
         let e = Store::open(&bad)
+            .and_then(|s| s.verify())
             .err()
             .unwrap_or_else(|| panic!("accepted ({want})"))
             .to_string();
@@ -342,11 +345,71 @@ fn damaged_or_foreign_stores_are_refused_clearly() {
     refuse(&b, "checksum");
     // Another version is refused, not misread.
     let mut b = good.clone();
-    b[8..12].copy_from_slice(&2u32.to_le_bytes());
-    refuse(&b, "version 2");
+    b[8..12].copy_from_slice(&1u32.to_le_bytes());
+    refuse(&b, "version 1");
     let mut b = good;
     b[..8].copy_from_slice(b"NOTASTOR");
     refuse(&b, "magic");
+}
+
+/// A corrupt chunk is refused by the slider when it first reads it, not used: a byte of
+/// the body flipped (one about every chunk, at varying offsets inside it) makes some
+/// isovalue sweep fail with a "corrupt" error naming the file, or `verify` fail, never
+/// a panic or a silently different surface.
+#[test]
+fn corrupt_chunks_are_refused_when_first_read() {
+    let volume = blobs([30, 29, 28], 0.1);
+    let path = store_of(&volume, "lazy.isoslider", 0.25);
+    let good = std::fs::read(&path).unwrap();
+    let header = {
+        let s = Store::open(&path).unwrap();
+        s.verify().unwrap();
+        // The first section starts after the header: find it from the directory.
+        u64::from_le_bytes(good[104 + 8..104 + 16].try_into().unwrap()) as usize
+    };
+    let sweep = [0.2, 0.45, 0.3, 0.9, -0.5, 0.6];
+    let mut reference = Slider::open(&path).unwrap();
+    let expected: Vec<Canon> = sweep
+        .iter()
+        .map(|&iso| {
+            reference.set_isovalue(iso).unwrap();
+            slider_canon(&reference)
+        })
+        .collect();
+    let bad = temp("lazy-bad.isoslider");
+    let mut refused_at_use = 0;
+    for at in (header..good.len()).step_by(4099) {
+        let mut b = good.clone();
+        b[at] ^= 0x04;
+        std::fs::write(&bad, &b).unwrap();
+        let Ok(mut s) = Slider::open(&bad) else {
+            continue; // refused at open (the chunk table or the level tables)
+        };
+        let mut failed = None;
+        for (iso, want) in sweep.iter().zip(&expected) {
+            match s.set_isovalue(*iso) {
+                Ok(_) => assert!(slider_canon(&s) == *want, "byte {at}: a different surface"),
+                Err(e) => {
+                    failed = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        match failed {
+            Some(e) => {
+                assert!(
+                    e.contains("corrupt") && e.contains("lazy-bad.isoslider"),
+                    "{e}"
+                );
+                refused_at_use += 1;
+            }
+            None => {
+                let e = s.store().verify().unwrap_err().to_string();
+                assert!(e.contains("corrupt"), "byte {at}: {e}");
+            }
+        }
+    }
+    assert!(refused_at_use > 0);
 }
 
 #[test]

@@ -182,6 +182,45 @@ int main(void) {
     CHECK(isobar_particles_read("/nonexistent/frame.vtk", &missing) == ISOBAR_STATUS_ERR_IO, "missing file");
     CHECK(strstr(isobar_last_error_message(), "/nonexistent/frame.vtk") != NULL, "message names the file");
 
+    /* High-order FE: one trilinear Lagrange hexahedron over [0, 1]³ (VTK corner order) with
+     * f = x; the isosurface f = 0.3 is the plane x = 0.3, every sample on it. */
+    {
+        const double corners[24] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1};
+        const uint8_t type = 72;
+        const int64_t offsets[2] = {0, 8};
+        const int64_t conn[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+        double f[8];
+        for (int i = 0; i < 8; i++) f[i] = corners[3 * i];
+        IsobarFeMesh *fe = NULL;
+        CHECK(isobar_fe_mesh_create(corners, 8, &type, 1, offsets, conn, 8, NULL, &fe) == ISOBAR_STATUS_OK,
+              "fe mesh: %s", isobar_last_error_message());
+        CHECK(isobar_fe_mesh_add_array(fe, "f", f, 8, 1) == ISOBAR_STATUS_OK, "fe array");
+        IsobarFeParams fp;
+        CHECK(isobar_fe_params_default(&fp) == ISOBAR_STATUS_OK && fp.struct_size == sizeof fp, "fe defaults");
+        fp.iso = 0.3;
+        fp.spacing = 0.1;
+        IsobarSamples *samples = NULL;
+        CHECK(isobar_fe_sample(fe, "f", &fp, NULL, NULL, &samples) == ISOBAR_STATUS_OK,
+              "fe sample: %s", isobar_last_error_message());
+        size_t ns = isobar_samples_count(samples);
+        const double *sp = isobar_samples_positions(samples);
+        const double *sr = isobar_samples_radii(samples);
+        CHECK(ns > 30 && sp && sr, "%zu samples", ns);
+        double off = 0.0;
+        for (size_t i = 0; i < ns; i++) {
+            off = fmax(off, fabs(sp[3 * i] - 0.3));
+            CHECK(sr[i] > 0.0, "radius %zu", i);
+        }
+        CHECK(off <= fp.tolerance, "fe sample off the plane by %g", off);
+        IsobarFeStats fs;
+        fs.struct_size = sizeof fs;
+        CHECK(isobar_samples_stats(samples, &fs) == ISOBAR_STATUS_OK && fs.particles == ns, "fe stats");
+        CHECK(isobar_fe_sample(fe, "g", &fp, NULL, NULL, &samples) == ISOBAR_STATUS_ERR_INVALID_INPUT, "fe missing field");
+        CHECK(strstr(isobar_last_error_message(), "g") != NULL, "message names the field");
+        isobar_samples_free(samples);
+        isobar_fe_mesh_free(fe);
+    }
+
     isobar_particles_free(particles);
     isobar_particles_free(NULL);
     isobar_surface_free(NULL);

@@ -54,6 +54,8 @@ run() {
 
 run vtk-module env PYTHONPATH="$root/vtk-plugin/build-vtk/python" \
     /usr/bin/python3 "$here/test_vtk_module.py"
+run vtk-fe-filter env PYTHONPATH="$root/vtk-plugin/build-vtk/python" \
+    /usr/bin/python3 "$here/test_fe_filter.py"
 
 # Xvfb under xvfb-run has been seen to lose its connection on a loaded machine ("bad X
 # server connection", pvbatch aborts); that says nothing about the plugin, so such a run

@@ -215,6 +215,38 @@ def test_volume_slider_in_paraview_slides_without_rebuilding():
 
 
 @test
+def test_fe_samples_in_paraview_equal_the_cli_and_keep_the_mesh_across_isovalues():
+    from paraview.simple import XMLUnstructuredGridReader
+
+    HighOrderSamples = globals()["HighOrderIsosurfaceSamples"]
+    fixture = os.path.join(h.REPO, "rust-core", "data", "fe", "mixed_lagrange.vtu")
+    reader = XMLUnstructuredGridReader(FileName=[fixture])
+    f = HighOrderSamples(Input=reader)
+    f.Scalars = ["POINTS", "p"]
+    iso = float(np.median(h.point_array(output_at(reader), "p")))
+    f.Isovalue = iso
+    out = output_at(f)
+    ref = os.path.join(TMP, "fe_pv_cli.vtp")
+    subprocess.run([h.CLI, "fe", fixture, "--field", "p", "--iso", repr(iso), "-o", ref, "--quiet"],
+                   check=True, capture_output=True)
+    a, _ = h.arrays(out)
+    b, _ = h.arrays(h.read_vtp(ref))
+    assert len(a) > 20 and a.shape == b.shape, (a.shape, b.shape)
+    assert np.abs(a - b).max() <= 1e-12, np.abs(a - b).max()
+    for name in ("Normals", "Radius", "Element", "Reference", "Curvature", "Energy"):
+        assert out.GetPointData().GetArray(name) is not None, name
+    for other in (iso - 0.2, iso + 0.3):
+        f.Isovalue = other
+        assert output_at(f).GetNumberOfPoints() > 10
+    f.UpdatePropertyInformation()
+    assert f.GetPropertyValue("NumberOfMeshBuilds") == 1, f.GetPropertyValue("NumberOfMeshBuilds")
+    hints = f.SMProxy.GetHints()
+    assert hints.FindNestedElementByName("Representation").GetAttribute("type") == "Point Gaussian"
+    assert hints.FindNestedElementByName("ShowInMenu").GetAttribute("category") == "isobar"
+    Delete(f)
+
+
+@test
 def test_filter_is_in_the_isobar_menu_category():
     r = LegacyVTKReader(FileNames=[h.FRAME_26])
     f = SPHIsosurface(Input=r)

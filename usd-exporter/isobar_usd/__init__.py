@@ -10,7 +10,12 @@ joined by value clips, so no process ever holds more than one frame::
     isobar_usd.write_frame(surface, "frame.usd", time=12)       # an isobar.Surface or arrays
     isobar_usd.check("fluid.usd")                               # [] when sound
 
-Command line: ``isobar-usd sph 'frames/frame_####.vtk' --iso 0.6 --h 0.05 -o fluid.usd``.
+High-order FE isosurfaces (point samples) become a UsdGeomPoints with widths and normals::
+
+    isobar_usd.write_fe_samples("solution.vtu", "surface.usd", field="p", iso=0.0)
+
+Command line: ``isobar-usd sph 'frames/frame_####.vtk' --iso 0.6 --h 0.05 -o fluid.usd``,
+``isobar-usd fe solution.vtu --field p --iso 0 -o surface.usd``.
 """
 
 from ._version import __version__
@@ -42,6 +47,7 @@ from .errors import Error, FrameError, InputError, StitchError  # noqa: E402
 from .frames import expand_sequence, frame_number, parse_frame_selection  # noqa: E402
 from .layers import StageSettings  # noqa: E402
 from .mesh import FrameMesh, to_mesh  # noqa: E402
+from .points import write_fe_samples, write_points  # noqa: E402
 from .sequence import (  # noqa: E402
     FrameProgress,
     FrameResult,
@@ -75,6 +81,8 @@ __all__ = [
     "request_stop",
     "stitch",
     "to_mesh",
+    "write_fe_samples",
     "write_frame",
+    "write_points",
     "write_sequence",
 ]

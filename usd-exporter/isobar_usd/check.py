@@ -124,6 +124,54 @@ def _mesh_problems(mesh, max_frames: Optional[int]) -> List[Problem]:
     return problems
 
 
+def _points_problems(points) -> List[Problem]:
+    """Counts of normals, widths and vertex primvars against the points, finite
+    positions, positive widths, the extent (with widths) against the points, at every
+    time sample (or the default value)."""
+    from pxr import Usd, UsdGeom
+
+    where = str(points.GetPath())
+    problems: List[Problem] = []
+    times = _sample_times([points.GetPointsAttr()]) or [Usd.TimeCode.Default()]
+    for time in times:
+        t = None if time == Usd.TimeCode.Default() else time
+
+        def add(what, message):
+            problems.append(Problem("error", what, where, t, message))
+
+        xyz = points.GetPointsAttr().Get(time)
+        if xyz is None:
+            add("points", "no value")
+            continue
+        xyz = np.asarray(xyz)
+        n = len(xyz)
+        if not np.isfinite(xyz).all():
+            add("points", "non-finite positions")
+        widths = points.GetWidthsAttr().Get(time)
+        if widths is not None and points.GetWidthsInterpolation() == UsdGeom.Tokens.vertex:
+            if len(widths) != n:
+                add("widths", f"{len(widths)} widths for {n} points")
+            elif n and not (np.asarray(widths) > 0).all():
+                add("widths", "widths must be positive")
+        normals = points.GetNormalsAttr().Get(time)
+        if normals is not None and points.GetNormalsInterpolation() == UsdGeom.Tokens.vertex and len(normals) != n:
+            add("normals", f"{len(normals)} normals for {n} points")
+        extent = points.GetExtentAttr().Get(time)
+        computed = UsdGeom.Points.ComputeExtent(xyz, widths) if widths is not None and len(widths) == n else None
+        if extent is None:
+            add("extent", "no extent authored")
+        elif computed is not None and n and not np.allclose(np.asarray(extent), np.asarray(computed), rtol=1e-6):
+            add("extent", f"extent {list(map(tuple, extent))} differs from the points' {list(map(tuple, computed))}")
+        for pv in UsdGeom.PrimvarsAPI(points.GetPrim()).GetPrimvars():
+            if pv.GetInterpolation() != "vertex":
+                continue
+            value = pv.Get(time)
+            size = max(1, pv.GetElementSize())
+            if value is not None and len(value) != n * size:
+                add("primvar", f"{pv.GetPrimvarName()}: {len(value)} values for {n} points")
+    return problems
+
+
 def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_frames: Optional[int] = None) -> List[Problem]:
     """Opens the stage at `path` and returns its problems (an empty list when it is sound).
 
@@ -153,6 +201,8 @@ def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_fra
     for prim in stage.Traverse():
         if prim.IsA(UsdGeom.Mesh):
             problems += _mesh_problems(UsdGeom.Mesh(prim), max_frames)
+        elif prim.IsA(UsdGeom.Points):
+            problems += _points_problems(UsdGeom.Points(prim))
     return problems
 
 

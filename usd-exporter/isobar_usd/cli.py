@@ -4,6 +4,7 @@
     isobar-usd sph 'frames/frame_####.vtk' ... -o fluid.usd --frames 10-20 --no-stitch
     isobar-usd stitch fluid.usd
     isobar-usd check fluid.usd
+    isobar-usd fe solution.vtu --field p --iso 0 -o surface.usd
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
         description="Write isobar's SPH isosurfaces as USD stages (time-sampled UsdGeomMesh, value clips).",
     )
     parser.add_argument("--version", action="version", version=f"isobar-usd {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{sph,stitch,check}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{sph,fe,stitch,check}")
 
     sph = sub.add_parser(
         "sph",
@@ -91,6 +92,8 @@ def _parser() -> argparse.ArgumentParser:
     u.add_argument("--primvars", type=_names, help="attributes written as vertex primvars (default: all of --attributes, plus Isovalue for several isovalues)")
     u.add_argument("--check", action="store_true", help="check the written stage (validators, per-frame topology)")
     u.add_argument("--quiet", "-q", action="store_true", help="print nothing but errors")
+
+    _add_fe(sub)
 
     st = sub.add_parser("stitch", help="rewrite a sequence's root layer and manifest from its frame layers",
                         description="Rewrite the root layer and clip manifest of a sequence from the frame layers in its clips folder "
@@ -147,6 +150,52 @@ def _extract_options(args) -> dict:
     if args.splash_threshold is not None:
         options["splash_threshold"] = args.splash_threshold
     return options
+
+
+def _add_fe(sub) -> None:
+    fe = sub.add_parser(
+        "fe",
+        help="sample the isosurface of a high-order FE field and write it as USD Points",
+        description="Sample the isosurface of a scalar field on Lagrange cells (a .vtu) with isobar's particle "
+        "system and write the samples as a UsdGeomPoints with normals, widths and primvars.",
+    )
+    fe.add_argument("input", help=".vtu file of Lagrange tetrahedra, hexahedra or wedges")
+    fe.add_argument("-o", "--output", required=True, help="USD file (.usd .usda .usdc)")
+    fe.add_argument("--field", required=True, help="scalar point array to contour")
+    fe.add_argument("--iso", required=True, type=float, help="the isovalue")
+    fe.add_argument("--spacing", type=float, default=0.0, help="sample spacing on flat parts (default: 1/40 of the diagonal)")
+    fe.add_argument("--rho", type=float, default=0.0, help="curvature adaptivity (default 0: uniform)")
+    fe.add_argument("--tolerance", type=float, help="every sample within this of the isovalue (core default 1e-6)")
+    fe.add_argument("--meters-per-unit", type=float, default=1.0, help="stage metersPerUnit (default 1)")
+    fe.add_argument("--up-axis", default="Y", choices=["Y", "Z", "y", "z"], help="stage upAxis (default Y)")
+    fe.add_argument("--prim", default="FE", help="root prim name (default FE)")
+    fe.add_argument("--points", default="Samples", help="Points prim name (default Samples)")
+    fe.add_argument("--check", action="store_true", help="check the written stage")
+    fe.add_argument("--quiet", "-q", action="store_true", help="print nothing but errors")
+
+
+def _run_fe(args) -> int:
+    from . import check, write_fe_samples
+
+    path, samples = write_fe_samples(
+        args.input,
+        args.output,
+        args.field,
+        args.iso,
+        spacing=args.spacing,
+        rho=args.rho,
+        tolerance=args.tolerance,
+        meters_per_unit=args.meters_per_unit,
+        up_axis=args.up_axis.upper(),
+        prim=args.prim,
+        points=args.points,
+    )
+    if not args.quiet:
+        st = samples.stats
+        print(f"wrote {path}: {len(samples):,} samples, max |F - C| {st['max_residual']:.2e}, {st['evaluations']:,} evaluations")
+    if args.check:
+        return _report_problems(check(path), args.quiet)
+    return 0
 
 
 def _run_sph(args) -> int:
@@ -227,6 +276,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if args.command == "sph":
             return _run_sph(args)
+        if args.command == "fe":
+            return _run_fe(args)
         if args.command == "stitch":
             result = stitch(args.output, fps=args.fps)
             if not args.quiet:

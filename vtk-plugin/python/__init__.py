@@ -1,11 +1,12 @@
 """isobar for VTK: exact isosurfaces of SPH particle data (Marching Correctors, or the
-adaptive 3-level grid) and isovalue sliding on image data (ISOSLIDER).
+adaptive 3-level grid), isovalue sliding on image data (ISOSLIDER), and point samples of
+isosurfaces of high-order Lagrange cells (particle system).
 
 Built against Debian's VTK 9.1 (python3-vtk9); import it only next to that VTK.
 
-    from isobar_vtk import vtkIsobarSPHIsosurface, vtkIsobarVolumeSlider
+    from isobar_vtk import vtkIsobarSPHIsosurface, vtkIsobarVolumeSlider, vtkIsobarFESamples
 """
 
-from .IsobarVTK import vtkIsobarSPHIsosurface, vtkIsobarVolumeSlider  # noqa: F401
+from .IsobarVTK import vtkIsobarFESamples, vtkIsobarSPHIsosurface, vtkIsobarVolumeSlider  # noqa: F401
 
-__all__ = ["vtkIsobarSPHIsosurface", "vtkIsobarVolumeSlider"]
+__all__ = ["vtkIsobarFESamples", "vtkIsobarSPHIsosurface", "vtkIsobarVolumeSlider"]

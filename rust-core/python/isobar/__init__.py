@@ -1,4 +1,4 @@
-"""isobar: exact isosurfaces of SPH particle data.
+"""isobar: exact isosurfaces of SPH particle data and high-order finite elements.
 
 A thin ctypes layer over the isobar core (libisobar.so, Rust) with numpy arrays in and
 out; numpy is the only dependency (``isobar.pyvista`` adapts to pyvista when it is
@@ -29,6 +29,7 @@ from .errors import (
     Status,
 )
 from .adaptive import extract_adaptive
+from .fe import FeMesh, Samples, sample_fe
 from .particles import Particles
 from .slider import Slider, SliderUpdate
 from .sph import default_params, extract
@@ -53,6 +54,7 @@ __all__ = [
     "ABI_VERSION",
     "KERNELS",
     "Cancelled",
+    "FeMesh",
     "Error",
     "FormatError",
     "InternalError",
@@ -61,6 +63,7 @@ __all__ = [
     "IoError",
     "OverBudgetError",
     "Particles",
+    "Samples",
     "Slider",
     "SliderUpdate",
     "Status",
@@ -71,6 +74,7 @@ __all__ = [
     "extract",
     "extract_adaptive",
     "library_path",
+    "sample_fe",
 ]
 
 

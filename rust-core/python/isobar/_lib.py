@@ -24,9 +24,11 @@ from ctypes import (
     c_float,
     c_int,
     c_int32,
+    c_int64,
     c_size_t,
     c_uint32,
     c_uint64,
+    c_uint8,
     c_void_p,
 )
 from pathlib import Path
@@ -162,6 +164,50 @@ class AdaptiveStats(Structure):
     ]
 
 
+class FeMeshHandle(Structure):
+    """Opaque ``IsobarFeMesh``."""
+
+
+class SamplesHandle(Structure):
+    """Opaque ``IsobarSamples``."""
+
+
+class FeParams(Structure):
+    """``IsobarFeParams``; fill with ``isobar_fe_params_default``."""
+
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("levels", c_uint32),
+        ("iso", c_double),
+        ("spacing", c_double),
+        ("rho", c_double),
+        ("tolerance", c_double),
+        ("max_density", c_double),
+        ("steady_fraction", c_double),
+        ("max_iterations", c_uint32),
+        ("neighbour_refresh", c_uint32),
+        ("split_rounds", c_uint32),
+        ("_reserved", c_uint32),
+        ("seed", c_uint64),
+    ]
+
+
+class FeStats(Structure):
+    """``IsobarFeStats``; set ``struct_size`` before ``isobar_samples_stats``."""
+
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("particles", c_uint64),
+        ("seeds", c_uint64),
+        ("iterations", c_uint64),
+        ("evaluations", c_uint64),
+        ("splits", c_uint64),
+        ("deletes", c_uint64),
+        ("spacing", c_double),
+        ("max_residual", c_double),
+    ]
+
+
 #: ``int32_t (*)(void* user, double fraction, const char* phase)``; non-zero cancels.
 PROGRESS_FN = CFUNCTYPE(c_int32, c_void_p, c_double, c_char_p)
 
@@ -213,6 +259,58 @@ _PROTOTYPES = {
             POINTER(AdaptiveStats),
         ],
     ),
+    # high-order finite elements
+    "isobar_fe_params_default": (_Status, [POINTER(FeParams)]),
+    "isobar_fe_mesh_create": (
+        _Status,
+        [
+            POINTER(c_double),
+            c_size_t,
+            POINTER(c_uint8),
+            c_size_t,
+            POINTER(c_int64),
+            POINTER(c_int64),
+            c_size_t,
+            POINTER(c_uint32),
+            POINTER(POINTER(FeMeshHandle)),
+        ],
+    ),
+    "isobar_fe_mesh_read": (_Status, [c_char_p, POINTER(POINTER(FeMeshHandle))]),
+    "isobar_fe_mesh_add_array": (
+        _Status,
+        [POINTER(FeMeshHandle), c_char_p, POINTER(c_double), c_size_t, c_size_t],
+    ),
+    "isobar_fe_mesh_array_count": (c_size_t, [POINTER(FeMeshHandle)]),
+    "isobar_fe_mesh_array": (
+        _Status,
+        [POINTER(FeMeshHandle), c_size_t, POINTER(c_char_p), POINTER(c_size_t), POINTER(POINTER(c_double))],
+    ),
+    "isobar_fe_mesh_point_count": (c_size_t, [POINTER(FeMeshHandle)]),
+    "isobar_fe_mesh_cell_count": (c_size_t, [POINTER(FeMeshHandle)]),
+    "isobar_fe_mesh_free": (None, [POINTER(FeMeshHandle)]),
+    "isobar_fe_sample": (
+        _Status,
+        [
+            POINTER(FeMeshHandle),
+            c_char_p,
+            POINTER(FeParams),
+            PROGRESS_FN,
+            c_void_p,
+            POINTER(POINTER(SamplesHandle)),
+        ],
+    ),
+    "isobar_samples_count": (c_size_t, [POINTER(SamplesHandle)]),
+    "isobar_samples_positions": (POINTER(c_double), [POINTER(SamplesHandle)]),
+    "isobar_samples_normals": (POINTER(c_float), [POINTER(SamplesHandle)]),
+    "isobar_samples_radii": (POINTER(c_double), [POINTER(SamplesHandle)]),
+    "isobar_samples_attribute_count": (c_size_t, [POINTER(SamplesHandle)]),
+    "isobar_samples_attribute": (
+        _Status,
+        [POINTER(SamplesHandle), c_size_t, POINTER(c_char_p), POINTER(c_size_t), POINTER(POINTER(c_double))],
+    ),
+    "isobar_samples_stats": (_Status, [POINTER(SamplesHandle), POINTER(FeStats)]),
+    "isobar_samples_write": (_Status, [POINTER(SamplesHandle), c_char_p]),
+    "isobar_samples_free": (None, [POINTER(SamplesHandle)]),
     # surface
     "isobar_surface_vertex_count": (c_size_t, [POINTER(SurfaceHandle)]),
     "isobar_surface_triangle_count": (c_size_t, [POINTER(SurfaceHandle)]),

@@ -15,6 +15,7 @@ from typing import Iterable, Optional
 
 import numpy as np
 
+from .fe import FeMesh, Samples, sample_fe
 from .particles import Particles
 from .sph import DEFAULT_H_ARRAYS, extract, is_sum_of_weights
 from .surface import Surface
@@ -118,4 +119,60 @@ def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[f
     return to_pyvista(surface)
 
 
-__all__ = ["surface_from_polydata", "to_pyvista", "particles_from_dataset"]
+def _offsets(grid):
+    """VTK 9's cell offsets (``cell_offsets`` in pyvista ≥ 0.45, ``offset`` before)."""
+    return grid.cell_offsets if hasattr(grid, "cell_offsets") else grid.offset
+
+
+def fe_mesh_from_dataset(grid, arrays: Optional[Iterable[str]] = None) -> FeMesh:
+    """A :class:`isobar.FeMesh` from a ``pv.UnstructuredGrid`` of Lagrange cells (VTK types
+    71, 72, 73), with its ``HigherOrderDegrees`` cell array when present and its numeric
+    point arrays (or only `arrays`)."""
+    pv = _pyvista()
+    if not isinstance(grid, pv.DataSet):
+        grid = pv.wrap(grid)
+    if not isinstance(grid, pv.UnstructuredGrid):
+        raise TypeError(f"a high-order mesh must be a pyvista.UnstructuredGrid, not {type(grid).__name__}")
+    degrees = grid.cell_data["HigherOrderDegrees"] if "HigherOrderDegrees" in grid.cell_data else None
+    mesh = FeMesh.from_arrays(grid.points, grid.celltypes, _offsets(grid), grid.cell_connectivity, degrees=degrees)
+    wanted = None if arrays is None else set(arrays)
+    n = grid.n_points
+    for name in grid.point_data.keys():
+        values = np.asarray(grid.point_data[name])
+        if (wanted is None or name in wanted) and values.dtype.kind in "fiub" and values.ndim and values.shape[0] == n:
+            mesh.add_array(name, values)
+    return mesh
+
+
+def samples_to_pyvista(samples: Samples):
+    """A ``pv.PolyData`` of vertices: ``Normals`` (active normals), ``Radius`` and every
+    per-sample array as point data (render as splats: ``style="points_gaussian"`` with
+    ``Radius`` as the scale array)."""
+    pv = _pyvista()
+    cloud = pv.PolyData(samples.points) if len(samples) else pv.PolyData()
+    if len(samples):
+        cloud.point_data["Normals"] = samples.normals
+        cloud.point_data.active_normals_name = "Normals"
+        cloud.point_data["Radius"] = samples.radii
+        for name, values in samples.arrays.items():
+            cloud.point_data[name] = values
+    return cloud
+
+
+def samples_from_unstructured_grid(grid, field: str, iso: float, **kw):
+    """Samples the isosurface ``field == iso`` of a Lagrange ``pv.UnstructuredGrid`` and
+    returns the points as ``pv.PolyData`` (see :func:`samples_to_pyvista`); `kw` are the
+    options of :func:`isobar.sample_fe` (spacing, rho, tolerance, levels, seed, progress)."""
+    samples = sample_fe(fe_mesh_from_dataset(grid, arrays=[field]), field, iso, **kw)
+    samples.release()
+    return samples_to_pyvista(samples)
+
+
+__all__ = [
+    "surface_from_polydata",
+    "to_pyvista",
+    "particles_from_dataset",
+    "fe_mesh_from_dataset",
+    "samples_to_pyvista",
+    "samples_from_unstructured_grid",
+]

@@ -238,8 +238,16 @@ def _sph_params(particles, iso, field, kernel, h, h_array, h_scale, grid_factor,
 def _run(invoke, progress: Optional[ProgressCallback], normals: bool) -> Surface:
     """Calls ``invoke(callback, handle)`` (a core extraction writing a surface handle) with
     the progress/cancel/Ctrl-C wiring, and wraps the result."""
+    handle = _call(invoke, progress, POINTER(SurfaceHandle)(), lib.isobar_surface_free)
+    return Surface._from_handle(handle, normals_requested=bool(normals))
+
+
+def _call(invoke, progress: Optional[ProgressCallback], handle, free):
+    """Calls ``invoke(callback, handle)`` (a core call writing a result handle) with the
+    progress/cancel/Ctrl-C wiring; returns the filled handle or raises (an exception of
+    the callback, KeyboardInterrupt, or the core's error), freeing a result nobody gets."""
     # The callback runs on this thread. It is always installed, so that Ctrl-C (a
-    # KeyboardInterrupt raised while it runs) cancels the extraction too.
+    # KeyboardInterrupt raised while it runs) cancels the call too.
     raised: list = []
 
     interrupted: list = []
@@ -257,19 +265,18 @@ def _run(invoke, progress: Optional[ProgressCallback], normals: bool) -> Surface
             return 1
 
     callback = PROGRESS_FN(report)
-    handle = POINTER(SurfaceHandle)()
     with _sigint_cancels(interrupted):
         status = invoke(callback, handle)
     if interrupted and not raised:
         raised.append(KeyboardInterrupt())
     if raised:
         if status == 0:
-            lib.isobar_surface_free(handle)
+            free(handle)
         exc = raised[0]
         raised.clear()
         raise exc
     if status == Status.OK:
-        return Surface._from_handle(handle, normals_requested=bool(normals))
+        return handle
     check(status)
     raise AssertionError("unreachable")  # check raises for every non-zero status
 

@@ -21,6 +21,20 @@ def _copy(ptr, count: int, dtype) -> np.ndarray:
     return np.ctypeslib.as_array(ptr, shape=(count,)).astype(dtype, copy=True)
 
 
+def _attributes(handle, n: int, count_fn, attribute_fn) -> Dict[str, np.ndarray]:
+    """Copies a result handle's named per-point arrays: name -> (n,) or (n, k) float64."""
+    attributes = {}
+    name = c_char_p()
+    components = c_size_t()
+    data = POINTER(c_double)()
+    for i in range(count_fn(handle)):
+        check(attribute_fn(handle, i, byref(name), byref(components), byref(data)))
+        k = components.value
+        values = _copy(data, n * k, np.float64)
+        attributes[name.value.decode("utf-8", "replace")] = values.reshape(n, k) if k != 1 else values
+    return attributes
+
+
 class Surface:
     """A triangle mesh extracted by isobar, with per-vertex data, in numpy arrays.
 
@@ -73,15 +87,7 @@ class Surface:
                 normals = np.empty((0, 3), dtype=np.float32)
             else:
                 normals = None
-            attributes = {}
-            name = c_char_p()
-            components = c_size_t()
-            data = POINTER(c_double)()
-            for i in range(lib.isobar_surface_attribute_count(handle)):
-                check(lib.isobar_surface_attribute(handle, i, byref(name), byref(components), byref(data)))
-                k = components.value
-                values = _copy(data, n * k, np.float64)
-                attributes[name.value.decode("utf-8", "replace")] = values.reshape(n, k) if k != 1 else values
+            attributes = _attributes(handle, n, lib.isobar_surface_attribute_count, lib.isobar_surface_attribute)
             stats = Stats()
             stats.struct_size = sizeof(Stats)
             check(lib.isobar_surface_stats(handle, byref(stats)))

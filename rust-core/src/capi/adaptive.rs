@@ -5,7 +5,9 @@
 use super::particles::IsobarParticles;
 use super::sph::{read_params, settings, IsobarProgressFn};
 use super::surface::IsobarSurface;
-use super::{guard, invalid, non_null, put, with_progress, IsobarSphParams, IsobarStatus};
+use super::{
+    copy_versioned_out, guard, invalid, non_null, put, with_progress, IsobarSphParams, IsobarStatus,
+};
 use crate::adaptive::{self, Params};
 use crate::correctors;
 use crate::field::sph::SphField;
@@ -124,10 +126,8 @@ pub extern "C" fn isobar_adaptive_extract(
         })?;
         let s = &extraction.stats;
         if !stats.is_null() {
-            // SAFETY: non-null, and the caller promises a struct of at least struct_size.
-            let given = unsafe { (*stats).struct_size } as usize;
             let full = IsobarAdaptiveStats {
-                struct_size: given as u32,
+                struct_size: 0,
                 cells_per_level: s.cells_per_level,
                 triangles_per_level: s.triangles_per_level,
                 transition_faces: s.transition_faces,
@@ -138,15 +138,7 @@ pub extern "C" fn isobar_adaptive_extract(
                 array_bytes: s.array_bytes,
                 seconds_total: s.timings.total,
             };
-            let n = given.min(std::mem::size_of::<IsobarAdaptiveStats>());
-            // SAFETY: copies at most the caller's struct_size bytes of the same layout.
-            unsafe {
-                std::ptr::copy_nonoverlapping(
-                    (&full as *const IsobarAdaptiveStats).cast::<u8>(),
-                    stats.cast::<u8>(),
-                    n,
-                )
-            };
+            copy_versioned_out(full, stats, "stats")?;
         }
         let legacy = correctors::Extraction {
             stats: correctors::Stats {

@@ -11,12 +11,14 @@
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
 mod adaptive;
+mod fe;
 mod particles;
 mod slider;
 mod sph;
 mod surface;
 
 pub use adaptive::*;
+pub use fe::*;
 pub use particles::*;
 pub use slider::*;
 pub use sph::*;
@@ -189,6 +191,63 @@ pub(crate) fn with_progress<R>(
     };
     let mut sink = crate::progress::Progress::new(&mut report);
     body(&mut sink)
+}
+
+/// NUL-terminated copies of the arrays' names, kept beside a result so C gets stable
+/// `const char*` for the handle's lifetime.
+pub(crate) fn names_of(arrays: &[crate::field::particles::Attribute]) -> Vec<CString> {
+    arrays
+        .iter()
+        .map(|a| CString::new(a.name.replace('\0', " ")).unwrap_or_default())
+        .collect()
+}
+
+/// Writes name, components and data of `arrays[index]` through the out-pointers.
+pub(crate) fn attribute_out(
+    arrays: &[crate::field::particles::Attribute],
+    names: &[CString],
+    index: usize,
+    name: *mut *const c_char,
+    components: *mut usize,
+    data: *mut *const f64,
+) -> Result<(), Error> {
+    let a = arrays.get(index).ok_or_else(|| {
+        invalid(
+            "index",
+            format!("{index} is out of range ({} arrays)", arrays.len()),
+        )
+    })?;
+    put(name, names[index].as_ptr(), "name")?;
+    put(components, a.components, "components")?;
+    put(data, a.data.as_ptr(), "data")
+}
+
+/// Copies a statistics struct to the caller's `out`, whose leading `struct_size: u32` says
+/// how many bytes of the layout it holds (older, shorter structs get the prefix).
+pub(crate) fn copy_versioned_out<T: Copy>(
+    full: T,
+    out: *mut T,
+    name: &'static str,
+) -> Result<(), Error> {
+    let size = non_null(out as *const T, name)?;
+    // SAFETY: T is repr(C) with a leading u32 struct_size (the callers' contract).
+    let size = unsafe { *(size as *const T).cast::<u32>() } as usize;
+    let ours = std::mem::size_of::<T>();
+    if !(4..=ours).contains(&size) {
+        return Err(invalid(
+            name,
+            format!("struct_size is {size}; set it to the struct's sizeof ({ours})"),
+        ));
+    }
+    // SAFETY: `out` holds at least `size` bytes of T's layout; its struct_size is kept.
+    unsafe {
+        std::ptr::copy_nonoverlapping(
+            (&full as *const T).cast::<u8>().add(4),
+            out.cast::<u8>().add(4),
+            size - 4,
+        )
+    };
+    Ok(())
 }
 
 /// Writes `value` through an out-pointer.

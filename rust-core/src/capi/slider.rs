@@ -17,7 +17,6 @@ use std::path::Path;
 /// Opaque slider: a memory-mapped store and the surface at the current isovalue.
 pub struct IsobarSlider {
     slider: Slider,
-    triangles: Vec<[u32; 3]>,
     change: Change,
     moved: Vec<u32>,
 }
@@ -156,7 +155,6 @@ pub extern "C" fn isobar_slider_open(
         let slider = Slider::open(Path::new(&path))?;
         let handle = Box::new(IsobarSlider {
             slider,
-            triangles: Vec::new(),
             change: Change::default(),
             moved: Vec::new(),
         });
@@ -187,7 +185,6 @@ pub extern "C" fn isobar_slider_set_isovalue(
     guard(|| {
         let h = slider_mut(s)?;
         let c = with_progress(progress, user, |p| h.slider.set_isovalue_with(iso, p))?;
-        h.slider.triangles_into(&mut h.triangles);
         h.moved.clear();
         h.moved
             .extend(c.moved_vertices.iter().flat_map(|&(a, b)| [a, b]));
@@ -211,13 +208,13 @@ pub extern "C" fn isobar_slider_set_isovalue(
 /// Number of vertices (0 for NULL).
 #[no_mangle]
 pub extern "C" fn isobar_slider_vertex_count(s: *const IsobarSlider) -> usize {
-    slider_ref(s).map_or(0, |s| s.slider.positions().len())
+    slider_ref(s).map_or(0, |s| s.slider.vertex_count())
 }
 
 /// Number of triangles (0 for NULL).
 #[no_mangle]
 pub extern "C" fn isobar_slider_triangle_count(s: *const IsobarSlider) -> usize {
-    slider_ref(s).map_or(0, |s| s.triangles.len())
+    slider_ref(s).map_or(0, |s| s.slider.triangle_count())
 }
 
 /// vertex_count × 3 f32 positions (V), or NULL.
@@ -235,7 +232,9 @@ pub extern "C" fn isobar_slider_normals(s: *const IsobarSlider) -> *const f32 {
 /// triangle_count × 3 u32 vertex indices (I), or NULL.
 #[no_mangle]
 pub extern "C" fn isobar_slider_triangles(s: *const IsobarSlider) -> *const u32 {
-    slider_ref(s).map_or(std::ptr::null(), |s| s.triangles.as_ptr().cast())
+    slider_ref(s).map_or(std::ptr::null(), |s| {
+        s.slider.triangle_array().as_ptr().cast()
+    })
 }
 
 /// The last change's triangles: `which` 0 = added (new numbering), 1 = removed (old
@@ -312,7 +311,10 @@ pub extern "C" fn isobar_slider_stats(
 #[no_mangle]
 pub extern "C" fn isobar_slider_free(s: *mut IsobarSlider) {
     if !s.is_null() {
-        // SAFETY: created by Box::into_raw in this crate and not freed before.
-        let _ = std::panic::catch_unwind(|| drop(unsafe { Box::from_raw(s) }));
+        // SAFETY: created by Box::into_raw in this crate and not freed before. Nothing of
+        // the handle is observed after a panic (its lazily filled arrays are not unwind
+        // safe by type), so asserting unwind safety is sound.
+        let free = std::panic::AssertUnwindSafe(|| drop(unsafe { Box::from_raw(s) }));
+        let _ = std::panic::catch_unwind(free);
     }
 }

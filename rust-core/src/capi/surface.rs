@@ -1,6 +1,8 @@
 //! Extraction results: core-owned arrays, valid until `isobar_surface_free`.
 
-use super::{guard, invalid, non_null, opt_str, put, IsobarStatus};
+use super::{
+    attribute_out, copy_versioned_out, guard, invalid, names_of, non_null, opt_str, IsobarStatus,
+};
 use crate::correctors::Extraction;
 use std::ffi::{c_char, CString};
 
@@ -12,12 +14,7 @@ pub struct IsobarSurface {
 
 impl IsobarSurface {
     pub(crate) fn new(extraction: Extraction) -> Box<Self> {
-        let names = extraction
-            .mesh
-            .attributes
-            .iter()
-            .map(|a| CString::new(a.name.replace('\0', " ")).unwrap_or_default())
-            .collect();
+        let names = names_of(&extraction.mesh.attributes);
         Box::new(IsobarSurface { extraction, names })
     }
 }
@@ -113,15 +110,14 @@ pub extern "C" fn isobar_surface_attribute(
 ) -> IsobarStatus {
     guard(|| {
         let s = non_null(s, "surface")?;
-        let a = s.extraction.mesh.attributes.get(index).ok_or_else(|| {
-            invalid(
-                "index",
-                format!("{index} is out of range ({} arrays)", s.names.len()),
-            )
-        })?;
-        put(name, s.names[index].as_ptr(), "name")?;
-        put(components, a.components, "components")?;
-        put(data, a.data.as_ptr(), "data")
+        attribute_out(
+            &s.extraction.mesh.attributes,
+            &s.names,
+            index,
+            name,
+            components,
+            data,
+        )
     })
 }
 
@@ -133,17 +129,10 @@ pub extern "C" fn isobar_surface_stats(
 ) -> IsobarStatus {
     guard(|| {
         let s = non_null(s, "surface")?;
-        let size = non_null(out as *const IsobarStats, "out")?.struct_size as usize;
-        if size < 4 || size > std::mem::size_of::<IsobarStats>() {
-            return Err(invalid(
-                "out.struct_size",
-                format!("is {size}; set it to sizeof(IsobarStats)"),
-            ));
-        }
         let st = &s.extraction.stats;
         let t = &st.timings;
         let full = IsobarStats {
-            struct_size: size as u32,
+            struct_size: 0,
             virtual_cells: st.virtual_cells,
             seed_cells: st.seed_cells,
             non_intersected_seeds: st.non_intersected_seeds,
@@ -166,15 +155,7 @@ pub extern "C" fn isobar_surface_stats(
             seconds_attributes: t.attributes,
             seconds_total: t.total,
         };
-        // SAFETY: `out` holds at least `size` bytes of IsobarStats layout.
-        unsafe {
-            std::ptr::copy_nonoverlapping(
-                (&full as *const IsobarStats).cast::<u8>(),
-                out.cast::<u8>(),
-                size,
-            )
-        };
-        Ok(())
+        copy_versioned_out(full, out, "out")
     })
 }
 

@@ -20,7 +20,7 @@ mod particle;
 mod seed;
 mod system;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 use energy::BETA;
 pub use energy::{alpha, energy, energy_derivative, ideal_energy};

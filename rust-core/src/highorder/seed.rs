@@ -29,7 +29,11 @@ fn cell_seeds(surface: &Surface, c: usize, lambda: f64, sc: &mut Scratch) -> Vec
         return Vec::new();
     }
     let shape = mesh.shape(c);
-    let m = (shape.order.iter().max().copied().unwrap_or(1) + 1).max(3) as i32;
+    // The lattice holds every node of the cell (m is a multiple of the order on each
+    // axis), so when the nodes straddle the isovalue some lattice edge does too and the
+    // cell is never left without seeds, however small the surface inside it (a sphere
+    // around the body node of one cell has no coarser lattice point inside it).
+    let m = lattice_divisions(shape.order) as i32;
     let inside = |i: i32, j: i32, k: i32| -> bool {
         let ok = |v: i32| (0..=m).contains(&v);
         ok(i)
@@ -90,4 +94,21 @@ impl Surface<'_> {
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.mesh.value(self.values, c, u, sc)
     }
+}
+
+/// Divisions per axis of the seeding lattice: a multiple of every axis order, at least
+/// max(order + 1, 3) so that curved cells are probed between their nodes.
+fn lattice_divisions(order: [usize; 3]) -> usize {
+    fn gcd(a: usize, b: usize) -> usize {
+        if b == 0 {
+            a
+        } else {
+            gcd(b, a % b)
+        }
+    }
+    let lcm = order
+        .iter()
+        .fold(1, |l, &o| if o == 0 { l } else { l / gcd(l, o) * o });
+    let want = (order.iter().max().copied().unwrap_or(1) + 1).max(3);
+    lcm * want.div_ceil(lcm)
 }

@@ -244,3 +244,23 @@ fn missing_field_and_bad_parameters_are_errors() {
     .unwrap();
     assert!(s.is_empty());
 }
+
+#[test]
+fn a_small_sphere_inside_one_cell_is_found() {
+    // One quadratic cell over [-1, 1]³ with f = |y|²: the spheres of radius 0.3 and 0.5
+    // hold no point of a 4-per-axis probe lattice, only the body node.
+    let mesh = grid_mesh(1, 2, |y| y, |y| y.length_squared());
+    for r in [0.3, 0.5] {
+        let params = Params {
+            iso: r * r,
+            spacing: 0.06,
+            ..Params::default()
+        };
+        let (s, stats) = run(&mesh, &params);
+        assert!(s.len() > 30, "radius {r}: {stats:?}");
+        for x in &s.positions {
+            let d = DVec3::from(*x).length();
+            assert!((d * d - r * r).abs() <= params.tolerance * (1.0 + 1e-9));
+        }
+    }
+}

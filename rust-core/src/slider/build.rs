@@ -2,7 +2,9 @@
 //! turn on and off as the isovalue passes it), consolidate blocks into skip-list levels
 //! with redundant edges removed, and write everything into one store file.
 
-use super::store::{Kind, DIRECTORY_ENTRY, FIXED_HEADER, MAGIC, VERSION};
+use super::store::{
+    neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER, MAGIC, VERSION,
+};
 use crate::error::{Error, Result};
 use crate::field::grid::{Lattice, Volume};
 use crate::progress::Progress;
@@ -163,9 +165,9 @@ pub fn build_store(
             u32::MAX / 3
         )));
     }
-    // order + ranks + masks, and the levels (about as many edge entries as level 0's
-    // 3 edges per node, twice, in the worst case).
-    let needed = n as u64 * (4 + 4 + 1) + n as u64 * 3 * 2 * 4;
+    // order + masks, and the levels (about as many edge entries as level 0's 3 edges per
+    // node, twice, in the worst case).
+    let needed = n as u64 * (4 + 1) + n as u64 * 3 * 2 * 4;
     if needed > params.memory_budget {
         return Err(Error::OverBudget {
             what: format!(
@@ -186,33 +188,23 @@ pub fn build_store(
             .total_cmp(&values.get(b as usize))
             .then(a.cmp(&b))
     });
-    let mut rank = vec![0u32; n];
-    for (r, &j) in order.iter().enumerate() {
-        rank[j as usize] = r as u32;
-    }
     progress.phase("edge lists", 0.3, 0.4)?;
+    // Bit d: the edge to neighbour d turns on as the isovalue passes the node going up.
     let mask: Vec<u8> = order
         .par_iter()
-        .enumerate()
-        .map(|(r, &j)| {
-            let c = lattice.coords(j as usize);
+        .map(|&j| {
+            let j = j as usize;
+            let vj = values.get(j);
             let mut m = 0u8;
-            for (d, _) in node_edges(&lattice, j as usize) {
-                let (a, up) = (d / 2, d % 2 == 1);
-                let mut nc = c;
-                if up {
-                    nc[a] += 1
-                } else {
-                    nc[a] -= 1
-                };
-                if rank[lattice.index(nc[0], nc[1], nc[2])] as usize > r {
+            for (d, _) in node_edges(&lattice, j) {
+                let k = neighbour(&lattice, j, d);
+                if rises(vj, j, values.get(k), k) {
                     m |= 1 << d;
                 }
             }
             m
         })
         .collect();
-    drop(rank);
 
     progress.phase("skip-list levels", 0.4, 0.8)?;
     let mut levels: Vec<LevelData> = Vec::new();
@@ -287,7 +279,50 @@ type Sink<'a> = dyn FnMut(&[u8]) -> std::io::Result<()> + 'a;
 /// Writes one piece of a section into a sink.
 type Part<'a> = &'a dyn Fn(&mut Sink) -> std::io::Result<()>;
 
-/// Writes sections after a placeholder header, then the header with their checksums.
+/// CRC32 of every CHUNK bytes of the body, fed as it is written.
+struct ChunkSums {
+    sums: Vec<u32>,
+    hasher: crc32fast::Hasher,
+    filled: usize,
+}
+
+impl ChunkSums {
+    fn update(&mut self, mut bytes: &[u8]) {
+        while !bytes.is_empty() {
+            let take = (CHUNK - self.filled).min(bytes.len());
+            self.hasher.update(&bytes[..take]);
+            self.filled += take;
+            bytes = &bytes[take..];
+            if self.filled == CHUNK {
+                let h = std::mem::take(&mut self.hasher);
+                self.sums.push(h.finalize());
+                self.filled = 0;
+            }
+        }
+    }
+
+    fn finish(mut self) -> Vec<u32> {
+        if self.filled > 0 {
+            self.sums.push(self.hasher.finalize());
+        }
+        self.sums
+    }
+}
+
+/// A level's edge lists as LEB128 gaps, with byte offsets per block.
+fn encode_lists(offsets: &[u64], ids: &[u32]) -> (Vec<u64>, Vec<u8>) {
+    let mut bytes = Vec::with_capacity(ids.len() * 2);
+    let mut out = Vec::with_capacity(offsets.len());
+    out.push(0);
+    for w in offsets.windows(2) {
+        write_varints(&ids[w[0] as usize..w[1] as usize], &mut bytes);
+        out.push(bytes.len() as u64);
+    }
+    (out, bytes)
+}
+
+/// Writes sections after a placeholder header, then CHECKS, then the header with the
+/// directory.
 fn write_store(
     path: &Path,
     volume: &Volume,
@@ -297,29 +332,56 @@ fn write_store(
     levels: &[LevelData],
 ) -> Result<()> {
     let lattice = &volume.lattice;
-    let sections = 3 + levels.len();
+    let sections = 4 + levels.len();
     let dir_end = FIXED_HEADER + sections * DIRECTORY_ENTRY;
     let header_len = (dir_end + 4).next_multiple_of(8);
+    let encoded: Vec<_> = levels
+        .par_iter()
+        .map(|l| {
+            (
+                encode_lists(&l.plus_offsets, &l.plus),
+                encode_lists(&l.minus_offsets, &l.minus),
+            )
+        })
+        .collect();
     super::super::io::write_atomically(path, |w| {
         w.write_all(&vec![0u8; header_len])?;
         let mut at = header_len as u64;
         let mut directory: Vec<u8> = Vec::with_capacity(sections * DIRECTORY_ENTRY);
+        let mut chunks = ChunkSums {
+            sums: Vec::new(),
+            hasher: crc32fast::Hasher::new(),
+            filled: 0,
+        };
         let mut section = |w: &mut std::io::BufWriter<std::fs::File>,
                            kind: Kind,
                            level: u32,
+                           pad: bool,
+                           chunks: Option<&mut ChunkSums>,
                            parts: &[Part]|
          -> std::io::Result<()> {
             let mut crc = crc32fast::Hasher::new();
             let mut len = 0u64;
+            let mut chunks = chunks;
             for part in parts {
                 part(&mut |bytes: &[u8]| {
                     crc.update(bytes);
+                    if let Some(c) = chunks.as_deref_mut() {
+                        c.update(bytes);
+                    }
                     len += bytes.len() as u64;
                     w.write_all(bytes)
                 })?;
             }
-            let pad = (len.next_multiple_of(8) - len) as usize;
+            let pad = if pad {
+                (len.next_multiple_of(8) - len) as usize
+            } else {
+                0
+            };
             w.write_all(&[0u8; 8][..pad])?;
+            if let Some(c) = chunks {
+                c.update(&[0u8; 8][..pad]);
+            }
             directory.extend_from_slice(&(kind as u32).to_le_bytes());
             directory.extend_from_slice(&level.to_le_bytes());
             directory.extend_from_slice(&at.to_le_bytes());
@@ -329,24 +391,56 @@ fn write_store(
             at += len + pad as u64;
             Ok(())
         };
-        section(w, Kind::Values, 0, &[&|out| volume.values.write_le(out)])?;
-        section(w, Kind::Order, 0, &[&|out| write_u32s(order, out)])?;
-        section(w, Kind::Mask, 0, &[&|out| out(mask)])?;
-        for (l, level) in levels.iter().enumerate() {
+        let c = Some(&mut chunks);
+        section(
+            w,
+            Kind::Values,
+            0,
+            true,
+            c,
+            &[&|out| volume.values.write_le(out)],
+        )?;
+        let c = Some(&mut chunks);
+        section(w, Kind::Order, 0, true, c, &[&|out| write_u32s(order, out)])?;
+        let c = Some(&mut chunks);
+        section(w, Kind::Mask, 0, true, c, &[&|out| out(mask)])?;
+        for (l, (level, ((plus_offsets, plus), (minus_offsets, minus)))) in
+            levels.iter().zip(&encoded).enumerate()
+        {
             section(
                 w,
                 Kind::Level,
                 l as u32 + 1,
+                true,
+                Some(&mut chunks),
                 &[
                     &|out| out(&(level.blocks() as u64).to_le_bytes()),
-                    &|out| write_u64s(&level.plus_offsets, out),
-                    &|out| write_u64s(&level.minus_offsets, out),
+                    &|out| write_u64s(plus_offsets, out),
+                    &|out| write_u64s(minus_offsets, out),
                     &|out| write_u32s(&level.starts, out),
-                    &|out| write_u32s(&level.plus, out),
-                    &|out| write_u32s(&level.minus, out),
+                    &|out| out(plus),
+                    &|out| out(minus),
                 ],
             )?;
         }
+        let sums = std::mem::replace(
+            &mut chunks,
+            ChunkSums {
+                sums: Vec::new(),
+                hasher: crc32fast::Hasher::new(),
+                filled: 0,
+            },
+        )
+        .finish();
+        // The file ends where CHECKS ends: its length is part of what is checked.
+        section(
+            w,
+            Kind::Checks,
+            0,
+            false,
+            None,
+            &[&|out| write_u32s(&sums, out)],
+        )?;
         let mut header = Vec::with_capacity(header_len);
         header.extend_from_slice(MAGIC);
         header.extend_from_slice(&VERSION.to_le_bytes());

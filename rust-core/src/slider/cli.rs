@@ -161,7 +161,7 @@ fn scripted(slider: &mut Slider) -> Result<()> {
             out,
             "iso {iso} triangles {} vertices {} update_ms {:.3} added {} removed {}",
             slider.triangle_count(),
-            slider.positions().len(),
+            slider.vertex_count(),
             change.seconds * 1e3,
             change.added_triangles.len(),
             change.removed_triangles.len()

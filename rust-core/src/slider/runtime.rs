@@ -9,9 +9,16 @@
 //! new one, collecting the net edge changes; removed edges leave holes that added edges
 //! fill, leftovers are compacted from the end; only cells around changed edges are
 //! re-triangulated, cells around moved vertices get their indices rewritten in place.
+//!
+//! An update costs what changed, not the surface: the full arrays (every vertex moves
+//! when the isovalue does, so V and N are O(surface); I is gathered from the buckets)
+//! are computed when first read after an update ([`Slider::positions`],
+//! [`Slider::normals`], [`Slider::triangle_array`]), into the previous arrays' memory.
+//! Scratch lists and the walk's edge map live in the slider and keep their capacity, so
+//! a steady slide allocates nothing but the returned [`Change`].
 
 use super::build::node_edges;
-use super::store::Store;
+use super::store::{neighbour, Store};
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice};
 use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing};
@@ -19,6 +26,7 @@ use crate::progress::Progress;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
+use std::cell::{OnceCell, RefCell};
 use std::time::Instant;
 
 /// What one interpolated vertex is computed from: its edge's lower node and axis, the two
@@ -98,7 +106,29 @@ pub struct SliderStats {
     pub edge_changes: u64,
 }
 
+/// V and N at one isovalue.
+#[derive(Clone, Debug, Default)]
+struct Vertices {
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+}
+
+/// Lists an update needs, kept between updates so they keep their capacity.
+#[derive(Default)]
+struct Scratch {
+    /// Net change per edge of the current walk (+1 on, −1 off).
+    delta: FxHashMap<u32, i8>,
+    removed: Vec<u32>,
+    added: Vec<u32>,
+    dirty: Vec<u32>,
+    holes: Vec<u32>,
+    reindex: Vec<u32>,
+    tris: Vec<[u32; 3]>,
+}
+
 /// An isosurface that slides: open a store, set isovalues, read the arrays.
+///
+/// Not `Sync`: the full arrays are filled lazily behind `&self`.
 pub struct Slider {
     store: Store,
     /// Level-0 position: nodes with rank < `rank` lie at or below the isovalue.
@@ -109,8 +139,14 @@ pub struct Slider {
     he: FxHashMap<u32, u32>,
     hc: FxHashMap<u32, CellEntry>,
     buckets: Vec<Bucket>,
-    positions: Vec<[f32; 3]>,
-    normals: Vec<[f32; 3]>,
+    /// V and N at `iso`, computed on first read after an update.
+    vertices: OnceCell<Vertices>,
+    /// The arrays of an earlier isovalue, whose memory the next computation reuses.
+    spare_vertices: RefCell<Vertices>,
+    /// I gathered from the buckets, on first read after an update.
+    all_triangles: OnceCell<Vec<[u32; 3]>>,
+    spare_triangles: RefCell<Vec<[u32; 3]>>,
+    scratch: Scratch,
     stats: SliderStats,
 }
 
@@ -125,7 +161,7 @@ impl Slider {
                 ..Bucket::default()
             })
             .collect();
-        let iso = store.value(store.order(0)) as f64 - 1.0;
+        let iso = store.value_range().0 as f64 - 1.0;
         Slider {
             store,
             rank: 0,
@@ -135,8 +171,11 @@ impl Slider {
             he: FxHashMap::default(),
             hc: FxHashMap::default(),
             buckets,
-            positions: Vec::new(),
-            normals: Vec::new(),
+            vertices: OnceCell::new(),
+            spare_vertices: RefCell::default(),
+            all_triangles: OnceCell::new(),
+            spare_triangles: RefCell::default(),
+            scratch: Scratch::default(),
             stats: SliderStats::default(),
         }
     }
@@ -156,14 +195,38 @@ impl Slider {
         self.iso
     }
 
-    /// Vertex positions (V).
+    /// Vertex positions (V), computed on the first read after an update.
     pub fn positions(&self) -> &[[f32; 3]] {
-        &self.positions
+        &self.vertices().positions
     }
 
-    /// Unit vertex normals (N).
+    /// Unit vertex normals (N), computed on the first read after an update.
     pub fn normals(&self) -> &[[f32; 3]] {
-        &self.normals
+        &self.vertices().normals
+    }
+
+    /// Number of vertices (computes nothing).
+    pub fn vertex_count(&self) -> usize {
+        self.edges.len()
+    }
+
+    /// All triangles (I), bucket after bucket, gathered on the first read after an update.
+    pub fn triangle_array(&self) -> &[[u32; 3]] {
+        self.all_triangles.get_or_init(|| {
+            let mut out = self.spare_triangles.take();
+            self.triangles_into(&mut out);
+            out
+        })
+    }
+
+    /// V and N at the current isovalue: every vertex moves when the isovalue does, so
+    /// this is O(surface) and runs once per update, only when someone reads them.
+    fn vertices(&self) -> &Vertices {
+        self.vertices.get_or_init(|| {
+            let mut v = self.spare_vertices.take();
+            self.compute_vertices(&mut v);
+            v
+        })
     }
 
     /// Edge id (`node · 3 + axis`) of each vertex.
@@ -219,17 +282,29 @@ impl Slider {
             });
         }
         let start = Instant::now();
-        let target = self.store.rank_of(iso);
+        let target = self.store.rank_of(iso)?;
         let mut change = Change {
             isovalue: iso,
             blocks_per_level: vec![0; self.store.levels.len() + 1],
             ..Change::default()
         };
-        let delta = self.walk(target, &mut change, progress)?;
-        self.rank = target;
-        self.iso = iso;
-        self.apply(delta, &mut change)?;
-        self.update_vertices();
+        // The full arrays of the old isovalue are stale; keep their memory for reuse.
+        if let Some(v) = self.vertices.take() {
+            *self.spare_vertices.get_mut() = v;
+        }
+        if let Some(t) = self.all_triangles.take() {
+            *self.spare_triangles.get_mut() = t;
+        }
+        let mut delta = std::mem::take(&mut self.scratch.delta);
+        delta.clear();
+        let walked = self.walk(target, &mut delta, &mut change, progress);
+        let applied = walked.and_then(|()| {
+            self.rank = target;
+            self.iso = iso;
+            self.apply(&delta, &mut change)
+        });
+        self.scratch.delta = delta;
+        applied?;
         change.seconds = start.elapsed().as_secs_f64();
         self.stats.updates += 1;
         self.stats.total_seconds += change.seconds;
@@ -239,22 +314,27 @@ impl Slider {
     }
 
     /// Walks the skip list from the current rank to `target`, taking the highest level
-    /// whose block fits, and returns the net change per edge (+1 on, −1 off).
+    /// whose block fits, and puts the net change per edge (+1 on, −1 off) into `delta`.
     fn walk(
         &self,
         target: usize,
+        delta: &mut FxHashMap<u32, i8>,
         change: &mut Change,
         progress: &mut Progress,
-    ) -> Result<FxHashMap<u32, i8>> {
+    ) -> Result<()> {
         let store = &self.store;
         let lattice = *store.lattice();
-        let mut delta: FxHashMap<u32, i8> = FxHashMap::default();
-        let mut bump = |e: u32, d: i8| {
+        let limit = 3 * store.nodes as u32;
+        let mut bump = |e: u32, d: i8| -> Result<()> {
+            if e >= limit {
+                return Err(self.corrupt(format!("edge {e} is out of range")));
+            }
             let entry = delta.entry(e).or_insert(0);
             *entry += d;
             if *entry == 0 {
                 delta.remove(&e);
             }
+            Ok(())
         };
         let mut r = self.rank;
         let span = r.abs_diff(target).max(1) as f64;
@@ -292,9 +372,13 @@ impl Slider {
             match used {
                 Some((l, k)) => {
                     let level = &store.levels[l];
-                    let (plus, minus) = store.block_edges(level, k);
-                    plus.for_each(|e| bump(e, sign));
-                    minus.for_each(|e| bump(e, -sign));
+                    let (plus, minus) = store.block_edges(level, k)?;
+                    for e in plus {
+                        bump(e, sign)?;
+                    }
+                    for e in minus {
+                        bump(e, -sign)?;
+                    }
                     change.blocks_per_level[l + 1] += 1;
                     r = if up {
                         store.start(level, k + 1)
@@ -304,16 +388,17 @@ impl Slider {
                 }
                 None => {
                     let b = if up { r } else { r - 1 };
-                    let m = store.mask(b);
-                    for (d, e) in node_edges(&lattice, store.order(b)) {
-                        bump(e, if m >> d & 1 == 1 { sign } else { -sign });
+                    let j = store.order_checked(b)?;
+                    let m = store.mask_checked(b)?;
+                    for (d, e) in node_edges(&lattice, j) {
+                        bump(e, if m >> d & 1 == 1 { sign } else { -sign })?;
                     }
                     change.blocks_per_level[0] += 1;
                     r = if up { r + 1 } else { r - 1 };
                 }
             }
         }
-        Ok(delta)
+        Ok(())
     }
 
     /// The (up to four) cells around edge `e`.
@@ -343,11 +428,40 @@ impl Slider {
 
     /// Applies the net edge changes: cells first out, edges out (holes), edges in (filling
     /// holes), compaction, cells in.
-    fn apply(&mut self, delta: FxHashMap<u32, i8>, change: &mut Change) -> Result<()> {
+    fn apply(&mut self, delta: &FxHashMap<u32, i8>, change: &mut Change) -> Result<()> {
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let result = self.apply_with(delta, change, &mut scratch);
+        self.scratch = scratch;
+        result
+    }
+
+    /// [`Slider::apply`] with the scratch lists taken out of `self`.
+    fn apply_with(
+        &mut self,
+        delta: &FxHashMap<u32, i8>,
+        change: &mut Change,
+        scratch: &mut Scratch,
+    ) -> Result<()> {
         let lattice = *self.store.lattice();
-        let mut removed: Vec<u32> = Vec::new();
-        let mut added: Vec<u32> = Vec::new();
-        for (&e, &d) in &delta {
+        let Scratch {
+            removed,
+            added,
+            dirty,
+            holes,
+            reindex,
+            tris,
+            ..
+        } = scratch;
+        for v in [
+            &mut *removed,
+            &mut *added,
+            &mut *dirty,
+            &mut *holes,
+            &mut *reindex,
+        ] {
+            v.clear();
+        }
+        for (&e, &d) in delta {
             match d {
                 1 => added.push(e),
                 -1 => removed.push(e),
@@ -358,15 +472,14 @@ impl Slider {
         added.sort_unstable();
         change.edges_added = added.len() as u64;
         change.edges_removed = removed.len() as u64;
-        let mut dirty = Vec::with_capacity(4 * (removed.len() + added.len()));
-        for &e in removed.iter().chain(&added) {
-            Self::edge_cells(&lattice, e, &mut dirty);
+        for &e in removed.iter().chain(added.iter()) {
+            Self::edge_cells(&lattice, e, dirty);
         }
         dirty.sort_unstable();
         dirty.dedup();
 
         // Cells around changed edges change case: their triangles go.
-        for &cell in &dirty {
+        for &cell in dirty.iter() {
             if let Some(entry) = self.hc.remove(&cell) {
                 let b = &self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
@@ -377,8 +490,7 @@ impl Slider {
             }
         }
         // Edges out leave holes ...
-        let mut holes = Vec::with_capacity(removed.len());
-        for &e in &removed {
+        for &e in removed.iter() {
             let Some(v) = self.he.remove(&e) else {
                 return Err(self.corrupt(format!("edge {e} turns off but is not on")));
             };
@@ -387,7 +499,7 @@ impl Slider {
         }
         // ... that edges in fill first.
         holes.sort_unstable_by(|a, b| b.cmp(a));
-        for &e in &added {
+        for &e in added.iter() {
             if self.he.contains_key(&e) {
                 return Err(self.corrupt(format!("edge {e} turns on but is already on")));
             }
@@ -395,7 +507,7 @@ impl Slider {
             if node >= self.store.nodes || lattice.coords(node)[axis] + 1 >= lattice.dims[axis] {
                 return Err(self.corrupt(format!("edge {e} is not a lattice edge")));
             }
-            let data = self.edge_data(e);
+            let data = self.edge_data(e)?;
             let v = match holes.pop() {
                 Some(h) => {
                     self.edges[h as usize] = e;
@@ -412,8 +524,7 @@ impl Slider {
         }
         // Leftover holes: move vertices from the end into them.
         holes.sort_unstable();
-        let mut reindex = Vec::new();
-        for h in holes {
+        for &h in holes.iter() {
             while self.edges.last() == Some(&u32::MAX) {
                 self.edges.pop();
                 self.data.pop();
@@ -428,30 +539,29 @@ impl Slider {
             self.data[h as usize] = d;
             self.he.insert(e, h);
             change.moved_vertices.push(((last - 1) as u32, h));
-            Self::edge_cells(&lattice, e, &mut reindex);
+            Self::edge_cells(&lattice, e, reindex);
         }
         reindex.sort_unstable();
         reindex.dedup();
         // One scratch list for every cell's triangles, not an allocation per cell.
-        let mut tris = Vec::new();
-        for cell in reindex {
+        for &cell in reindex.iter() {
             if let Some(&entry) = self.hc.get(&cell) {
-                self.cell_triangles(cell, entry.case, &mut tris)?;
+                self.cell_triangles(cell, entry.case, tris)?;
                 let b = &mut self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
-                b.triangles[s..s + b.size].copy_from_slice(&tris);
+                b.triangles[s..s + b.size].copy_from_slice(tris);
             }
         }
         // Cells around changed edges come back with their new case.
-        for &cell in &dirty {
-            let case = self.case_of(cell);
+        for &cell in dirty.iter() {
+            let case = self.case_of(cell)?;
             if case == 0 || case == 255 {
                 continue;
             }
-            self.cell_triangles(cell, case, &mut tris)?;
-            change.added_triangles.extend_from_slice(&tris);
+            self.cell_triangles(cell, case, tris)?;
+            change.added_triangles.extend_from_slice(tris);
             let b = &mut self.buckets[tris.len()];
-            b.triangles.extend_from_slice(&tris);
+            b.triangles.extend_from_slice(tris);
             b.cells.push(cell);
             let entry = CellEntry {
                 case,
@@ -482,7 +592,7 @@ impl Slider {
     }
 
     /// Case of `cell` at the current isovalue (bit c: corner c above it).
-    fn case_of(&self, cell: u32) -> u8 {
+    fn case_of(&self, cell: u32) -> Result<u8> {
         let lattice = self.store.lattice();
         let c = lattice.coords(cell as usize);
         let mut case = 0u8;
@@ -490,12 +600,12 @@ impl Slider {
             let [dx, dy, dz] = corner_offset(k).map(|v| v as usize);
             let v = self
                 .store
-                .value(lattice.index(c[0] + dx, c[1] + dy, c[2] + dz));
+                .checked_value(lattice.index(c[0] + dx, c[1] + dy, c[2] + dz))?;
             if v as f64 > self.iso {
                 case |= 1 << k;
             }
         }
-        case
+        Ok(case)
     }
 
     /// Triangles of `cell` in `case`, as vertex indices through HE, into `out` (cleared).
@@ -519,29 +629,36 @@ impl Slider {
         Ok(())
     }
 
-    /// Interpolation data of edge `e` from the mapped values.
-    fn edge_data(&self, e: u32) -> EdgeData {
+    /// Interpolation data of edge `e` from the mapped values (the chunks of every value
+    /// it reads checked first).
+    fn edge_data(&self, e: u32) -> Result<EdgeData> {
         let store = &self.store;
         let lattice = store.lattice();
         let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
         let c = lattice.coords(node);
         let mut up = c;
         up[axis] += 1;
+        for end in [c, up] {
+            let i = lattice.index(end[0], end[1], end[2]);
+            store.checked_value(i)?;
+            for (d, _) in node_edges(lattice, i) {
+                store.checked_value(neighbour(lattice, i, d))?;
+            }
+        }
         let value = |i: usize| store.value(i);
-        edge_data_from(lattice, value, c, axis, up)
+        Ok(edge_data_from(lattice, value, c, axis, up))
     }
 
-    /// Recomputes V and N from E (every vertex moves when the isovalue does), in place:
-    /// no per-update allocation once the arrays have grown.
-    fn update_vertices(&mut self) {
+    /// Computes V and N from E into `out`, reusing its memory.
+    fn compute_vertices(&self, out: &mut Vertices) {
         let lattice = *self.store.lattice();
         let iso = self.iso;
         let n = self.data.len();
-        self.positions.resize(n, [0.0; 3]);
-        self.normals.resize(n, [0.0; 3]);
-        self.positions
+        out.positions.resize(n, [0.0; 3]);
+        out.normals.resize(n, [0.0; 3]);
+        out.positions
             .par_iter_mut()
-            .zip(self.normals.par_iter_mut())
+            .zip(out.normals.par_iter_mut())
             .zip(self.data.par_iter())
             .with_min_len(4096)
             .for_each(|((p, nrm), d)| {

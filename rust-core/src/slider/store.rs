@@ -8,30 +8,45 @@
 //!   88 skip-list threshold f64                     96 levels above 0 u32   100 sections u32
 //! directory: per section kind u32, level u32, offset u64, length u64, crc32 u32, 0 u32
 //! crc32 of header + directory, u32; padding to 8 bytes
-//! sections, 8-byte aligned:
+//! sections, 8-byte aligned, in this order (the file ends exactly where CHECKS ends):
 //!   VALUES  node values in their type, x fastest
 //!   ORDER   u32 node ids sorted by (value, id): block B_r of level 0 is node ORDER[r]
 //!   MASK    u8 per block of level 0: bit 2a+s set when the edge to the neighbour along
-//!           axis a (s = 0: −, 1: +) becomes active as the isovalue passes the node going up
-//!           (E+); the node's other edges become inactive (E−)
-//!   LEVEL L (L ≥ 1) blocks: n u64, E+ offsets u64×(n+1), E− offsets u64×(n+1),
-//!           first ranks u32×(n+1) (the last is the end), E+ edges u32…, E− edges u32…
+//!           axis a (s = 0: −, 1: +) becomes active as the isovalue passes the node going
+//!           up (E+: the neighbour comes later in the order, see [`rises`]); the node's
+//!           other edges become inactive (E−). Derivable from VALUES, but kept: reading it
+//!           is one sequential byte per block where deriving it reads six neighbours
+//!   LEVEL L (L ≥ 1) blocks: n u64, E+ byte offsets u64×(n+1), E− byte offsets u64×(n+1),
+//!           first ranks u32×(n+1) (the last is the end), E+ bytes, E− bytes; a block's
+//!           list is its edge ids ascending, each as the LEB128 varint of its gap to the
+//!           previous one (the first from 0)
+//!   CHECKS  crc32 u32 per 4096-byte chunk of the bytes from the end of the header to
+//!           the start of CHECKS
 //! ```
 //!
 //! An edge is `node · 3 + axis` (from its lower node), a cell is its lower corner node.
 //! Interpolation data (the end values and, through neighbours, the gradients) comes from
 //! VALUES, which is read only around the surface.
+//!
+//! Opening reads the header, the directory, CHECKS and the skip-list tables (a few
+//! kilobytes a level) and checks every size against the file's length, so a truncated
+//! or foreign file is refused at once; the data is checked a chunk at a time on first
+//! touch ([`Store::ensure`]) or all at once by [`Store::verify`], so resident memory
+//! follows what the slider reads and a corrupt chunk is refused before its data is used.
 
 use crate::error::{Error, Result};
 use crate::field::grid::{Lattice, ValueType};
 use glam::DVec3;
 use memmap2::Mmap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// First bytes of every store.
 pub const MAGIC: &[u8; 8] = b"ISOSLIDE";
 /// The version this build writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
+/// Bytes per checksummed chunk (a page: checking one touches no other).
+pub(crate) const CHUNK: usize = 4096;
 pub(crate) const FIXED_HEADER: usize = 104;
 pub(crate) const DIRECTORY_ENTRY: usize = 32;
 const MAX_SECTIONS: usize = 64;
@@ -43,6 +58,7 @@ pub(crate) enum Kind {
     Order = 2,
     Mask = 3,
     Level = 4,
+    Checks = 5,
 }
 
 impl Kind {
@@ -52,6 +68,7 @@ impl Kind {
             2 => Kind::Order,
             3 => Kind::Mask,
             4 => Kind::Level,
+            5 => Kind::Checks,
             _ => return None,
         })
     }
@@ -61,6 +78,7 @@ impl Kind {
             Kind::Order => "order",
             Kind::Mask => "mask",
             Kind::Level => "level",
+            Kind::Checks => "checks",
         }
     }
 }
@@ -89,6 +107,16 @@ pub struct Store {
     order: usize,
     mask: usize,
     pub(crate) levels: Vec<Level>,
+    /// First byte of the checksummed body (the end of the header).
+    body: usize,
+    /// End of the body: where CHECKS starts.
+    body_end: usize,
+    /// Byte offset of CHECKS.
+    checks: usize,
+    /// One bit per body chunk: its checksum has been verified.
+    verified: Vec<AtomicU64>,
+    /// (kind, level, offset, length) of every section, to name them in errors.
+    sections: Vec<(Kind, usize, usize, usize)>,
 }
 
 #[inline]
@@ -191,19 +219,13 @@ impl Store {
                     b.len()
                 )));
             }
-            let (offset, length) = (offset as usize, length as usize);
-            if crc32fast::hash(&b[offset..offset + length]) != u32_at(b, e + 24) {
+            if offset < header_len as u64 {
                 return Err(err(format!(
-                    "corrupt: section '{}'{} fails its checksum",
-                    kind.name(),
-                    if kind == Kind::Level {
-                        format!(" {level}")
-                    } else {
-                        String::new()
-                    }
+                    "corrupt: section '{}' starts inside the header",
+                    kind.name()
                 )));
             }
-            found.push((kind, level, offset, length));
+            found.push((kind, level, offset as usize, length as usize));
         }
         let section = |kind: Kind, level: usize, want: Option<usize>| -> Result<(usize, usize)> {
             let &(_, _, offset, length) = found
@@ -220,32 +242,37 @@ impl Store {
             }
             Ok((offset, length))
         };
+        // The chunk checksums: read whole (4 bytes per 4 KiB), checked against the
+        // directory, and sized by the file, so a truncated body is refused here.
+        let (checks, checks_len) = section(Kind::Checks, 0, None)?;
+        let body = header_len;
+        let chunks = (checks - body).div_ceil(CHUNK);
+        if checks_len != 4 * chunks || checks + checks_len != b.len() {
+            return Err(err(format!(
+                "truncated or corrupt: {} bytes, the directory describes {}",
+                b.len(),
+                checks + 4 * chunks
+            )));
+        }
+        let dir_crc = |kind: Kind| {
+            let s = (0..sections)
+                .find(|&s| u32_at(b, FIXED_HEADER + s * DIRECTORY_ENTRY) == kind as u32)
+                .expect("found above");
+            u32_at(b, FIXED_HEADER + s * DIRECTORY_ENTRY + 24)
+        };
+        if crc32fast::hash(&b[checks..checks + checks_len]) != dir_crc(Kind::Checks) {
+            return Err(err("corrupt: section 'checks' fails its checksum".into()));
+        }
+        if found
+            .iter()
+            .any(|&(k, _, o, l)| k != Kind::Checks && o + l > checks)
+        {
+            return Err(err("corrupt directory: a section overlaps 'checks'".into()));
+        }
         let values = section(Kind::Values, 0, Some(nodes * value_type.size()))?.0;
         let order = section(Kind::Order, 0, Some(nodes * 4))?.0;
         let mask = section(Kind::Mask, 0, Some(nodes))?.0;
-        if (order..order + nodes * 4)
-            .step_by(4)
-            .any(|at| u32_at(b, at) as usize >= nodes)
-        {
-            return Err(err(
-                "corrupt: section 'order' names a node out of range".into()
-            ));
-        }
-        let mut levels = Vec::with_capacity(level_count);
-        for l in 1..=level_count {
-            let (offset, length) = section(Kind::Level, l, None)?;
-            levels.push(
-                parse_level(b, offset, length, nodes)
-                    .map_err(|m| err(format!("corrupt: skip-list level {l}: {m}")))?,
-            );
-        }
-        // Verifying read every page; hand them back so that resident memory follows what
-        // the slider touches, not the file size. The map is read-only and file-backed, so
-        // dropped pages are read again from the file when needed.
-        // SAFETY: no reference into the map's pages is held across this call that could
-        // observe different contents: the file is not written while mapped (see `open`).
-        let _ = unsafe { map.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
-        Ok(Store {
+        let mut store = Store {
             path: path.to_path_buf(),
             lattice,
             value_type,
@@ -254,9 +281,86 @@ impl Store {
             values,
             order,
             mask,
-            levels,
+            levels: Vec::with_capacity(level_count),
+            body,
+            body_end: checks,
+            checks,
+            verified: (0..chunks.div_ceil(64))
+                .map(|_| AtomicU64::new(0))
+                .collect(),
+            sections: found.clone(),
             map,
-        })
+        };
+        for l in 1..=level_count {
+            let (offset, length) = section(Kind::Level, l, None)?;
+            let level = store.parse_level(offset, length).map_err(|m| match m {
+                LevelError::Store(e) => e,
+                LevelError::Table(m) => err(format!("corrupt: skip-list level {l}: {m}")),
+            })?;
+            store.levels.push(level);
+        }
+        // The smallest and largest values, read by `value_range` and the empty surface.
+        let last = nodes - 1;
+        store.ensure(order, order + 4)?;
+        store.ensure(order + 4 * last, order + 4 * nodes)?;
+        for r in [0, last] {
+            store.checked_value(store.order_checked(r)?)?;
+        }
+        Ok(store)
+    }
+
+    /// Checks the chunks holding bytes `from..to` of the file, each once: a chunk whose
+    /// checksum fails is refused with an error naming the section.
+    #[inline]
+    pub(crate) fn ensure(&self, from: usize, to: usize) -> Result<()> {
+        if from >= to {
+            return Ok(());
+        }
+        let (first, last) = ((from - self.body) / CHUNK, (to - 1 - self.body) / CHUNK);
+        for c in first..=last {
+            let bit = 1u64 << (c % 64);
+            if self.verified[c / 64].load(Ordering::Relaxed) & bit == 0 {
+                self.verify_chunk(c)?;
+                self.verified[c / 64].fetch_or(bit, Ordering::Relaxed);
+            }
+        }
+        Ok(())
+    }
+
+    #[cold]
+    fn verify_chunk(&self, c: usize) -> Result<()> {
+        let lo = self.body + c * CHUNK;
+        let hi = (lo + CHUNK).min(self.body_end);
+        if crc32fast::hash(&self.map[lo..hi]) == u32_at(&self.map, self.checks + 4 * c) {
+            return Ok(());
+        }
+        let what = self
+            .sections
+            .iter()
+            .find(|s| s.2 <= hi && lo < s.2 + s.3)
+            .map_or("padding".to_string(), |s| match s.0 {
+                Kind::Level => format!("section 'level' {}", s.1),
+                k => format!("section '{}'", k.name()),
+            });
+        Err(Error::format(
+            &self.path,
+            format!("corrupt: {what} fails its checksum (bytes {lo}..{hi})"),
+        ))
+    }
+
+    /// Checks every chunk of the file (what opening does lazily, all at once).
+    pub fn verify(&self) -> Result<()> {
+        self.ensure(self.body, self.body_end)?;
+        // Verifying read every page; hand them back so that resident memory follows
+        // what the slider touches. The map is read-only and file-backed, so dropped
+        // pages are read again from the file when needed.
+        // SAFETY: no reference into the map's pages is held across this call that could
+        // observe different contents: the file is not written while mapped (see `open`).
+        let _ = unsafe {
+            self.map
+                .unchecked_advise(memmap2::UncheckedAdvice::DontNeed)
+        };
+        Ok(())
     }
 
     /// The file this store was opened from.
@@ -292,9 +396,9 @@ impl Store {
         self.map.len() as u64
     }
 
-    /// Value of node `i`.
-    #[inline]
-    pub fn value(&self, i: usize) -> f32 {
+    /// Value of node `i`, unchecked: only after [`Store::ensure`] covered it.
+    #[inline(always)]
+    pub(crate) fn value(&self, i: usize) -> f32 {
         let b = &self.map[..];
         match self.value_type {
             ValueType::F32 => f32::from_bits(u32_at(b, self.values + 4 * i)),
@@ -306,30 +410,68 @@ impl Store {
         }
     }
 
-    /// Node of level-0 block `r`.
+    /// Value of node `i`, its chunk checked first (a value never straddles chunks: the
+    /// section is 8-aligned and the value size divides the chunk).
+    #[inline(always)]
+    pub(crate) fn checked_value(&self, i: usize) -> Result<f32> {
+        let at = self.values + self.value_type.size() * i;
+        if !self.chunk_checked(at) {
+            self.ensure(at, at + 1)?;
+        }
+        Ok(self.value(i))
+    }
+
+    /// Whether the chunk holding byte `at` has been checked (the hot path of every
+    /// checked read: one bit test).
+    #[inline(always)]
+    fn chunk_checked(&self, at: usize) -> bool {
+        let c = (at - self.body) / CHUNK;
+        self.verified[c / 64].load(Ordering::Relaxed) >> (c % 64) & 1 == 1
+    }
+
+    /// Node of level-0 block `r` (chunk checked, id in range).
     #[inline]
-    pub(crate) fn order(&self, r: usize) -> usize {
+    pub(crate) fn order_checked(&self, r: usize) -> Result<usize> {
+        if !self.chunk_checked(self.order + 4 * r) {
+            self.ensure(self.order + 4 * r, self.order + 4 * r + 4)?;
+        }
+        let j = u32_at(&self.map, self.order + 4 * r) as usize;
+        if j >= self.nodes {
+            return Err(Error::format(
+                &self.path,
+                format!("corrupt: section 'order' names node {j} at rank {r}, out of range"),
+            ));
+        }
+        Ok(j)
+    }
+
+    /// Node of level-0 block `r`, unchecked: only for ranks `open` checked.
+    #[inline]
+    fn order(&self, r: usize) -> usize {
         u32_at(&self.map, self.order + 4 * r) as usize
     }
 
-    /// Activation mask of level-0 block `r`.
+    /// Activation mask of level-0 block `r` (chunk checked).
     #[inline]
-    pub(crate) fn mask(&self, r: usize) -> u8 {
-        self.map[self.mask + r]
+    pub(crate) fn mask_checked(&self, r: usize) -> Result<u8> {
+        if !self.chunk_checked(self.mask + r) {
+            self.ensure(self.mask + r, self.mask + r + 1)?;
+        }
+        Ok(self.map[self.mask + r])
     }
 
     /// Number of nodes whose value is ≤ `iso`: the level-0 position of isovalue `iso`.
-    pub(crate) fn rank_of(&self, iso: f64) -> usize {
+    pub(crate) fn rank_of(&self, iso: f64) -> Result<usize> {
         let (mut lo, mut hi) = (0usize, self.nodes);
         while lo < hi {
             let mid = (lo + hi) / 2;
-            if (self.value(self.order(mid)) as f64) <= iso {
+            if (self.checked_value(self.order_checked(mid)?)? as f64) <= iso {
                 lo = mid + 1;
             } else {
                 hi = mid;
             }
         }
-        lo
+        Ok(lo)
     }
 
     /// First rank of block `k` of `level` (k = blocks gives the end).
@@ -352,86 +494,160 @@ impl Store {
         (lo <= level.blocks && self.start(level, lo) == r).then_some(lo)
     }
 
-    /// E+ and E− of block `k` of `level`, as iterators over edge ids.
+    /// E+ and E− of block `k` of `level` (chunks checked), as iterators over edge ids.
     pub(crate) fn block_edges(
         &self,
         level: &Level,
         k: usize,
-    ) -> (
-        impl Iterator<Item = u32> + '_,
-        impl Iterator<Item = u32> + '_,
-    ) {
+    ) -> Result<(Varints<'_>, Varints<'_>)> {
         let b = &self.map[..];
-        let range = |offsets: usize, base: usize| {
-            let from = u64_at(b, offsets + 8 * k) as usize;
-            let to = u64_at(b, offsets + 8 * (k + 1)) as usize;
-            (from..to).map(move |i| u32_at(b, base + 4 * i))
+        let range = |offsets: usize, base: usize| -> Result<Varints<'_>> {
+            let from = base + u64_at(b, offsets + 8 * k) as usize;
+            let to = base + u64_at(b, offsets + 8 * (k + 1)) as usize;
+            self.ensure(from, to)?;
+            Ok(Varints {
+                bytes: &b[from..to],
+                prev: 0,
+            })
         };
-        (
-            range(level.plus_offsets, level.plus),
-            range(level.minus_offsets, level.minus),
-        )
+        Ok((
+            range(level.plus_offsets, level.plus)?,
+            range(level.minus_offsets, level.minus)?,
+        ))
+    }
+
+    /// Checks a level's tables (sizes, monotone offsets and starts covering 0..nodes).
+    fn parse_level(&self, offset: usize, length: usize) -> std::result::Result<Level, LevelError> {
+        let b = &self.map[..];
+        if length < 8 {
+            return Err(LevelError::Table("too short".into()));
+        }
+        self.ensure(offset, offset + 8)?;
+        let blocks = u64_at(b, offset) as usize;
+        let fixed = blocks
+            .checked_add(1)
+            .and_then(|n| n.checked_mul(20))
+            .and_then(|n| n.checked_add(8))
+            .filter(|&n| n <= length)
+            .ok_or(LevelError::Table(
+                "block tables longer than the section".into(),
+            ))?;
+        self.ensure(offset, offset + fixed)?;
+        let plus_offsets = offset + 8;
+        let minus_offsets = plus_offsets + 8 * (blocks + 1);
+        let starts = minus_offsets + 8 * (blocks + 1);
+        let plus = starts + 4 * (blocks + 1);
+        let mono = |at: usize, width: usize| -> std::result::Result<u64, LevelError> {
+            let mut prev = 0u64;
+            for k in 0..=blocks {
+                let v = if width == 8 {
+                    u64_at(b, at + 8 * k)
+                } else {
+                    u32_at(b, at + 4 * k) as u64
+                };
+                if v < prev || (k == 0 && v != 0) {
+                    return Err(LevelError::Table(format!(
+                        "table at byte {at} is not increasing from 0"
+                    )));
+                }
+                prev = v;
+            }
+            Ok(prev)
+        };
+        let plus_bytes = mono(plus_offsets, 8)? as usize;
+        let minus_bytes = mono(minus_offsets, 8)? as usize;
+        if mono(starts, 4)? as usize != self.nodes {
+            return Err(LevelError::Table("blocks do not cover every node".into()));
+        }
+        if fixed + plus_bytes + minus_bytes != length {
+            return Err(LevelError::Table(
+                "edge lists do not fill the section".into(),
+            ));
+        }
+        Ok(Level {
+            blocks,
+            plus_offsets,
+            minus_offsets,
+            starts,
+            plus,
+            minus: plus + plus_bytes,
+        })
     }
 }
 
-/// Checks a level's tables (sizes, monotone offsets and starts covering 0..nodes).
-fn parse_level(
-    b: &[u8],
-    offset: usize,
-    length: usize,
-    nodes: usize,
-) -> std::result::Result<Level, String> {
-    if length < 8 {
-        return Err("too short".into());
+/// Why a level was refused: a failed chunk, or tables that do not fit.
+enum LevelError {
+    Store(Error),
+    Table(String),
+}
+
+impl From<Error> for LevelError {
+    fn from(e: Error) -> Self {
+        LevelError::Store(e)
     }
-    let blocks = u64_at(b, offset) as usize;
-    let fixed = blocks
-        .checked_add(1)
-        .and_then(|n| n.checked_mul(20))
-        .and_then(|n| n.checked_add(8))
-        .filter(|&n| n <= length)
-        .ok_or("block tables longer than the section")?;
-    let plus_offsets = offset + 8;
-    let minus_offsets = plus_offsets + 8 * (blocks + 1);
-    let starts = minus_offsets + 8 * (blocks + 1);
-    let plus = starts + 4 * (blocks + 1);
-    let mono = |at: usize, width: usize| -> std::result::Result<u64, String> {
-        let mut prev = 0u64;
-        for k in 0..=blocks {
-            let v = if width == 8 {
-                u64_at(b, at + 8 * k)
-            } else {
-                u32_at(b, at + 4 * k) as u64
-            };
-            if v < prev || (k == 0 && v != 0) {
-                return Err(format!("table at byte {at} is not increasing from 0"));
+}
+
+/// Whether the edge from node `j` (value `vj`) to its neighbour `k` (value `vk`) turns
+/// on as the isovalue passes `j` going up: `k` comes later in the level-0 order, by value
+/// then by id. The build and the run time share it.
+#[inline]
+pub(crate) fn rises(vj: f32, j: usize, vk: f32, k: usize) -> bool {
+    match vk.total_cmp(&vj) {
+        std::cmp::Ordering::Greater => true,
+        std::cmp::Ordering::Less => false,
+        std::cmp::Ordering::Equal => k > j,
+    }
+}
+
+/// The neighbour of node `j` in direction `d` (2a+s, as
+/// [`super::build::node_edges`] numbers them).
+#[inline]
+pub(crate) fn neighbour(lattice: &Lattice, j: usize, d: usize) -> usize {
+    let s = lattice.stride(d / 2);
+    if d % 2 == 1 {
+        j + s
+    } else {
+        j - s
+    }
+}
+
+/// Ascending edge ids decoded from LEB128 gaps. A malformed list (a varint running past
+/// the end) ends early; ids are range-checked where they are used.
+pub(crate) struct Varints<'a> {
+    bytes: &'a [u8],
+    prev: u32,
+}
+
+impl Iterator for Varints<'_> {
+    type Item = u32;
+    #[inline]
+    fn next(&mut self) -> Option<u32> {
+        let mut gap = 0u32;
+        let mut shift = 0;
+        loop {
+            let (&byte, rest) = self.bytes.split_first()?;
+            self.bytes = rest;
+            gap |= ((byte & 0x7f) as u32).wrapping_shl(shift);
+            if byte & 0x80 == 0 {
+                break;
             }
-            prev = v;
+            shift += 7;
         }
-        Ok(prev)
-    };
-    let plus_count = mono(plus_offsets, 8)? as usize;
-    let minus_count = mono(minus_offsets, 8)? as usize;
-    if mono(starts, 4)? as usize != nodes {
-        return Err("blocks do not cover every node".into());
+        self.prev = self.prev.wrapping_add(gap);
+        Some(self.prev)
     }
-    let minus = plus + 4 * plus_count;
-    if fixed + 4 * (plus_count + minus_count) != length {
-        return Err("edge lists do not fill the section".into());
+}
+
+/// Appends `ids` (ascending) to `out` as LEB128 gaps.
+pub(crate) fn write_varints(ids: &[u32], out: &mut Vec<u8>) {
+    let mut prev = 0u32;
+    for &id in ids {
+        let mut gap = id - prev;
+        prev = id;
+        while gap >= 0x80 {
+            out.push((gap as u8) | 0x80);
+            gap >>= 7;
+        }
+        out.push(gap as u8);
     }
-    let limit = 3 * nodes as u32;
-    if (plus..plus + 4 * (plus_count + minus_count))
-        .step_by(4)
-        .any(|at| u32_at(b, at) >= limit)
-    {
-        return Err("an edge id is out of range".into());
-    }
-    Ok(Level {
-        blocks,
-        plus_offsets,
-        minus_offsets,
-        starts,
-        plus,
-        minus,
-    })
 }

@@ -1,0 +1,138 @@
+"""isobar.sample_fe: high-order FE isosurfaces through the C ABI, fed the way pyvista and
+VTK users hold Lagrange cells, checked against an analytic surface and against VTK's own
+evaluation of the same cells."""
+
+import os
+
+import numpy as np
+import pytest
+import pyvista as pv
+import vtk
+
+import isobar
+import isobar.pyvista
+
+FIXTURE = os.path.join(os.path.dirname(__file__), "..", "..", "rust-core", "data", "fe", "mixed_lagrange.vtu")
+
+# The teardrop of the paper's Fig. 7: the sphere |y| = R mapped by the quadratic
+# x = (y.x w, y.y w, y.z), w = A + B y.z. Order-2 cells reproduce both the map and the field
+# |y|² exactly, so the discrete isosurface is the analytic one.
+A, B, R = 0.6, 0.45, 0.8
+
+
+def teardrop_grid(blocks=2, order=2):
+    """Lagrange hexahedra from VTK's own vtkCellTypeSource (VTK's node order by
+    construction), over [-1, 1]³ in y, mapped to the teardrop, with f = |y|²."""
+    src = vtk.vtkCellTypeSource()
+    src.SetCellType(vtk.VTK_LAGRANGE_HEXAHEDRON)
+    src.SetCellOrder(order)
+    src.SetBlocksDimensions(blocks, blocks, blocks)
+    src.Update()
+    grid = pv.wrap(src.GetOutput())
+    y = np.asarray(grid.points, dtype=np.float64) / blocks * 2.0 - 1.0
+    w = A + B * y[:, 2]
+    grid.points = np.stack([y[:, 0] * w, y[:, 1] * w, y[:, 2]], axis=1)
+    grid.point_data["f"] = (y * y).sum(axis=1)
+    return grid
+
+
+def teardrop_field(x):
+    w = A + B * x[:, 2]
+    y = np.stack([x[:, 0] / w, x[:, 1] / w, x[:, 2]], axis=1)
+    return (y * y).sum(axis=1) - R * R
+
+
+def test_samples_lie_on_the_analytic_teardrop_with_outward_normals():
+    grid = teardrop_grid()
+    assert set(np.unique(grid.celltypes)) == {vtk.VTK_LAGRANGE_HEXAHEDRON}
+    mesh = isobar.pyvista.fe_mesh_from_dataset(grid)
+    assert (mesh.n_cells, mesh.n_points) == (8, grid.n_points)
+    samples = isobar.sample_fe(mesh, "f", R * R, spacing=0.1, tolerance=1e-7)
+    assert len(samples) > 100
+    assert np.abs(teardrop_field(samples.points)).max() <= 1e-7 * (1 + 1e-9)
+    assert samples.stats["max_residual"] <= 1e-7
+    assert samples.stats["particles"] == len(samples)
+    # Unit normals pointing out of the teardrop (f grows outwards): a small step along the
+    # normal raises the analytic field.
+    assert np.allclose(np.linalg.norm(samples.normals, axis=1), 1.0, atol=1e-5)
+    assert (teardrop_field(samples.points + 1e-4 * samples.normals) > 0).all()
+    # Reference coordinates in the unit cube of a valid cell.
+    ref = samples.arrays["Reference"]
+    assert ref.shape == (len(samples), 3) and ref.min() >= -1e-9 and ref.max() <= 1 + 1e-9
+    cells = samples.arrays["Element"]
+    assert cells.min() >= 0 and cells.max() < mesh.n_cells
+    assert (samples.radii > 0).all()
+
+
+def test_the_pyvista_adaptor_and_the_file_round_trip_give_the_same_samples(tmp_path):
+    grid = teardrop_grid()
+    cloud = isobar.pyvista.samples_from_unstructured_grid(grid, "f", R * R, spacing=0.15)
+    assert isinstance(cloud, pv.PolyData) and cloud.n_points > 50
+    assert cloud.point_data.active_normals_name == "Normals"
+    assert {"Radius", "Element", "Reference", "Curvature", "Energy"} <= set(cloud.point_data.keys())
+    # The same cells through a .vtu file and the core's reader: identical samples.
+    path = tmp_path / "teardrop.vtu"
+    grid.save(path)
+    samples = isobar.sample_fe(isobar.FeMesh.read(path), "f", R * R, spacing=0.15)
+    np.testing.assert_array_equal(samples.points, np.asarray(cloud.points))
+    out = tmp_path / "samples.vtp"
+    samples.write(out)
+    back = pv.read(out)
+    np.testing.assert_allclose(np.asarray(back.points), samples.points, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back.point_data["Radius"], samples.radii)
+
+
+def test_vtk_evaluates_the_same_point_and_value_at_every_sample_of_mixed_cells():
+    """The committed fixture mixes a quadratic hexahedron, a cubic tetrahedron and a wedge
+    (VTK-written, with HigherOrderDegrees). Each sample carries its cell and reference
+    coordinates; VTK's own Lagrange basis there (vtkCell.EvaluateLocation) must give the
+    sample's world position and, interpolating the point data, the isovalue."""
+    grid = pv.read(FIXTURE)
+    p_all = np.asarray(grid.point_data["p"])
+    iso = float(np.median(p_all))
+    samples = isobar.sample_fe(isobar.FeMesh.read(FIXTURE), "p", iso, tolerance=1e-8)
+    assert len(samples) > 50
+    cells = samples.arrays["Element"].astype(int)
+    assert len(np.unique(cells)) >= 2, "the surface crosses several cells"
+    degrees = np.asarray(grid.cell_data["HigherOrderDegrees"]).astype(int)
+    worst_x = worst_f = 0.0
+    for c, u, x in zip(cells, samples.arrays["Reference"], samples.points):
+        cell = grid.GetCell(int(c))
+        # VTK's GetCell does not apply HigherOrderDegrees (anisotropic orders); set them.
+        d = degrees[c]
+        if grid.celltypes[c] == vtk.VTK_LAGRANGE_HEXAHEDRON:
+            cell.SetOrder(*map(int, d))
+        elif grid.celltypes[c] == vtk.VTK_LAGRANGE_WEDGE:
+            cell.SetOrder(*map(int, d), cell.GetNumberOfPoints())
+        weights = [0.0] * cell.GetNumberOfPoints()
+        where = [0.0, 0.0, 0.0]
+        cell.EvaluateLocation(vtk.reference(0), list(map(float, u)), where, weights)
+        ids = [cell.GetPointId(k) for k in range(cell.GetNumberOfPoints())]
+        worst_x = max(worst_x, float(np.abs(np.array(where) - x).max()))
+        worst_f = max(worst_f, abs(float(np.dot(weights, p_all[ids])) - iso))
+    assert worst_x <= 1e-9, worst_x
+    assert worst_f <= 1e-8 * (1 + 1e-6), worst_f
+
+
+def test_bad_meshes_fields_and_cancellation_raise_clear_errors():
+    grid = teardrop_grid(blocks=1)
+    mesh = isobar.pyvista.fe_mesh_from_dataset(grid)
+    with pytest.raises(isobar.InvalidInputError, match="nope"):
+        isobar.sample_fe(mesh, "nope", 0.5)
+    # Mirroring x turns every Jacobian negative: the core names the inverted cell.
+    points = np.asarray(grid.points).copy()
+    points[:, 0] *= -1
+    with pytest.raises(isobar.InvalidInputError, match="cell 0"):
+        isobar.FeMesh.from_arrays(points, grid.celltypes, grid.cell_offsets, grid.cell_connectivity)
+    conn = np.asarray(grid.cell_connectivity).copy()
+    conn[2] = 10_000
+    with pytest.raises(isobar.InvalidInputError, match="10000"):
+        isobar.FeMesh.from_arrays(grid.points, grid.celltypes, grid.cell_offsets, conn)
+    with pytest.raises(isobar.InvalidArgumentError, match="offsets"):
+        isobar.FeMesh.from_arrays(grid.points, grid.celltypes, grid.cell_offsets[:-1], grid.cell_connectivity)
+    with pytest.raises(isobar.IoError):
+        isobar.FeMesh.read("/nonexistent/mesh.vtu")
+    seen = []
+    with pytest.raises(isobar.Cancelled):
+        isobar.sample_fe(mesh, "f", R * R, spacing=0.05, progress=lambda f, phase: seen.append(phase) or False)
+    assert seen

@@ -1,0 +1,353 @@
+#include "vtkIsobarFESamples.h"
+
+#include "vtkCellArray.h"
+#include "vtkCellData.h"
+#include "vtkCellType.h"
+#include "vtkDataArray.h"
+#include "vtkDoubleArray.h"
+#include "vtkFloatArray.h"
+#include "vtkIdList.h"
+#include "vtkIdTypeArray.h"
+#include "vtkInformation.h"
+#include "vtkInformationVector.h"
+#include "vtkNew.h"
+#include "vtkObjectFactory.h"
+#include "vtkPointData.h"
+#include "vtkPoints.h"
+#include "vtkPolyData.h"
+#include "vtkUnsignedCharArray.h"
+#include "vtkUnstructuredGrid.h"
+
+#include "isobar.h"
+
+#include <sstream>
+#include <vector>
+
+vtkStandardNewMacro(vtkIsobarFESamples);
+
+namespace
+{
+std::string CoreError(const char* call, IsobarStatus status)
+{
+  std::ostringstream msg;
+  msg << call << " failed (status " << static_cast<int>(status)
+      << "): " << isobar_last_error_message();
+  return msg.str();
+}
+
+/// Owns core samples for the length of one update.
+struct SamplesHandle
+{
+  IsobarSamples* Ptr = nullptr;
+  ~SamplesHandle() { isobar_samples_free(this->Ptr); }
+};
+
+/// The grid as the core takes it: double points, VTK types, int64 offsets and
+/// connectivity, HigherOrderDegrees when the input has them.
+struct MeshArrays
+{
+  std::vector<double> Points;
+  std::vector<uint8_t> Types;
+  std::vector<int64_t> Offsets;
+  std::vector<int64_t> Connectivity;
+  std::vector<uint32_t> Degrees;
+};
+
+MeshArrays Collect(vtkUnstructuredGrid* input)
+{
+  MeshArrays m;
+  const vtkIdType np = input->GetNumberOfPoints();
+  const vtkIdType nc = input->GetNumberOfCells();
+  m.Points.resize(3 * static_cast<size_t>(np));
+  for (vtkIdType i = 0; i < np; ++i)
+  {
+    input->GetPoint(i, &m.Points[3 * static_cast<size_t>(i)]);
+  }
+  m.Types.reserve(static_cast<size_t>(nc));
+  m.Offsets.reserve(static_cast<size_t>(nc) + 1);
+  m.Offsets.push_back(0);
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < nc; ++c)
+  {
+    m.Types.push_back(static_cast<uint8_t>(input->GetCellType(c)));
+    input->GetCellPoints(c, ids);
+    for (vtkIdType k = 0; k < ids->GetNumberOfIds(); ++k)
+    {
+      m.Connectivity.push_back(static_cast<int64_t>(ids->GetId(k)));
+    }
+    m.Offsets.push_back(static_cast<int64_t>(m.Connectivity.size()));
+  }
+  // Readers do not always mark the array as the HigherOrderDegrees attribute (VTK 9.1's
+  // XML reader does not): take it by its conventional name too.
+  vtkDataArray* degrees = input->GetCellData()->GetHigherOrderDegrees();
+  if (!degrees)
+  {
+    degrees = input->GetCellData()->GetArray("HigherOrderDegrees");
+  }
+  if (degrees && degrees->GetNumberOfComponents() == 3 && degrees->GetNumberOfTuples() == nc)
+  {
+    m.Degrees.resize(3 * static_cast<size_t>(nc));
+    for (vtkIdType c = 0; c < nc; ++c)
+    {
+      for (int k = 0; k < 3; ++k)
+      {
+        m.Degrees[3 * static_cast<size_t>(c) + k] =
+          static_cast<uint32_t>(degrees->GetComponent(c, k));
+      }
+    }
+  }
+  return m;
+}
+
+void AddDoubleArray(vtkPointData* pd, const char* name, int components, vtkIdType n,
+  const double* data)
+{
+  vtkNew<vtkDoubleArray> a;
+  a->SetName(name);
+  a->SetNumberOfComponents(components);
+  a->SetNumberOfTuples(n);
+  if (n > 0)
+  {
+    std::copy_n(data, n * components, a->GetPointer(0));
+  }
+  pd->AddArray(a);
+}
+} // namespace
+
+/// The progress callback handed to the core.
+struct vtkIsobarFESamplesProgress
+{
+  static int32_t Call(void* user, double fraction, const char* phase)
+  {
+    return static_cast<vtkIsobarFESamples*>(user)->ReportProgress(fraction, phase) ? 1 : 0;
+  }
+};
+
+//------------------------------------------------------------------------------
+vtkIsobarFESamples::vtkIsobarFESamples()
+  : Isovalue(0.0)
+  , Spacing(0.0)
+  , CurvatureAdaptivity(0.0)
+  , Tolerance(1e-6)
+  , Levels(2)
+  , Seed(1)
+  , NumberOfMeshBuilds(0)
+  , LastEvaluations(0.0)
+  , LastMaxResidual(0.0)
+  , LastProgress(-1.0)
+  , Mesh(nullptr)
+{
+  IsobarFeParams defaults;
+  if (isobar_fe_params_default(&defaults) == ISOBAR_STATUS_OK)
+  {
+    this->Tolerance = defaults.tolerance;
+    this->Levels = static_cast<int>(defaults.levels);
+    this->Seed = static_cast<int>(defaults.seed);
+  }
+  this->SetInputArrayToProcess(
+    0, 0, 0, vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
+}
+
+//------------------------------------------------------------------------------
+vtkIsobarFESamples::~vtkIsobarFESamples()
+{
+  this->FreeMesh();
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarFESamples::FreeMesh()
+{
+  isobar_fe_mesh_free(this->Mesh);
+  this->Mesh = nullptr;
+  this->BuiltFrom.clear();
+}
+
+//------------------------------------------------------------------------------
+int vtkIsobarFESamples::FillInputPortInformation(int, vtkInformation* info)
+{
+  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkUnstructuredGrid");
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarFESamples::Fail(const std::string& message)
+{
+  this->ErrorMessage = message;
+  vtkErrorMacro(<< message);
+}
+
+//------------------------------------------------------------------------------
+bool vtkIsobarFESamples::ReportProgress(double fraction, const char* phase)
+{
+  if (fraction >= 1.0 || fraction - this->LastProgress >= 0.01 || fraction < this->LastProgress)
+  {
+    this->LastProgress = fraction;
+    this->SetProgressText(phase);
+    this->UpdateProgress(fraction);
+  }
+  return this->GetAbortExecute() != 0;
+}
+
+//------------------------------------------------------------------------------
+int vtkIsobarFESamples::RequestData(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
+{
+  vtkUnstructuredGrid* input = vtkUnstructuredGrid::GetData(inputVector[0], 0);
+  vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
+  this->ErrorMessage.clear();
+  this->LastProgress = -1.0;
+  output->Initialize();
+
+  if (!input || input->GetNumberOfCells() == 0)
+  {
+    this->Fail("the input has no cells: give an unstructured grid of Lagrange cells");
+    return 1;
+  }
+  vtkDataArray* values = this->GetInputArrayToProcess(0, inputVector);
+  if (!values || values->GetNumberOfTuples() != input->GetNumberOfPoints())
+  {
+    this->Fail("the input has no point scalars: choose a point array to contour");
+    return 1;
+  }
+  const std::string field = values->GetName() ? values->GetName() : "field";
+
+  // 1. The core's copy of the mesh, made again only when the points, the cells or the
+  // array changed. The arrays themselves are the key, not the data set: ParaView touches
+  // the data set's MTime on re-execution without changing what it holds.
+  std::ostringstream key;
+  auto identify = [&key](vtkObject* o) { key << o << "@" << (o ? o->GetMTime() : 0) << " "; };
+  identify(input->GetPoints() ? input->GetPoints()->GetData() : nullptr);
+  identify(input->GetCells());
+  identify(input->GetCellTypesArray());
+  identify(input->GetCellData()->GetArray("HigherOrderDegrees"));
+  identify(values);
+  key << field;
+  if (!this->Mesh || key.str() != this->BuiltFrom)
+  {
+    this->FreeMesh();
+    const MeshArrays m = Collect(input);
+    IsobarStatus status = isobar_fe_mesh_create(m.Points.data(), m.Points.size() / 3,
+      m.Types.data(), m.Types.size(), m.Offsets.data(), m.Connectivity.data(),
+      m.Connectivity.size(), m.Degrees.empty() ? nullptr : m.Degrees.data(), &this->Mesh);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->Mesh = nullptr;
+      this->Fail(CoreError("isobar_fe_mesh_create", status));
+      return 1;
+    }
+    const vtkIdType n = values->GetNumberOfTuples();
+    std::vector<double> scalars(static_cast<size_t>(n));
+    for (vtkIdType i = 0; i < n; ++i)
+    {
+      scalars[static_cast<size_t>(i)] = values->GetComponent(i, 0);
+    }
+    status = isobar_fe_mesh_add_array(
+      this->Mesh, field.c_str(), scalars.data(), static_cast<size_t>(n), 1);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->FreeMesh();
+      this->Fail(CoreError("isobar_fe_mesh_add_array", status));
+      return 1;
+    }
+    this->BuiltFrom = key.str();
+    ++this->NumberOfMeshBuilds;
+  }
+
+  // 2. Sample.
+  IsobarFeParams params;
+  isobar_fe_params_default(&params);
+  params.iso = this->Isovalue;
+  params.spacing = this->Spacing;
+  params.rho = this->CurvatureAdaptivity;
+  params.tolerance = this->Tolerance;
+  params.levels = static_cast<uint32_t>(this->Levels);
+  params.seed = static_cast<uint64_t>(this->Seed);
+  SamplesHandle samples;
+  this->UpdateProgress(0.0);
+  const IsobarStatus status = isobar_fe_sample(this->Mesh, field.c_str(), &params,
+    &vtkIsobarFESamplesProgress::Call, this, &samples.Ptr);
+  if (status == ISOBAR_STATUS_CANCELLED)
+  {
+    this->ErrorMessage = "cancelled";
+    return 1;
+  }
+  if (status != ISOBAR_STATUS_OK)
+  {
+    this->Fail(CoreError("isobar_fe_sample", status));
+    return 1;
+  }
+  IsobarFeStats stats;
+  stats.struct_size = sizeof(stats);
+  if (isobar_samples_stats(samples.Ptr, &stats) == ISOBAR_STATUS_OK)
+  {
+    this->LastEvaluations = static_cast<double>(stats.evaluations);
+    this->LastMaxResidual = stats.max_residual;
+  }
+
+  // 3. Vertices with Normals, Radius and the per-sample arrays.
+  const vtkIdType n = static_cast<vtkIdType>(isobar_samples_count(samples.Ptr));
+  vtkNew<vtkDoubleArray> xyz;
+  xyz->SetNumberOfComponents(3);
+  xyz->SetNumberOfTuples(n);
+  vtkNew<vtkFloatArray> normals;
+  normals->SetName("Normals");
+  normals->SetNumberOfComponents(3);
+  normals->SetNumberOfTuples(n);
+  if (n > 0)
+  {
+    std::copy_n(isobar_samples_positions(samples.Ptr), 3 * n, xyz->GetPointer(0));
+    std::copy_n(isobar_samples_normals(samples.Ptr), 3 * n, normals->GetPointer(0));
+  }
+  vtkNew<vtkPoints> points;
+  points->SetData(xyz);
+  vtkNew<vtkIdTypeArray> offsets;
+  vtkNew<vtkIdTypeArray> connectivity;
+  offsets->SetNumberOfValues(n + 1);
+  connectivity->SetNumberOfValues(n);
+  for (vtkIdType i = 0; i <= n; ++i)
+  {
+    offsets->SetValue(i, i);
+  }
+  for (vtkIdType i = 0; i < n; ++i)
+  {
+    connectivity->SetValue(i, i);
+  }
+  vtkNew<vtkCellArray> verts;
+  verts->SetData(offsets, connectivity);
+  output->SetPoints(points);
+  output->SetVerts(verts);
+  vtkPointData* pd = output->GetPointData();
+  pd->SetNormals(normals);
+  AddDoubleArray(pd, "Radius", 1, n, isobar_samples_radii(samples.Ptr));
+  const size_t na = isobar_samples_attribute_count(samples.Ptr);
+  for (size_t i = 0; i < na; ++i)
+  {
+    const char* name = nullptr;
+    size_t components = 0;
+    const double* data = nullptr;
+    const IsobarStatus got =
+      isobar_samples_attribute(samples.Ptr, i, &name, &components, &data);
+    if (got != ISOBAR_STATUS_OK)
+    {
+      output->Initialize();
+      this->Fail(CoreError("isobar_samples_attribute", got));
+      return 1;
+    }
+    AddDoubleArray(pd, name, static_cast<int>(components), n, data);
+  }
+  this->UpdateProgress(1.0);
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarFESamples::PrintSelf(ostream& os, vtkIndent indent)
+{
+  this->Superclass::PrintSelf(os, indent);
+  os << indent << "Isovalue: " << this->Isovalue << "\n";
+  os << indent << "Spacing: " << this->Spacing << "\n";
+  os << indent << "CurvatureAdaptivity: " << this->CurvatureAdaptivity << "\n";
+  os << indent << "Tolerance: " << this->Tolerance << "\n";
+  os << indent << "Levels: " << this->Levels << "\n";
+  os << indent << "Seed: " << this->Seed << "\n";
+  os << indent << "NumberOfMeshBuilds: " << this->NumberOfMeshBuilds << "\n";
+}
