@@ -1,6 +1,6 @@
 """Isosurfaces of high-order finite elements as Blender point clouds: no UI here.
 
-A .vtu of Lagrange cells is read once per object into an ``isobar.FeMesh`` (the core checks
+A .vtu of Lagrange cells (or a Gmsh .msh v4 with high-order elements and $NodeData) is read once per object into an ``isobar.FeMesh`` (the core checks
 and links the cells then); each isovalue or spacing change samples the isosurface again on
 that mesh and replaces the object's point cloud: points on the exact level set of the
 elements' polynomials, with ``radius`` (the disk each point stands for, which Cycles and
@@ -18,7 +18,7 @@ import numpy as np
 from .extraction import isobar_module
 
 #: Extensions of the FE files the core reads.
-FE_EXTENSIONS = (".vtu",)
+FE_EXTENSIONS = (".vtu", ".msh")
 
 # Meshes by object (session_uid) with the file each was read from: reading and checking
 # the cells is the slow part that an isovalue change must not repeat.

@@ -337,7 +337,7 @@ class IsobarFESettings(bpy.types.PropertyGroup):
     isovalue)."""
 
     enabled: BoolProperty(name="FE Samples", description="This object is an isobar high-order FE isosurface", default=False)
-    filepath: StringProperty(name="File", description="The .vtu of Lagrange cells", subtype="FILE_PATH")
+    filepath: StringProperty(name="File", description="The .vtu of Lagrange cells or Gmsh .msh v4 file", subtype="FILE_PATH")
     field: StringProperty(name="Field", description="The scalar point array to contour", update=_resample)
     isovalue: FloatProperty(name="Isovalue", description="The isovalue C", default=0.0, precision=4, update=_resample)
     spacing: FloatProperty(

@@ -159,7 +159,7 @@ def _add_fe(sub) -> None:
         description="Sample the isosurface of a scalar field on Lagrange cells (a .vtu) with isobar's particle "
         "system and write the samples as a UsdGeomPoints with normals, widths and primvars.",
     )
-    fe.add_argument("input", help=".vtu file of Lagrange tetrahedra, hexahedra or wedges")
+    fe.add_argument("input", help=".vtu of Lagrange tetrahedra, hexahedra or wedges, or a Gmsh .msh (v4.1) with high-order elements and $NodeData")
     fe.add_argument("-o", "--output", required=True, help="USD file (.usd .usda .usdc)")
     fe.add_argument("--field", required=True, help="scalar point array to contour")
     fe.add_argument("--iso", required=True, type=float, help="the isovalue")

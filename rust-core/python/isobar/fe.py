@@ -53,7 +53,8 @@ class FeMesh:
 
     @classmethod
     def read(cls, path) -> "FeMesh":
-        """Reads a .vtu file of Lagrange cells with its point arrays."""
+        """Reads a .vtu file of Lagrange cells, or a Gmsh .msh (v4.1) with high-order
+        elements and $NodeData, with its point arrays."""
         handle = POINTER(FeMeshHandle)()
         check(lib.isobar_fe_mesh_read(encode(path, "path"), byref(handle)))
         return cls(handle)

@@ -209,7 +209,8 @@ pub extern "C" fn isobar_fe_mesh_create(
     })
 }
 
-/// Reads a mesh with its point arrays from a file (.vtu with Lagrange cells).
+/// Reads a mesh with its point arrays from a file (.vtu with Lagrange cells, or Gmsh .msh
+/// v4.1 with high-order elements and $NodeData).
 #[no_mangle]
 pub extern "C" fn isobar_fe_mesh_read(
     path: *const c_char,
