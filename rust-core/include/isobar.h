@@ -296,7 +296,8 @@ enum IsobarStatus isobar_fe_mesh_create(const double *points,
                                         const uint32_t *degrees,
                                         struct IsobarFeMesh **out);
 
-// Reads a mesh with its point arrays from a file (.vtu with Lagrange cells).
+// Reads a mesh with its point arrays from a file (.vtu with Lagrange cells, or Gmsh .msh
+// v4.1 with high-order elements and $NodeData).
 enum IsobarStatus isobar_fe_mesh_read(const char *path, struct IsobarFeMesh **out);
 
 // Adds (or replaces) a per-point array: `count` items × `components` f64, item-major;
