@@ -479,7 +479,9 @@ impl SphField {
     }
 
     /// Neighbour-grid cells searched on each side of a query point.
-    pub(crate) const SEARCH_REACH: i64 = REACH;
+    pub fn search_reach(&self) -> u32 {
+        REACH as u32
+    }
 }
 
 impl ScalarField for SphField {

@@ -79,7 +79,7 @@ impl GpuField {
                 Kernel::Quadratic => 3,
             },
             shepard: field.shepard() as u32,
-            reach: SphField::SEARCH_REACH as u32,
+            reach: field.search_reach(),
             pad: [0; 2],
         };
         Ok(GpuField {

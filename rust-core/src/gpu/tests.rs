@@ -331,3 +331,34 @@ fn gpu_seed_cells_equal_cpu_seed_cells() {
         }
     }
 }
+
+/// Figures, not a check (lavapipe times say nothing about a GPU): run with
+/// `cargo test --release --lib gpu::tests::figures -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn figures() {
+    if gpu().is_none() {
+        return;
+    }
+    for name in FRAMES {
+        let field = frame(name);
+        for backend in [Backend::Cpu, Backend::Gpu] {
+            let p = Params {
+                isovalue: 0.6,
+                grid_factor: 0.375,
+                backend,
+                ..Params::default()
+            };
+            let t = std::time::Instant::now();
+            let out = adaptive::extract_sph(&field, &p, &mut Progress::none()).unwrap();
+            println!(
+                "{name} {:?}: {:.3} s, {} triangles, {} array bytes, {} field evaluations",
+                backend,
+                t.elapsed().as_secs_f64(),
+                out.stats.triangles,
+                out.stats.array_bytes,
+                out.stats.field_evaluations
+            );
+        }
+    }
+}
