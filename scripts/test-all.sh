@@ -15,9 +15,9 @@ if ! command -v cargo >/dev/null; then
 fi
 
 # Debian packages: a C compiler for the C ABI test; EGL/Mesa for pyvista's offscreen
-# screenshots.
+# screenshots; lavapipe (mesa-vulkan-drivers) so the wgpu kernels run without a GPU.
 need=()
-for pkg in gcc libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0; do
+for pkg in gcc libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 mesa-vulkan-drivers; do
     dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then
@@ -25,6 +25,10 @@ if [ ${#need[@]} -gt 0 ]; then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${need[@]}"
 fi
+
+# wgpu: Vulkan only (lavapipe on CPU-only machines); skips the GL probe. GPU tests fail
+# without an adapter unless ISOBAR_GPU_TESTS=skip.
+export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"
 
 rustup component add rustfmt clippy >/dev/null 2>&1 || true
 

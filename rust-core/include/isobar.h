@@ -16,6 +16,15 @@
 // Bumped whenever a function's signature or a struct's prefix changes incompatibly.
 #define ISOBAR_ABI_VERSION 1
 
+// `IsobarAdaptiveParams::backend`: rayon on the CPU.
+#define ISOBAR_BACKEND_CPU 0
+
+// `IsobarAdaptiveParams::backend`: wgpu compute shaders.
+#define ISOBAR_BACKEND_GPU 1
+
+// `IsobarAdaptiveParams::backend`: the GPU when an adapter exists, else the CPU.
+#define ISOBAR_BACKEND_AUTO 2
+
 // Kernel: Monaghan's cubic spline (support 2h).
 #define ISOBAR_KERNEL_CUBIC 0
 
@@ -74,6 +83,10 @@ typedef struct IsobarAdaptiveParams {
   uint32_t splash_dilation;
   // Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
   uint32_t bisection_iterations;
+  // Where the work runs: `ISOBAR_BACKEND_CPU` (default), `ISOBAR_BACKEND_GPU` (wgpu;
+  // `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU adapter: ..." without one) or
+  // `ISOBAR_BACKEND_AUTO` (the GPU when an adapter exists). Added in version 2.
+  uint32_t backend;
 } IsobarAdaptiveParams;
 
 // Parameters of `isobar_sph_extract`. Fill with `isobar_sph_params_default`, which sets
@@ -156,6 +169,8 @@ typedef struct IsobarAdaptiveStats {
   // Bytes of the per-level arrays.
   uint64_t array_bytes;
   double seconds_total;
+  // The back end that ran: `ISOBAR_BACKEND_CPU` or `ISOBAR_BACKEND_GPU`. Version 2.
+  uint32_t backend;
 } IsobarAdaptiveStats;
 
 // Options of the particle system (the paper's s, ρ, ε_T ...). Fill with

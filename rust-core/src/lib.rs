@@ -9,6 +9,7 @@ pub mod capi;
 pub mod correctors;
 pub mod error;
 pub mod field;
+pub mod gpu;
 pub mod highorder;
 pub mod io;
 pub mod mc;

@@ -40,3 +40,16 @@ def test_adaptive_refuses_bad_input_with_the_core_message():
         isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, bisection_iterations=0)
     with pytest.raises(isobar.Cancelled):
         isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, progress=lambda f, p: False)
+
+
+def test_adaptive_backend_choice_is_reported_and_checked():
+    cpu, stats = isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, backend="cpu")
+    assert stats["backend"] == "cpu"
+    # auto: the GPU when an adapter exists (lavapipe in CI), else the CPU; closed either
+    # way (GPU == CPU within the f32 tolerance is checked by the Rust tests, gpu/tests.rs).
+    auto, stats = isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, backend="auto")
+    assert stats["backend"] in ("cpu", "gpu")
+    assert edges_used_twice_oppositely(auto.triangles)
+    assert abs(auto.n_triangles - cpu.n_triangles) <= 0.01 * cpu.n_triangles
+    with pytest.raises(ValueError, match="backend"):
+        isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, backend="cuda")

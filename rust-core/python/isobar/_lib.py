@@ -133,6 +133,7 @@ class Stats(Structure):
         ("seconds_trimming", c_double),
         ("seconds_attributes", c_double),
         ("seconds_total", c_double),
+        ("backend", c_uint32),
     ]
 
 
@@ -144,6 +145,7 @@ class AdaptiveParams(Structure):
         ("splash_threshold", c_uint32),
         ("splash_dilation", c_uint32),
         ("bisection_iterations", c_uint32),
+        ("backend", c_uint32),
     ]
 
 

@@ -14,6 +14,10 @@ from .sph import ProgressCallback, _run, _sph_params
 from .surface import Surface
 
 
+#: ``IsobarAdaptiveParams.backend`` values (ISOBAR_BACKEND_CPU, _GPU, _AUTO).
+_BACKENDS = {"cpu": 0, "gpu": 1, "auto": 2}
+
+
 def default_params() -> AdaptiveParams:
     """The core's default ``IsobarAdaptiveParams`` (with ``struct_size`` set)."""
     params = AdaptiveParams()
@@ -41,6 +45,7 @@ def extract_adaptive(
     splash_dilation: Optional[int] = None,
     bisection_iterations: Optional[int] = None,
     progress: Optional[ProgressCallback] = None,
+    backend: str = "auto",
 ) -> Tuple[Surface, dict]:
     """Extracts the adaptive surface of the particles' SPH field at one isovalue.
 
@@ -53,12 +58,17 @@ def extract_adaptive(
         splash_dilation: layers of neighbour cells raised to level 3 around each splash
             cell (core default 1; 0 is the paper's criterion alone).
         bisection_iterations: halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+        backend: "cpu", "gpu" (wgpu; raises "no GPU adapter: ..." without one) or "auto"
+            (the GPU when an adapter exists, else the CPU); ``stats["backend"]`` says
+            which ran.
 
     Returns:
         (:class:`Surface`, stats) where stats holds ``cells_per_level``,
         ``triangles_per_level``, ``transition_faces``, ``crack_triangles``, ``vertices``,
-        ``triangles``, ``field_evaluations``, ``array_bytes`` and ``seconds_total``.
+        ``triangles``, ``field_evaluations``, ``array_bytes``, ``seconds_total`` and ``backend`` ("cpu" or "gpu").
     """
+    if backend not in _BACKENDS:
+        raise ValueError(f"backend must be one of {sorted(_BACKENDS)}, got {backend!r}")
     if not isinstance(particles, Particles):
         particles = Particles.from_arrays(particles)
     params, keep = _sph_params(particles, float(iso), field, kernel, h, h_array, h_scale,
@@ -72,6 +82,7 @@ def extract_adaptive(
         adaptive.splash_dilation = int(splash_dilation)
     if bisection_iterations is not None:
         adaptive.bisection_iterations = int(bisection_iterations)
+    adaptive.backend = _BACKENDS[backend]
     stats = AdaptiveStats()
     stats.struct_size = sizeof(AdaptiveStats)
     surface = _run(
@@ -86,6 +97,7 @@ def extract_adaptive(
     info = {name: getattr(stats, name) for name, _ in AdaptiveStats._fields_ if name != "struct_size"}
     info["cells_per_level"] = list(stats.cells_per_level)
     info["triangles_per_level"] = list(stats.triangles_per_level)
+    info["backend"] = {v: k for k, v in _BACKENDS.items()}.get(stats.backend, "cpu")
     return surface, info
 
 

@@ -6,6 +6,7 @@ use crate::correctors;
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
 use crate::field::sph::{SphField, SphSettings};
+use crate::gpu::Backend;
 use crate::io;
 use crate::progress::Progress;
 use std::fmt::Write as _;
@@ -31,6 +32,10 @@ pub struct AdaptiveArgs {
     /// the Hausdorff distance.
     #[arg(long)]
     pub compare: bool,
+    /// Where the per-level work runs: cpu, gpu (wgpu; an error without an adapter) or
+    /// auto (the GPU when an adapter exists). With --compare, both back ends are timed.
+    #[arg(long, default_value = "cpu")]
+    pub backend: String,
 }
 
 /// What the binary passes from its shared SPH options.
@@ -68,6 +73,7 @@ pub fn run(
         bisection_iterations: args.bisection_iterations,
         normals: common.normals,
         memory_budget: common.memory_budget,
+        backend: Backend::parse(&args.backend)?,
     };
     params.validate()?;
     let frames = io::expand_sequence(common.input)?;
@@ -94,6 +100,7 @@ pub fn run(
         let mut rows = rows(&data, &out.stats, build_s);
         if args.compare {
             rows.extend(compare(&field, &params, &out)?);
+            rows.extend(compare_backends(&field, &params)?);
         }
         if !common.quiet {
             let mut text = format!("{}\n", path.display());
@@ -114,6 +121,7 @@ pub fn run(
 fn rows(data: &ParticleData, s: &Stats, build_s: f64) -> Vec<(String, String)> {
     let mut r: Vec<(String, String)> = vec![
         ("particles".into(), data.len().to_string()),
+        ("backend".into(), s.backend.name().to_string()),
         ("coarse cells".into(), s.coarse_cells.to_string()),
     ];
     for l in 0..3 {
@@ -226,6 +234,60 @@ fn compare(
             format!("{:.4}", d / fine),
         ),
     ])
+}
+
+/// The adaptive extraction on each back end with an adapter for it: time, triangles,
+/// array bytes, and the largest distance between the two meshes' positions (same
+/// vertex order when the triangle sets agree).
+fn compare_backends(field: &SphField, params: &Params) -> Result<Vec<(String, String)>> {
+    let mut rows = Vec::new();
+    let mut meshes = Vec::new();
+    for backend in [Backend::Cpu, Backend::Gpu] {
+        let name = backend.name();
+        if let Err(e) = backend.resolve() {
+            rows.push((format!("{name} adaptive"), e.to_string()));
+            continue;
+        }
+        let p = Params {
+            backend,
+            ..params.clone()
+        };
+        let t = Instant::now();
+        let out = extract_sph(field, &p, &mut Progress::none())?;
+        let seconds = t.elapsed().as_secs_f64();
+        rows.extend([
+            (
+                format!("{name} adaptive: time (s)"),
+                format!("{seconds:.3}"),
+            ),
+            (
+                format!("{name} adaptive: triangles"),
+                out.stats.triangles.to_string(),
+            ),
+            (
+                format!("{name} adaptive: array bytes"),
+                out.stats.array_bytes.to_string(),
+            ),
+        ]);
+        meshes.push(out.mesh);
+    }
+    if let [cpu, gpu] = &meshes[..] {
+        let same = cpu.triangles == gpu.triangles;
+        rows.push(("gpu == cpu triangles".into(), same.to_string()));
+        if same {
+            let d = cpu
+                .positions
+                .iter()
+                .zip(&gpu.positions)
+                .map(|(a, b)| (0..3).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max))
+                .fold(0.0, f64::max);
+            rows.push((
+                "gpu - cpu max position difference".into(),
+                format!("{d:.3e}"),
+            ));
+        }
+    }
+    Ok(rows)
 }
 
 fn write_json(path: &Path, rows: &[(String, String)]) -> Result<()> {

@@ -17,6 +17,7 @@ pub mod levels;
 use crate::error::{Error, Result};
 use crate::field::sph::SphField;
 use crate::field::ScalarField;
+use crate::gpu::Backend;
 use crate::mesh::Mesh;
 use crate::progress::Progress;
 use grid::CoarseGrid;
@@ -43,6 +44,8 @@ pub struct Params {
     pub normals: bool,
     /// Bytes the grid arrays may take; larger grids are refused before allocation.
     pub memory_budget: u64,
+    /// Where the per-level work runs (`extract_sph` only; `extract` is CPU).
+    pub backend: Backend,
 }
 
 impl Default for Params {
@@ -55,6 +58,7 @@ impl Default for Params {
             bisection_iterations: 5,
             normals: true,
             memory_budget: crate::field::DEFAULT_MEMORY_BUDGET,
+            backend: Backend::Cpu,
         }
     }
 }
@@ -117,6 +121,8 @@ pub struct Stats {
     /// points, triangles).
     pub array_bytes: u64,
     pub timings: Timings,
+    /// The back end that ran (`Cpu` or `Gpu`, never `Auto`).
+    pub backend: Backend,
 }
 
 /// A surface and how it was made.
@@ -168,7 +174,10 @@ pub fn extract_sph(
     let grid = grid_for(field, params)?;
     let levels = levels_for(field, &grid, params)?;
     let elapsed = start.elapsed().as_secs_f64();
-    let mut out = extract(field, &grid, &levels, params, progress)?;
+    let mut out = match params.backend.resolve()? {
+        Backend::Gpu => extract_gpu(field, &grid, &levels, params, progress)?,
+        _ => extract(field, &grid, &levels, params, progress)?,
+    };
     out.stats.timings.levels = elapsed;
     out.stats.timings.total += elapsed;
     Ok(out)
@@ -184,11 +193,90 @@ pub fn extract<F: ScalarField + ?Sized>(
     params: &Params,
     progress: &mut Progress,
 ) -> Result<Extraction> {
+    extract_with(
+        grid,
+        levels,
+        params,
+        params.isovalue,
+        progress,
+        |level, progress| {
+            levels::build_level(
+                field,
+                grid,
+                levels,
+                level,
+                params.isovalue,
+                params.bisection_iterations,
+                params.normals,
+                progress,
+            )
+        },
+    )
+}
+
+/// [`extract_sph`]'s per-level work on the GPU (`gpu::level`); the levels, crack filling
+/// and assembly as on the CPU.
+#[cfg(feature = "gpu")]
+fn extract_gpu(
+    field: &SphField,
+    grid: &CoarseGrid,
+    levels: &[u8],
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Extraction> {
+    let gpu = crate::gpu::device::get()?;
+    let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
+    // The kernels compare with the f32 isovalue; cracks must see the same signs.
+    let iso = params.isovalue as f32;
+    let mut out = extract_with(
+        grid,
+        levels,
+        params,
+        iso as f64,
+        progress,
+        |level, progress| {
+            crate::gpu::level::build_level(
+                gpu,
+                &on_device,
+                grid,
+                levels,
+                level,
+                iso,
+                params.bisection_iterations,
+                params.normals,
+                progress,
+            )
+        },
+    )?;
+    out.stats.backend = Backend::Gpu;
+    Ok(out)
+}
+
+#[cfg(not(feature = "gpu"))]
+fn extract_gpu(
+    _: &SphField,
+    _: &CoarseGrid,
+    _: &[u8],
+    _: &Params,
+    _: &mut Progress,
+) -> Result<Extraction> {
+    Err(crate::gpu::adapter_name().expect_err("no GPU without the feature"))
+}
+
+/// Levels checked, then `build` for levels 1, 2, 3, cracks filled comparing node values
+/// with `iso`, and the mesh assembled.
+fn extract_with(
+    grid: &CoarseGrid,
+    levels: &[u8],
+    params: &Params,
+    iso: f64,
+    progress: &mut Progress,
+    mut build: impl FnMut(u8, &mut Progress) -> Result<LevelArrays>,
+) -> Result<Extraction> {
     params.validate()?;
     grid::check_levels(grid, levels)?;
     levels::check_budget(levels, params.memory_budget)?;
     let start = Instant::now();
-    let iso = params.isovalue;
     let mut stats = Stats {
         coarse_cells: levels.len() as u64,
         ..Stats::default()
@@ -201,16 +289,7 @@ pub fn extract<F: ScalarField + ?Sized>(
     for level in 1..=3u8 {
         let from = 0.05 + 0.25 * (level - 1) as f64;
         progress.phase("level surfaces", from, from + 0.25)?;
-        let a = levels::build_level(
-            field,
-            grid,
-            levels,
-            level,
-            iso,
-            params.bisection_iterations,
-            params.normals,
-            progress,
-        )?;
+        let a = build(level, progress)?;
         stats.field_evaluations += a.evaluations;
         stats.triangles_per_level[level as usize - 1] = a.triangles.len() as u64;
         arrays.push(a);

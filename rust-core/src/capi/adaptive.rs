@@ -11,6 +11,7 @@ use super::{
 use crate::adaptive::{self, Params};
 use crate::correctors;
 use crate::field::sph::SphField;
+use crate::gpu::Backend;
 use std::ffi::c_void;
 
 /// Options of `isobar_adaptive_extract`. Fill with `isobar_adaptive_params_default`,
@@ -26,6 +27,29 @@ pub struct IsobarAdaptiveParams {
     pub splash_dilation: u32,
     /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
     pub bisection_iterations: u32,
+    /// Where the work runs: `ISOBAR_BACKEND_CPU` (default), `ISOBAR_BACKEND_GPU` (wgpu;
+    /// `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU adapter: ..." without one) or
+    /// `ISOBAR_BACKEND_AUTO` (the GPU when an adapter exists). Added in version 2.
+    pub backend: u32,
+}
+
+/// `IsobarAdaptiveParams::backend`: rayon on the CPU.
+pub const ISOBAR_BACKEND_CPU: u32 = 0;
+/// `IsobarAdaptiveParams::backend`: wgpu compute shaders.
+pub const ISOBAR_BACKEND_GPU: u32 = 1;
+/// `IsobarAdaptiveParams::backend`: the GPU when an adapter exists, else the CPU.
+pub const ISOBAR_BACKEND_AUTO: u32 = 2;
+
+fn backend_from_c(b: u32) -> Result<Backend, crate::Error> {
+    match b {
+        ISOBAR_BACKEND_CPU => Ok(Backend::Cpu),
+        ISOBAR_BACKEND_GPU => Ok(Backend::Gpu),
+        ISOBAR_BACKEND_AUTO => Ok(Backend::Auto),
+        _ => Err(invalid(
+            "adaptive.backend",
+            format!("{b} is not ISOBAR_BACKEND_CPU (0), _GPU (1) or _AUTO (2)"),
+        )),
+    }
 }
 
 /// Size of the first version of `IsobarAdaptiveParams`.
@@ -39,6 +63,7 @@ impl Default for IsobarAdaptiveParams {
             splash_threshold: p.splash_threshold,
             splash_dilation: p.splash_dilation,
             bisection_iterations: p.bisection_iterations,
+            backend: ISOBAR_BACKEND_CPU,
         }
     }
 }
@@ -61,6 +86,8 @@ pub struct IsobarAdaptiveStats {
     /// Bytes of the per-level arrays.
     pub array_bytes: u64,
     pub seconds_total: f64,
+    /// The back end that ran: `ISOBAR_BACKEND_CPU` or `ISOBAR_BACKEND_GPU`. Version 2.
+    pub backend: u32,
 }
 
 /// Writes the default adaptive options (with `struct_size` set) to `out`.
@@ -117,6 +144,7 @@ pub extern "C" fn isobar_adaptive_extract(
             bisection_iterations: a.bisection_iterations,
             normals: sph_params.normals,
             memory_budget: sph_params.memory_budget,
+            backend: backend_from_c(a.backend)?,
         };
         let extraction = with_progress(progress, user, |sink| {
             sink.window(0.0, 0.1);
@@ -137,6 +165,10 @@ pub extern "C" fn isobar_adaptive_extract(
                 field_evaluations: s.field_evaluations,
                 array_bytes: s.array_bytes,
                 seconds_total: s.timings.total,
+                backend: match s.backend {
+                    Backend::Gpu => ISOBAR_BACKEND_GPU,
+                    _ => ISOBAR_BACKEND_CPU,
+                },
             };
             copy_versioned_out(full, stats, "stats")?;
         }
@@ -272,6 +304,26 @@ mod tests {
         sph.isovalue_count = 1;
         adaptive.struct_size = 3;
         assert_eq!(refused(&sph, &adaptive), IsobarStatus::ErrInvalidArgument);
+        // An unknown back end; a version-1 struct (no backend field) runs on the CPU.
+        adaptive = IsobarAdaptiveParams {
+            backend: 7,
+            ..IsobarAdaptiveParams::default()
+        };
+        assert_eq!(refused(&sph, &adaptive), IsobarStatus::ErrInvalidArgument);
+        adaptive.struct_size = ADAPTIVE_PARAMS_V1_SIZE as u32;
+        let mut surface = std::ptr::null_mut();
+        let status = isobar_adaptive_extract(
+            handle,
+            &sph,
+            &adaptive,
+            None,
+            std::ptr::null_mut(),
+            &mut surface,
+            &mut stats,
+        );
+        assert_eq!(status, IsobarStatus::Ok);
+        assert_eq!(stats.backend, ISOBAR_BACKEND_CPU);
+        isobar_surface_free(surface);
         isobar_particles_free(handle);
     }
 }

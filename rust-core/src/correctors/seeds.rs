@@ -74,7 +74,7 @@ fn pair_radius(field: &SphField, i: usize) -> f64 {
 /// A side counts as covered by a neighbour within 1.5 h: solvers space particles about h
 /// apart, so h alone would leave the axis neighbours of an interior particle just outside
 /// and mark it as free surface on every side.
-fn side_radius(field: &SphField, i: usize) -> f64 {
+pub(crate) fn side_radius(field: &SphField, i: usize) -> f64 {
     (1.5 * field.h_unscaled(i)).min(field.support(i))
 }
 
@@ -85,10 +85,33 @@ pub fn seed_cells(
     iso: f64,
     search: &SeedSearch,
 ) -> Result<Vec<u64>> {
+    let order = search.pairs.order();
+    seed_cells_with(field, grid, iso, search, |i, visit| {
+        search
+            .pairs
+            .for_each_candidate_range(search.positions[i], 1, |range| {
+                for &j in &order[range] {
+                    visit(j as usize);
+                }
+            })
+    })
+}
+
+/// [`seed_cells`] with each particle's neighbour candidates from `candidates(i, visit)`:
+/// any superset, in any order, of the particles within [`side_radius`] of particle i
+/// (grid slots). The exact tests here pick the pairs, so every such superset (the GPU's
+/// conservative f32 search, `gpu::seeds`) gives the same seeds.
+pub fn seed_cells_with(
+    field: &SphField,
+    grid: &VirtualGrid,
+    iso: f64,
+    search: &SeedSearch,
+    candidates: impl Fn(usize, &mut dyn FnMut(usize)) + Sync,
+) -> Result<Vec<u64>> {
     let SeedSearch {
         positions,
-        pairs,
         smoothed,
+        ..
     } = search;
     // Each particle is classified twice, by its raw and by its smoothed value; a pair
     // straddles when either classification differs.
@@ -104,7 +127,6 @@ pub fn seed_cells(
     };
     let fraction = field.kernel().linear_crossing_error() + WINDOW_MARGIN;
     let window = |length: f64| (WINDOW_CELLS * grid.cell_size).max(fraction * length);
-    let order = pairs.order();
     let mut seeds: Vec<u64> = (0..field.len())
         .into_par_iter()
         .fold(Vec::new, |mut out, i| {
@@ -114,35 +136,32 @@ pub fn seed_cells(
             let side_r2 = side_radius(field, i).powi(2);
             // Bit 2a+s: a neighbour lies on side s (0: negative, 1: positive) of axis a.
             let mut sides = 0u8;
-            pairs.for_each_candidate_range(xi, 1, |range| {
-                for &j in &order[range] {
-                    let j = j as usize;
-                    let d = positions[j] - xi;
-                    let d2 = d.length_squared();
-                    if j == i || d2 >= side_r2 {
-                        continue;
+            candidates(i, &mut |j| {
+                let d = positions[j] - xi;
+                let d2 = d.length_squared();
+                if j == i || d2 >= side_r2 {
+                    return;
+                }
+                for a in 0..3 {
+                    if d[a] > 0.0 {
+                        sides |= 1 << (2 * a + 1);
+                    } else if d[a] < 0.0 {
+                        sides |= 1 << (2 * a);
                     }
-                    for a in 0..3 {
-                        if d[a] > 0.0 {
-                            sides |= 1 << (2 * a + 1);
-                        } else if d[a] < 0.0 {
-                            sides |= 1 << (2 * a);
-                        }
-                    }
-                    if d2 >= r2 {
-                        continue;
-                    }
-                    let cj = class(j);
-                    if j > i && cj != ci {
-                        let values = ends(
-                            ci,
-                            cj,
-                            (smoothed[i], smoothed[j]),
-                            (field.raw_value(i), field.raw_value(j)),
-                        );
-                        let (a, b) = crossing_window(xi, positions[j], values, iso, window);
-                        cells_on_segment(grid, a, b, &mut out);
-                    }
+                }
+                if d2 >= r2 {
+                    return;
+                }
+                let cj = class(j);
+                if j > i && cj != ci {
+                    let values = ends(
+                        ci,
+                        cj,
+                        (smoothed[i], smoothed[j]),
+                        (field.raw_value(i), field.raw_value(j)),
+                    );
+                    let (a, b) = crossing_window(xi, positions[j], values, iso, window);
+                    cells_on_segment(grid, a, b, &mut out);
                 }
             });
             if ci != outside {

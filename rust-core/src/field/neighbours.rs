@@ -65,8 +65,13 @@ impl NeighbourGrid {
         let cell_of: Vec<u32> = positions
             .par_iter()
             .map(|&p| {
+                // Clamped: (hi - lo) / cell can round below the product used here, and a
+                // particle on the upper bound would land one cell past the row's end,
+                // i.e. in the next row, where no query near it looks.
                 let c = grid.cell_coords(p);
-                grid.linear(c[0] as usize, c[1] as usize, c[2] as usize) as u32
+                let c: [usize; 3] =
+                    std::array::from_fn(|a| c[a].clamp(0, dims[a] as i64 - 1) as usize);
+                grid.linear(c[0], c[1], c[2]) as u32
             })
             .collect();
         // Counting sort; the scatter runs in particle order so each cell lists its
@@ -92,6 +97,12 @@ impl NeighbourGrid {
     /// Original particle index of each sorted slot.
     pub fn order(&self) -> &[u32] {
         &self.order
+    }
+
+    /// (origin, 1 / cell size, cells per axis, slot offsets per cell plus one): the
+    /// layout a GPU kernel needs to repeat [`NeighbourGrid::for_each_candidate_range`].
+    pub fn layout(&self) -> (DVec3, f64, [usize; 3], &[u32]) {
+        (self.origin, self.inv_cell, self.dims, &self.offsets)
     }
 
     fn linear(&self, x: usize, y: usize, z: usize) -> usize {

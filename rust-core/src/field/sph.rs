@@ -460,6 +460,28 @@ impl SphField {
     pub fn kernel(&self) -> Kernel {
         self.kernel
     }
+
+    /// Whether values are Shepard-normalised.
+    pub fn shepard(&self) -> bool {
+        self.shepard
+    }
+
+    /// The particle in grid slot `slot` as the evaluation loop uses it: (position,
+    /// support², 1/h, V σ / h³, A). GPU kernels repeat that loop on these numbers.
+    pub fn packed(&self, slot: usize) -> (DVec3, f64, f64, f64, f64) {
+        let p = &self.particles[slot];
+        (p.pos, p.support2, p.inv_h, p.weight_scale, p.value)
+    }
+
+    /// The neighbour grid the evaluation loop searches (slots are grid order).
+    pub fn neighbour_grid(&self) -> &NeighbourGrid {
+        &self.grid
+    }
+
+    /// Neighbour-grid cells searched on each side of a query point.
+    pub fn search_reach(&self) -> u32 {
+        REACH as u32
+    }
 }
 
 impl ScalarField for SphField {

@@ -1,0 +1,95 @@
+//! The wgpu back end: one lazily created device (adapter, device, queue, a pipeline
+//! cache), buffer helpers, and the WGSL kernels of the adaptive 3-level method
+//! (`shaders/*.wgsl`). With no adapter (or a build without the `gpu` feature) an explicit
+//! [`Backend::Gpu`] request is an error saying so, and [`Backend::Auto`] runs on the CPU.
+//!
+//! Kernels compute in f32 (WGSL has no portable f64): field values differ from the CPU's
+//! f64 ones by a relative ~1e-6, so GPU and CPU surfaces agree to within that except
+//! where a value lies that close to the isovalue (see `tests.rs` for the exact rule).
+
+use crate::error::{Error, Result};
+
+#[cfg(feature = "gpu")]
+pub mod device;
+#[cfg(feature = "gpu")]
+pub mod level;
+#[cfg(feature = "gpu")]
+pub mod seeds;
+#[cfg(feature = "gpu")]
+pub mod sph;
+
+/// Where an extraction runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Backend {
+    /// Rayon on the CPU, f64 throughout.
+    #[default]
+    Cpu,
+    /// wgpu compute shaders; an error when no adapter exists.
+    Gpu,
+    /// The GPU when an adapter exists, else the CPU.
+    Auto,
+}
+
+impl Backend {
+    /// Parses `cpu`, `gpu` or `auto`.
+    pub fn parse(s: &str) -> Result<Backend> {
+        match s.to_ascii_lowercase().as_str() {
+            "cpu" => Ok(Backend::Cpu),
+            "gpu" => Ok(Backend::Gpu),
+            "auto" => Ok(Backend::Auto),
+            _ => Err(Error::InvalidParameter {
+                name: "backend",
+                message: format!("'{s}' is not one of cpu, gpu, auto"),
+            }),
+        }
+    }
+
+    /// Name used on command lines and in stats.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::Gpu => "gpu",
+            Backend::Auto => "auto",
+        }
+    }
+
+    /// The back end that will actually run: `Cpu` or `Gpu`. `Gpu` without an adapter is
+    /// an error naming why there is none; `Auto` then gives `Cpu`.
+    pub fn resolve(self) -> Result<Backend> {
+        match self {
+            Backend::Cpu => Ok(Backend::Cpu),
+            Backend::Gpu => adapter_name().map(|_| Backend::Gpu),
+            Backend::Auto => Ok(if adapter_name().is_ok() {
+                Backend::Gpu
+            } else {
+                Backend::Cpu
+            }),
+        }
+    }
+}
+
+/// Name and driver of the adapter the GPU back end uses, or an error saying why there is
+/// none ("no GPU adapter: ...").
+pub fn adapter_name() -> Result<String> {
+    #[cfg(feature = "gpu")]
+    {
+        device::get().map(|g| g.name.clone())
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        Err(no_adapter(
+            "this build of isobar has no GPU support (feature 'gpu' is off)",
+        ))
+    }
+}
+
+/// The error of a GPU request that cannot be served.
+pub(crate) fn no_adapter(why: &str) -> Error {
+    Error::InvalidParameter {
+        name: "backend",
+        message: format!("no GPU adapter: {why}"),
+    }
+}
+
+#[cfg(all(test, feature = "gpu"))]
+mod tests;

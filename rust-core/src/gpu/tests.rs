@@ -1,0 +1,364 @@
+//! GPU against CPU. Without an adapter these tests FAIL, unless `ISOBAR_GPU_TESTS=skip`
+//! is set: CI must not pass by skipping (it installs lavapipe, `mesa-vulkan-drivers`).
+//!
+//! Tolerance rule. The kernels evaluate the field in f32, the CPU in f64; their values
+//! agree to a relative ~1e-6. A sign test (case, bisection step) can only differ where a
+//! value lies within that of the isovalue, so every comparison below is exact (cases,
+//! cut edges, triangles) or within 1e-5 (values relative to their largest, positions
+//! relative to the grid's extent), with one exception stated where it is used: a sub-cell
+//! whose corner values straddle differently may differ only if one of its corners lies
+//! within 1e-5 (relative) of the isovalue on the CPU.
+
+use super::device;
+use super::level::{build_level, scan};
+use super::sph::GpuField;
+use crate::adaptive::grid::{self, CoarseGrid};
+use crate::adaptive::levels::{self, LevelArrays};
+use crate::adaptive::{self, grid_for, Params};
+use crate::field::kernel::Kernel;
+use crate::field::particles::ParticleData;
+use crate::field::sph::{SmoothingLength, SphField, SphSettings};
+use crate::gpu::Backend;
+use crate::progress::Progress;
+use glam::DVec3;
+
+const TOL: f64 = 1e-5;
+
+/// The device, or None when `ISOBAR_GPU_TESTS=skip` and there is none; otherwise a
+/// missing adapter fails the test.
+fn gpu() -> Option<&'static device::Gpu> {
+    match device::get() {
+        Ok(g) => Some(g),
+        Err(e) if std::env::var("ISOBAR_GPU_TESTS").as_deref() == Ok("skip") => {
+            eprintln!("skipped (ISOBAR_GPU_TESTS=skip): {e}");
+            None
+        }
+        Err(e) => panic!("{e}; install mesa-vulkan-drivers or set ISOBAR_GPU_TESTS=skip"),
+    }
+}
+
+/// A small pseudo-random generator, so the tests need no crate.
+fn lcg(seed: &mut u64) -> f64 {
+    *seed = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*seed >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// A ball of fluid on a jittered lattice, a thin slab, and a few lone splash particles
+/// and pairs: every level appears, with transition faces of both kinds.
+fn body(kernel: Kernel) -> SphField {
+    let r = 0.05;
+    let mut seed = 7u64;
+    let mut positions = Vec::new();
+    for z in -8..=8 {
+        for y in -8..=8 {
+            for x in -8..=8 {
+                let p = DVec3::new(x as f64, y as f64, z as f64) * r;
+                if p.length() < 0.38 {
+                    let j = DVec3::new(lcg(&mut seed), lcg(&mut seed), lcg(&mut seed)) - 0.5;
+                    positions.push(p + j * 0.2 * r);
+                }
+            }
+        }
+    }
+    for (x, y) in [(9, 0), (10, 0), (9, 1)] {
+        for z in -3..=3 {
+            positions.push(DVec3::new(x as f64, y as f64, z as f64) * r);
+        }
+    }
+    for p in [
+        DVec3::new(0.0, 0.75, 0.0),
+        DVec3::new(0.0, -0.8, 0.3),
+        DVec3::new(0.05, -0.8, 0.3),
+        DVec3::new(-0.7, 0.1, -0.6),
+    ] {
+        positions.push(p);
+    }
+    let data = ParticleData {
+        positions,
+        ..ParticleData::default()
+    };
+    let settings = SphSettings {
+        kernel,
+        smoothing_length: SmoothingLength::Constant(2.0 * r),
+        ..SphSettings::default()
+    };
+    SphField::new(&data, &settings).unwrap()
+}
+
+fn params(iso: f64) -> Params {
+    Params {
+        isovalue: iso,
+        grid_factor: 0.5,
+        ..Params::default()
+    }
+}
+
+/// Largest coordinate extent of the grid: positions are compared relative to it.
+fn extent(g: &CoarseGrid) -> f64 {
+    g.cells.iter().map(|&c| c as f64).fold(0.0, f64::max) * g.fine * 4.0
+}
+
+/// Exact equality of everything but floating values, which are within TOL (module doc).
+fn assert_level_equal(cpu: &LevelArrays, gpu: &LevelArrays, iso: f64, scale: f64, what: &str) {
+    assert_eq!(cpu.cells, gpu.cells, "{what}: cells");
+    let vmax = cpu.values.iter().fold(1e-30f64, |m, v| m.max(v.abs()));
+    let worst = cpu
+        .values
+        .iter()
+        .zip(&gpu.values)
+        .map(|(a, b)| (a - b).abs() / vmax)
+        .fold(0.0, f64::max);
+    assert!(
+        worst < TOL,
+        "{what}: node values differ by {worst:e} relative"
+    );
+    let near_iso = cpu.values.iter().any(|v| (v - iso).abs() < TOL * vmax);
+    if near_iso {
+        // The exception of the module doc: report it, compare what is comparable.
+        eprintln!("{what}: a node value lies within {TOL:e} of the isovalue");
+        return;
+    }
+    assert_eq!(cpu.cases, gpu.cases, "{what}: cases");
+    assert_eq!(cpu.triangle_offsets, gpu.triangle_offsets, "{what}: scan");
+    assert_eq!(cpu.edges, gpu.edges, "{what}: cut edges");
+    assert_eq!(cpu.triangles, gpu.triangles, "{what}: triangles");
+    for (i, (a, b)) in cpu.points.iter().zip(&gpu.points).enumerate() {
+        assert_eq!(a.id, b.id, "{what}: point {i} on another finest edge");
+        let d = (a.position - b.position).abs().max_element() / scale;
+        assert!(d < TOL, "{what}: point {i} moved {d:e} of the extent");
+        if a.normal != DVec3::ZERO {
+            assert!(a.normal.dot(b.normal) > 0.999, "{what}: normal {i}");
+        }
+    }
+}
+
+#[test]
+fn scan_equals_a_sequential_prefix_sum() {
+    let Some(g) = gpu() else { return };
+    let mut seed = 3u64;
+    for n in [1usize, 63, 64, 65, 4097, 300_001] {
+        let data: Vec<u32> = (0..n).map(|_| (lcg(&mut seed) * 9.0) as u32).collect();
+        let buf = g.upload("data", &data);
+        scan(g, &buf, n as u64).unwrap();
+        let got: Vec<u32> = g.read(&buf, n).unwrap();
+        let mut want = Vec::with_capacity(n);
+        let mut total = 0u32;
+        for &v in &data {
+            want.push(total);
+            total += v;
+        }
+        assert_eq!(got, want, "n = {n}");
+    }
+}
+
+/// Every level's arrays, GPU against CPU, for each kernel, with levels from the splash
+/// criterion and with a forced mix (1, 2, 3 in stripes, balanced).
+#[test]
+fn level_arrays_equal_the_cpu_ones() {
+    let Some(g) = gpu() else { return };
+    for kernel in Kernel::ALL {
+        let field = body(kernel);
+        let p = params(0.5);
+        let grid = grid_for(&field, &p).unwrap();
+        let natural = adaptive::levels_for(&field, &grid, &p).unwrap();
+        let mut forced: Vec<u8> = (0..grid.cell_count())
+            .map(|i| 1 + (grid.coords(i)[0] % 3) as u8)
+            .collect();
+        grid::balance(&grid, &mut forced);
+        let on_device = GpuField::new(g, &field, grid.origin).unwrap();
+        for (name, levels) in [("splash", &natural), ("forced", &forced)] {
+            let mut triangles = 0;
+            for level in 1..=3u8 {
+                let what = format!("{kernel:?} {name} level {level}");
+                let cpu = levels::build_level(
+                    &field,
+                    &grid,
+                    levels,
+                    level,
+                    p.isovalue,
+                    p.bisection_iterations,
+                    true,
+                    &mut Progress::none(),
+                )
+                .unwrap();
+                let gpu = build_level(
+                    g,
+                    &on_device,
+                    &grid,
+                    levels,
+                    level,
+                    p.isovalue as f32,
+                    p.bisection_iterations,
+                    true,
+                    &mut Progress::none(),
+                )
+                .unwrap();
+                assert_level_equal(&cpu, &gpu, p.isovalue, extent(&grid), &what);
+                triangles += gpu.triangles.len();
+            }
+            assert!(triangles > 0, "{kernel:?} {name}: no surface to compare");
+        }
+    }
+}
+
+/// Whole extractions: same triangles (vertices are ordered by finest-edge identity, so
+/// equal triangle lists are equal triangle sets), positions within TOL of the extent,
+/// and the GPU mesh closed and oriented on its own.
+fn assert_same_surface(field: &SphField, p: &Params, what: &str) -> u64 {
+    let cpu = adaptive::extract_sph(field, p, &mut Progress::none()).unwrap();
+    let gp = Params {
+        backend: Backend::Gpu,
+        ..p.clone()
+    };
+    let gpu = adaptive::extract_sph(field, &gp, &mut Progress::none()).unwrap();
+    assert_eq!(cpu.stats.backend, Backend::Cpu);
+    assert_eq!(gpu.stats.backend, Backend::Gpu);
+    let topo = gpu.mesh.topology();
+    assert!(topo.is_watertight_oriented(), "{what}: GPU mesh {topo:?}");
+    assert_eq!(gpu.stats.point_mismatches, 0, "{what}");
+    assert_eq!(
+        cpu.stats.cells_per_level, gpu.stats.cells_per_level,
+        "{what}"
+    );
+    assert_eq!(cpu.mesh.triangles, gpu.mesh.triangles, "{what}: triangles");
+    let scale = extent(&grid_for(field, p).unwrap());
+    for (i, (a, b)) in cpu
+        .mesh
+        .positions
+        .iter()
+        .zip(&gpu.mesh.positions)
+        .enumerate()
+    {
+        let d = (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max) / scale;
+        assert!(d < TOL, "{what}: vertex {i} moved {d:e} of the extent");
+    }
+    gpu.stats.triangles
+}
+
+#[test]
+fn gpu_surface_equals_cpu_surface_on_closed_bodies() {
+    if gpu().is_none() {
+        return;
+    }
+    let field = body(Kernel::CubicSpline);
+    for (threshold, dilation) in [(0, 0), (1, 0), (1, 1), (3, 1)] {
+        let p = Params {
+            splash_threshold: threshold,
+            splash_dilation: dilation,
+            ..params(0.5)
+        };
+        let what = format!("threshold {threshold} dilation {dilation}");
+        assert!(assert_same_surface(&field, &p, &what) > 0, "{what}");
+    }
+}
+
+#[test]
+fn explicit_gpu_without_adapter_is_an_error_not_a_panic() {
+    // With an adapter this only checks that Auto picks it; without one, that Gpu says so.
+    match device::get() {
+        Ok(_) => assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Gpu),
+        Err(e) => {
+            assert!(e.to_string().contains("no GPU adapter"), "{e}");
+            assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Cpu);
+            assert!(Backend::Gpu.resolve().is_err());
+        }
+    }
+}
+
+/// A real frame at splashsurf's settings (r = 0.025, h = 2r, cubic spline).
+fn frame(name: &str) -> SphField {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/splashsurf")
+        .join(name);
+    let data = crate::io::read_particles(&path).unwrap();
+    let s = SphSettings {
+        kernel: Kernel::CubicSpline,
+        smoothing_length: SmoothingLength::Constant(0.05),
+        ..SphSettings::default()
+    };
+    SphField::new(&data, &s).unwrap()
+}
+
+const FRAMES: [&str; 2] = [
+    "dam_break_frame_23_24389_particles.bgeo",
+    "double_dam_break_frame_01_4732_particles.vtk",
+];
+
+#[test]
+fn gpu_surface_equals_cpu_surface_on_real_frames() {
+    if gpu().is_none() {
+        return;
+    }
+    for name in FRAMES {
+        let field = frame(name);
+        let p = Params {
+            isovalue: 0.6,
+            grid_factor: 0.375,
+            ..Params::default()
+        };
+        assert!(assert_same_surface(&field, &p, name) > 0, "{name}");
+    }
+}
+
+/// GPU seed cells (neighbour search on the device, exact tests on the CPU) against the
+/// CPU's, exactly, on the analytic body at several isovalues and on real frames.
+#[test]
+fn gpu_seed_cells_equal_cpu_seed_cells() {
+    use crate::correctors::{self, seeds};
+    let Some(g) = gpu() else { return };
+    let cases = [
+        (body(Kernel::CubicSpline), vec![0.05, 0.5, 0.7, 0.9]),
+        (body(Kernel::QuinticSpline), vec![0.5]),
+        (frame(FRAMES[0]), vec![0.3, 0.6]),
+        (frame(FRAMES[1]), vec![0.6]),
+    ];
+    for (k, (field, isos)) in cases.iter().enumerate() {
+        let search = seeds::SeedSearch::new(field).unwrap();
+        let on_device = GpuField::new(g, field, field.bounds().0).unwrap();
+        let candidates = super::seeds::Candidates::new(g, &on_device, field).unwrap();
+        for &iso in isos {
+            let cp = correctors::Params {
+                isovalues: vec![iso],
+                ..correctors::Params::default()
+            };
+            let grid = correctors::virtual_grid(field, &cp).unwrap();
+            let cpu = seeds::seed_cells(field, &grid, iso, &search).unwrap();
+            let gpu = super::seeds::seed_cells(&candidates, field, &grid, iso, &search).unwrap();
+            assert!(!cpu.is_empty(), "case {k} iso {iso}");
+            assert_eq!(cpu, gpu, "case {k} iso {iso}");
+        }
+    }
+}
+
+/// Figures, not a check (lavapipe times say nothing about a GPU): run with
+/// `cargo test --release --lib gpu::tests::figures -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn figures() {
+    if gpu().is_none() {
+        return;
+    }
+    for name in FRAMES {
+        let field = frame(name);
+        for backend in [Backend::Cpu, Backend::Gpu] {
+            let p = Params {
+                isovalue: 0.6,
+                grid_factor: 0.375,
+                backend,
+                ..Params::default()
+            };
+            let t = std::time::Instant::now();
+            let out = adaptive::extract_sph(&field, &p, &mut Progress::none()).unwrap();
+            println!(
+                "{name} {:?}: {:.3} s, {} triangles, {} array bytes, {} field evaluations",
+                backend,
+                t.elapsed().as_secs_f64(),
+                out.stats.triangles,
+                out.stats.array_bytes,
+                out.stats.field_evaluations
+            );
+        }
+    }
+}
