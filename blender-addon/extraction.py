@@ -65,6 +65,7 @@ class Params:
     grid_factor: float = 0.5
     method: str = "CORRECTORS"  # or "ADAPTIVE"
     splash_threshold: int = 1
+    backend: str = "CPU"  # adaptive: CPU, GPU (wgpu) or AUTO (a hardware GPU when there is one)
     correct: bool = True
     trim: str = "AUTO"  # AUTO, OFF, ON, CUSTOM
     trim_node: float = 0.1
@@ -245,7 +246,11 @@ def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn])
     for correctors_only in ("correct", "trim"):
         kwargs.pop(correctors_only)
     surface, _stats = isobar_module().extract_adaptive(
-        particles, progress=progress, splash_threshold=int(params.splash_threshold), **kwargs
+        particles,
+        progress=progress,
+        splash_threshold=int(params.splash_threshold),
+        backend=params.backend.lower(),
+        **kwargs,
     )
     try:
         return frame_mesh_from_surface(surface)

@@ -96,6 +96,7 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
         layout.prop(settings, "method")
         if settings.method == "ADAPTIVE":
             layout.prop(settings, "splash_threshold")
+            layout.prop(settings, "backend")
             return
         layout.prop(settings, "correct")
         layout.prop(settings, "trim")

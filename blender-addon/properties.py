@@ -55,6 +55,12 @@ METHODS = [
     ("ADAPTIVE", "Adaptive", "Crack-free 3-level grid: far fewer triangles, splashes kept fine; no attributes"),
 ]
 
+BACKENDS = [
+    ("CPU", "CPU", "All cores of this machine, double precision"),
+    ("GPU", "GPU", "wgpu compute shaders (single precision); an error when there is no GPU adapter"),
+    ("AUTO", "Auto", "A hardware GPU when there is one, else the CPU"),
+]
+
 TRIM_MODES = [
     ("AUTO", "Auto", "Trim at the free surface except when extracting the free surface itself"),
     ("OFF", "Off", "No free-surface trimming"),
@@ -190,6 +196,7 @@ class IsobarSettings(bpy.types.PropertyGroup):
         soft_max=8,
         update=_changed,
     )
+    backend: EnumProperty(name="Backend", description="Adaptive: where the grids run", items=BACKENDS, default="CPU", update=_changed)
     correct: BoolProperty(
         name="Correction",
         description="Move every vertex onto the level set (off: a faster linear preview)",

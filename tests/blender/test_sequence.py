@@ -254,5 +254,15 @@ def test_adaptive_method(scene, isobar, demo_sequence):
     with isobar.Particles.read(str(path)) as particles:
         coarse, _ = isobar.extract_adaptive(particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0)
     assert_mesh_equals(obj, coarse)
+    # Backend GPU: the core's wgpu path (lavapipe in CI, installed by the test command).
+    settings.backend = "GPU"
+    assert not settings.status_error, settings.status
+    with isobar.Particles.read(str(path)) as particles:
+        gpu, gpu_stats = isobar.extract_adaptive(
+            particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0, backend="gpu"
+        )
+    assert gpu_stats["backend"] == "gpu"
+    assert_mesh_equals(obj, gpu)
+    settings.backend = "CPU"
     settings.method = "CORRECTORS"
     assert_mesh_equals(obj, correctors)

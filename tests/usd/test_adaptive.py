@@ -62,3 +62,24 @@ def test_api_refuses_an_unknown_method(tmp_path):
 def test_api_refuses_several_isovalues_for_the_adaptive_method(tmp_path):
     with pytest.raises(isobar_usd.Error, match="one isovalue at a time"):
         isobar_usd.write_sequence(str(need(FRAME_26)), tmp_path / "x.usd", [0.5, 0.6], method="adaptive", **DAM)
+
+
+def test_cli_gpu_backend_writes_the_cpu_surface_within_f32(cli, tmp_path):
+    """--backend gpu (wgpu on lavapipe in CI; the test command installs it): the same
+    triangles as the CPU path, positions within the GPU's f32 tolerance, closed."""
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    out = tmp_path / "gpu.usd"
+    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", "--backend", "gpu", "-o", out, "-q")
+    with isobar.Particles.read(str(FRAME_26)) as particles:
+        cpu, stats = isobar.extract_adaptive(particles, ISO, backend="cpu", **DAM)
+    got = mesh_at(open_stage(out), 26)
+    triangles = got["indices"].reshape(-1, 3).astype(np.int64)
+    assert triangles.shape == cpu.triangles.shape
+    assert _closed_and_oriented(triangles)
+    assert np.abs(np.sort(got["points"], axis=0) - np.sort(cpu.points.astype(np.float32), axis=0)).max() <= 1e-4
+
+
+def test_cli_backend_needs_the_adaptive_method(cli, tmp_path):
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    proc = run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--backend", "gpu", "-o", tmp_path / "x.usd", check=False)
+    assert proc.returncode == 1 and "--method adaptive" in proc.stderr

@@ -108,6 +108,18 @@ def test_adaptive_method_equals_the_cli_and_is_closed():
     corrected = free_surface_filter(reader(h.FRAME_26))
     corrected.Update()
     assert 0 < out.GetNumberOfCells() < corrected.GetOutput().GetNumberOfCells()
+    # Backend GPU (wgpu; lavapipe in CI, installed by the test command): the CLI's GPU
+    # surface exactly, and the CPU surface within the f32 tolerance.
+    gpu = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE, Backend=1)
+    gpu.Update()
+    assert gpu.GetErrorMessage() == "", gpu.GetErrorMessage()
+    gpu_ref_path = os.path.join(TMP, "adaptive_gpu.vtp")
+    subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", gpu_ref_path, "--iso", str(h.ISO),
+                    "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR), "--backend", "gpu"],
+                   check=True, capture_output=True)
+    h.assert_same_surface(gpu.GetOutput(), h.read_vtp(gpu_ref_path), 1e-12, "adaptive gpu")
+    assert gpu.GetOutput().GetNumberOfCells() == out.GetNumberOfCells()
+    assert h.open_edges(gpu.GetOutput()) == 0
     # One isovalue only: a clear error and an empty output, not a silent first isovalue.
     f.SetIsovalue(1, 0.7)
     errors = Errors(f)

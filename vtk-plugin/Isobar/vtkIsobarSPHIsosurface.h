@@ -166,6 +166,14 @@ public:
   ///@}
 
   ///@{
+  /// Adaptive method: where the grids run, ISOBAR_BACKEND_CPU (0, default),
+  /// ISOBAR_BACKEND_GPU (1, wgpu; an error when there is no adapter) or ISOBAR_BACKEND_AUTO
+  /// (2, a hardware GPU when there is one).
+  vtkSetClampMacro(Backend, int, 0, 2);
+  vtkGetMacro(Backend, int);
+  ///@}
+
+  ///@{
   /// Correct vertices onto the level set (default on); off gives a linear preview.
   vtkSetMacro(Correct, vtkTypeBool);
   vtkGetMacro(Correct, vtkTypeBool);
@@ -292,6 +300,7 @@ protected:
   double GridFactor;
   int Method;
   int SplashThreshold;
+  int Backend;
   vtkTypeBool Correct;
   double Tolerance;
   vtkTypeBool Trim;

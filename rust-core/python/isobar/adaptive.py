@@ -59,7 +59,8 @@ def extract_adaptive(
             cell (core default 1; 0 is the paper's criterion alone).
         bisection_iterations: halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
         backend: "cpu", "gpu" (wgpu; raises "no GPU adapter: ..." without one) or "auto"
-            (the GPU when an adapter exists, else the CPU); ``stats["backend"]`` says
+            (a hardware GPU when there is one, else the CPU: a software adapter such
+            as lavapipe is slower than the CPU path); ``stats["backend"]`` says
             which ran.
 
     Returns:

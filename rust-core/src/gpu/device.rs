@@ -16,6 +16,9 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     /// Adapter name, driver and device type, for stats and messages.
     pub name: String,
+    /// A software rasteriser (lavapipe, llvmpipe, WARP): correct, but slower than the CPU
+    /// path, so `Backend::Auto` does not pick it.
+    pub software: bool,
     pipelines: Mutex<HashMap<(&'static str, &'static str), wgpu::ComputePipeline>>,
 }
 
@@ -43,6 +46,7 @@ fn create() -> std::result::Result<Gpu, String> {
         "{} ({:?}, {:?}, {})",
         info.name, info.backend, info.device_type, info.driver
     );
+    let software = info.device_type == wgpu::DeviceType::Cpu;
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("isobar"),
         required_features: wgpu::Features::empty(),
@@ -54,6 +58,7 @@ fn create() -> std::result::Result<Gpu, String> {
         device,
         queue,
         name,
+        software,
         pipelines: Mutex::new(HashMap::new()),
     })
 }

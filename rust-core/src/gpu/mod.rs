@@ -26,7 +26,8 @@ pub enum Backend {
     Cpu,
     /// wgpu compute shaders; an error when no adapter exists.
     Gpu,
-    /// The GPU when an adapter exists, else the CPU.
+    /// A hardware GPU when there is one, else the CPU (a software adapter such as
+    /// lavapipe is correct but slower than the CPU path; ask for `Gpu` to use it).
     Auto,
 }
 
@@ -59,12 +60,24 @@ impl Backend {
         match self {
             Backend::Cpu => Ok(Backend::Cpu),
             Backend::Gpu => adapter_name().map(|_| Backend::Gpu),
-            Backend::Auto => Ok(if adapter_name().is_ok() {
+            Backend::Auto => Ok(if hardware_adapter() {
                 Backend::Gpu
             } else {
                 Backend::Cpu
             }),
         }
+    }
+}
+
+/// True when the adapter is a hardware GPU (not a software rasteriser).
+fn hardware_adapter() -> bool {
+    #[cfg(feature = "gpu")]
+    {
+        device::get().is_ok_and(|g| !g.software)
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        false
     }
 }
 

@@ -256,9 +256,18 @@ fn gpu_surface_equals_cpu_surface_on_closed_bodies() {
 
 #[test]
 fn explicit_gpu_without_adapter_is_an_error_not_a_panic() {
-    // With an adapter this only checks that Auto picks it; without one, that Gpu says so.
+    // With an adapter Auto picks it when it is hardware, not a software rasteriser
+    // (lavapipe in CI); without one, Gpu says so.
     match device::get() {
-        Ok(_) => assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Gpu),
+        Ok(g) => {
+            let want = if g.software {
+                Backend::Cpu
+            } else {
+                Backend::Gpu
+            };
+            assert_eq!(Backend::Auto.resolve().unwrap(), want, "{}", g.name);
+            assert_eq!(Backend::Gpu.resolve().unwrap(), Backend::Gpu);
+        }
         Err(e) => {
             assert!(e.to_string().contains("no GPU adapter"), "{e}");
             assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Cpu);
