@@ -133,7 +133,6 @@ class Stats(Structure):
         ("seconds_trimming", c_double),
         ("seconds_attributes", c_double),
         ("seconds_total", c_double),
-        ("backend", c_uint32),
     ]
 
 
@@ -163,6 +162,7 @@ class AdaptiveStats(Structure):
         ("field_evaluations", c_uint64),
         ("array_bytes", c_uint64),
         ("seconds_total", c_double),
+        ("backend", c_uint32),
     ]
 
 
