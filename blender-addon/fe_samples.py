@@ -96,18 +96,6 @@ def point_cloud(name: str, samples) -> "bpy.types.PointCloud":
             bpy.data.meshes.remove(mesh)
 
 
-def new_object(context, name: str, samples):
-    """A point-cloud object of `samples`, linked to the active collection and selected."""
-    obj = bpy.data.objects.new(name, point_cloud(name, samples))
-    collection = getattr(context, "collection", None) or context.scene.collection
-    collection.objects.link(obj)
-    for other in context.view_layer.objects:
-        other.select_set(False)
-    obj.select_set(True)
-    context.view_layer.objects.active = obj
-    return obj
-
-
 def resample(obj, path: str, field: str, iso: float, spacing: float, rho: float, progress=None):
     """Samples the isosurface again on the object's mesh and swaps its point cloud (the
     materials stay). Returns the isobar.Samples."""
@@ -125,4 +113,4 @@ def resample(obj, path: str, field: str, iso: float, spacing: float, rho: float,
     return samples
 
 
-__all__ = ["FE_EXTENSIONS", "close", "close_all", "mesh_for", "new_object", "point_cloud", "resample", "scalar_fields"]
+__all__ = ["FE_EXTENSIONS", "close", "close_all", "mesh_for", "point_cloud", "resample", "scalar_fields"]

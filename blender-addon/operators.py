@@ -20,8 +20,11 @@ def _fluid_object(context, name: str = ""):
 
 
 def _new_surface_object(context, name: str):
-    mesh = bpy.data.meshes.new(name)
-    obj = bpy.data.objects.new(name, mesh)
+    return _link_and_select(context, bpy.data.objects.new(name, bpy.data.meshes.new(name)))
+
+
+def _link_and_select(context, obj):
+    """Links `obj` to the active collection and makes it the only selected, active object."""
     collection = getattr(context, "collection", None) or context.scene.collection
     collection.objects.link(obj)
     for other in context.view_layer.objects:
@@ -231,12 +234,7 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
                 bpy.data.objects.remove(obj)
             self.report({"ERROR"}, importer.describe_error(error))
             return {"CANCELLED"}
-        collection = getattr(context, "collection", None) or context.scene.collection
-        collection.objects.link(obj)
-        for other in context.view_layer.objects:
-            other.select_set(False)
-        obj.select_set(True)
-        context.view_layer.objects.active = obj
+        _link_and_select(context, obj)
         settings = obj.isobar_fe
         settings.value_min, settings.value_max = lo, hi
         settings.filepath = path

@@ -150,23 +150,31 @@ class ISOBAR_PT_cache(_Sidebar, bpy.types.Panel):
         row.operator("isobar.free_bake", text="Free", icon="TRASH")
 
 
+def _draw_isovalue_object(layout, context, import_op: str, import_text: str, group: str, draw_settings):
+    """An import button, then the active object's isovalue settings (property group
+    `group`): what `draw_settings(layout, settings)` shows, the value range, the status."""
+    layout.operator(import_op, text=import_text, icon="IMPORT")
+    obj = getattr(context, "active_object", None)
+    settings = getattr(obj, group, None) if obj is not None else None
+    if settings is None or not settings.enabled:
+        return
+    draw_settings(layout, settings)
+    layout.label(text=f"Range {settings.value_min:.6g} .. {settings.value_max:.6g}")
+    if settings.status:
+        row = layout.row()
+        row.alert = settings.status_error
+        row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+
+
 class ISOBAR_PT_slider(_Sidebar, bpy.types.Panel):
     bl_label = "Isovalue Slider"
     bl_idname = "ISOBAR_PT_slider"
 
     def draw(self, context):
-        layout = self.layout
-        layout.operator("isobar.import_volume", text="Import Volume", icon="IMPORT")
-        obj = getattr(context, "active_object", None)
-        if obj is None or not obj.isobar_slider.enabled:
-            return
-        settings = obj.isobar_slider
-        layout.prop(settings, "isovalue", slider=True)
-        layout.label(text=f"Range {settings.value_min:.6g} .. {settings.value_max:.6g}")
-        if settings.status:
-            row = layout.row()
-            row.alert = settings.status_error
-            row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+        def settings(layout, s):
+            layout.prop(s, "isovalue", slider=True)
+
+        _draw_isovalue_object(self.layout, context, "isobar.import_volume", "Import Volume", "isobar_slider", settings)
 
 
 class ISOBAR_PT_fe(_Sidebar, bpy.types.Panel):
@@ -174,21 +182,11 @@ class ISOBAR_PT_fe(_Sidebar, bpy.types.Panel):
     bl_idname = "ISOBAR_PT_fe"
 
     def draw(self, context):
-        layout = self.layout
-        layout.operator("isobar.import_fe", text="Import FE Field", icon="IMPORT")
-        obj = getattr(context, "active_object", None)
-        if obj is None or not obj.isobar_fe.enabled:
-            return
-        settings = obj.isobar_fe
-        layout.prop(settings, "field")
-        layout.prop(settings, "isovalue", slider=True)
-        layout.label(text=f"Range {settings.value_min:.6g} .. {settings.value_max:.6g}")
-        layout.prop(settings, "spacing")
-        layout.prop(settings, "curvature_adaptivity")
-        if settings.status:
-            row = layout.row()
-            row.alert = settings.status_error
-            row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+        def settings(layout, s):
+            for name in ("field", "isovalue", "spacing", "curvature_adaptivity"):
+                layout.prop(s, name, slider=name == "isovalue")
+
+        _draw_isovalue_object(self.layout, context, "isobar.import_fe", "Import FE Field", "isobar_fe", settings)
 
 
 classes = (ISOBAR_PT_main, ISOBAR_PT_source, ISOBAR_PT_surface, ISOBAR_PT_attributes, ISOBAR_PT_cache, ISOBAR_PT_slider, ISOBAR_PT_fe)

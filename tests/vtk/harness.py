@@ -63,6 +63,22 @@ def run_all(only=None):
     return failed
 
 
+class Errors:
+    """Collects the ErrorEvent messages of a VTK object."""
+
+    def __init__(self, obj):
+        from vtkmodules.util.vtkConstants import VTK_STRING
+        from vtkmodules.vtkCommonCore import vtkCommand
+
+        self.messages = []
+
+        def on_error(o, e, data):
+            self.messages.append(data)
+
+        on_error.CallDataType = VTK_STRING
+        obj.AddObserver(vtkCommand.ErrorEvent, on_error)
+
+
 def tmpdir():
     d = os.environ.get("ISOBAR_TEST_TMP")
     if d:

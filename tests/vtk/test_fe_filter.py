@@ -14,10 +14,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness as h  # noqa: E402
-from harness import test  # noqa: E402
+from harness import Errors, test  # noqa: E402
 
 from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
-from vtkmodules.util.vtkConstants import VTK_STRING  # noqa: E402
 from vtkmodules.vtkCommonCore import vtkCommand  # noqa: E402
 from vtkmodules.vtkCommonDataModel import vtkUnstructuredGrid  # noqa: E402
 from vtkmodules.vtkFiltersSources import vtkCellTypeSource  # noqa: E402
@@ -76,17 +75,6 @@ def vtk_evaluate(grid, cell_ids, reference, name):
         xs.append(x)
         fs.append(float(np.dot(weights, values[ids])))
     return np.array(xs), np.array(fs)
-
-
-class Errors:
-    def __init__(self, obj):
-        self.messages = []
-
-        def on_error(o, e, data):
-            self.messages.append(data)
-
-        on_error.CallDataType = VTK_STRING
-        obj.AddObserver(vtkCommand.ErrorEvent, on_error)
 
 
 @test

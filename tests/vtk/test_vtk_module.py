@@ -11,7 +11,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness as h  # noqa: E402
-from harness import test  # noqa: E402
+from harness import Errors, test  # noqa: E402
 
 import vtkmodules  # noqa: E402
 from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
@@ -19,7 +19,6 @@ from vtkmodules.vtkCommonCore import vtkCommand, vtkPoints, vtkUnsignedCharArray
 from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkDataSetAttributes, vtkPolyData  # noqa: E402
 from vtkmodules.vtkIOLegacy import vtkUnstructuredGridReader  # noqa: E402
 
-from vtkmodules.util.vtkConstants import VTK_STRING  # noqa: E402
 
 from isobar_vtk import vtkIsobarSPHIsosurface  # noqa: E402
 
@@ -45,19 +44,6 @@ def free_surface_filter(source, **settings):
     for k, v in settings.items():
         getattr(f, "Set" + k)(v)
     return f
-
-
-class Errors:
-    """Collects the ErrorEvent messages of a VTK object."""
-
-    def __init__(self, obj):
-        self.messages = []
-
-        def on_error(o, e, data):
-            self.messages.append(data)
-
-        on_error.CallDataType = VTK_STRING
-        obj.AddObserver(vtkCommand.ErrorEvent, on_error)
 
 
 @test

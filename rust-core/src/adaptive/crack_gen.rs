@@ -24,11 +24,11 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 /// Number of sign configurations of a transition face (9 fine vertices).
-pub const CONFIGURATIONS: usize = 512;
+pub(crate) const CONFIGURATIONS: usize = 512;
 /// Most fill triangles a configuration may need (the paper's bound).
-pub const MAX_TRIANGLES: usize = 12;
+pub(crate) const MAX_TRIANGLES: usize = 12;
 /// Integers per table row: the triangle count, then 3 × `MAX_TRIANGLES` point indices.
-pub const ROW: usize = 1 + 3 * MAX_TRIANGLES;
+pub(crate) const ROW: usize = 1 + 3 * MAX_TRIANGLES;
 
 /// A station on the face: a surface point (0..12) or a fine grid vertex (`GRID + i + 3j`).
 type Node = u8;

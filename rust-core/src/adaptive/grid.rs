@@ -12,9 +12,7 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Finest-lattice cells per coarse cell along an axis.
-pub const FINE_PER_COARSE: u32 = 4;
-/// Levels of the scheme.
-pub const LEVELS: usize = 3;
+pub(crate) const FINE_PER_COARSE: u32 = 4;
 
 /// Sub-cells per axis of a cell of `level` (1, 2 or 4).
 pub const fn subdivisions(level: u8) -> u32 {

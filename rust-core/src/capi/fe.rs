@@ -4,11 +4,10 @@
 
 use super::sph::IsobarProgressFn;
 use super::{
-    attribute_out, copy_versioned_out, guard, invalid, names_of, non_null, opt_str, put, slice,
-    with_progress, IsobarStatus,
+    add_array, attribute_out, copy_versioned_out, guard, invalid, names_of, non_null, opt_str, put,
+    slice, with_progress, IsobarStatus,
 };
 use crate::field::fe::FeMesh;
-use crate::field::particles::Attribute;
 use crate::highorder::{self, Params, Stats};
 use crate::samples::PointSamples;
 use glam::DVec3;
@@ -239,30 +238,16 @@ pub extern "C" fn isobar_fe_mesh_add_array(
     guard(|| {
         // SAFETY: the caller promises a live handle not used by another thread meanwhile.
         let m = unsafe { mesh.as_mut() }.ok_or_else(|| invalid("mesh", "must not be NULL"))?;
-        let name = opt_str(name, "name")?.ok_or_else(|| invalid("name", "must not be NULL"))?;
-        if name.is_empty() {
-            return Err(invalid("name", "must not be empty"));
-        }
-        if components == 0 {
-            return Err(invalid("components", "must be at least 1"));
-        }
         let points = m.mesh.points.len();
-        if count != points {
-            return Err(invalid(
-                "count",
-                format!("array '{name}' has {count} items for {points} points"),
-            ));
-        }
-        let len = count
-            .checked_mul(components)
-            .ok_or_else(|| invalid("count", "too large"))?;
-        let data = slice(data, len, "data")?.to_vec();
-        m.mesh.point_data.retain(|a| a.name != name);
-        m.mesh.point_data.push(Attribute {
+        add_array(
+            &mut m.mesh.point_data,
+            points,
+            "points",
             name,
+            count,
             components,
-            data,
-        });
+            |len| Ok(slice(data, len, "data")?.to_vec()),
+        )?;
         m.names = names_of(&m.mesh.point_data);
         Ok(())
     })

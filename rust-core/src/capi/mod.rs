@@ -202,6 +202,45 @@ pub(crate) fn names_of(arrays: &[crate::field::particles::Attribute]) -> Vec<CSt
         .collect()
 }
 
+/// Adds (or replaces) a named array of `count` items × `components` to `arrays`, whose
+/// owner holds `items` items (`what`: "particles", "points" in messages). `read` copies the
+/// caller's `count × components` values; it runs only after the counts are checked, so a
+/// wrong count is refused before the caller's buffer is read.
+pub(crate) fn add_array(
+    arrays: &mut Vec<crate::field::particles::Attribute>,
+    items: usize,
+    what: &str,
+    name: *const c_char,
+    count: usize,
+    components: usize,
+    read: impl FnOnce(usize) -> Result<Vec<f64>, Error>,
+) -> Result<(), Error> {
+    let name = opt_str(name, "name")?.ok_or_else(|| invalid("name", "must not be NULL"))?;
+    if name.is_empty() {
+        return Err(invalid("name", "must not be empty"));
+    }
+    if components == 0 {
+        return Err(invalid("components", "must be at least 1"));
+    }
+    if count != items {
+        return Err(invalid(
+            "count",
+            format!("array '{name}' has {count} items for {items} {what}"),
+        ));
+    }
+    let len = count
+        .checked_mul(components)
+        .ok_or_else(|| invalid("count", "too large"))?;
+    let data = read(len)?;
+    arrays.retain(|a| a.name != name);
+    arrays.push(crate::field::particles::Attribute {
+        name,
+        components,
+        data,
+    });
+    Ok(())
+}
+
 /// Writes name, components and data of `arrays[index]` through the out-pointers.
 pub(crate) fn attribute_out(
     arrays: &[crate::field::particles::Attribute],

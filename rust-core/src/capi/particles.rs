@@ -1,7 +1,7 @@
 //! Particle handles: built from caller arrays or read from a file.
 
-use super::{guard, invalid, non_null, opt_str, put, slice, IsobarStatus};
-use crate::field::particles::{Attribute, ParticleData};
+use super::{add_array, guard, invalid, names_of, non_null, opt_str, put, slice, IsobarStatus};
+use crate::field::particles::ParticleData;
 use glam::DVec3;
 use std::ffi::{c_char, CString};
 
@@ -14,21 +14,8 @@ pub struct IsobarParticles {
 
 impl IsobarParticles {
     fn new(data: ParticleData) -> Box<Self> {
-        let mut p = Box::new(IsobarParticles {
-            data,
-            names: Vec::new(),
-        });
-        p.refresh_names();
-        p
-    }
-
-    fn refresh_names(&mut self) {
-        self.names = self
-            .data
-            .attributes
-            .iter()
-            .map(|a| CString::new(a.name.replace('\0', " ")).unwrap_or_default())
-            .collect();
+        let names = names_of(&data.attributes);
+        Box::new(IsobarParticles { data, names })
     }
 }
 
@@ -77,36 +64,24 @@ pub extern "C" fn isobar_particles_create_f32(
 fn add(
     particles: *mut IsobarParticles,
     name: *const c_char,
-    data: Vec<f64>,
     count: usize,
     components: usize,
+    read: impl FnOnce(usize) -> Result<Vec<f64>, crate::Error>,
 ) -> Result<(), crate::Error> {
     // SAFETY: the caller promises a live handle not used by another thread meanwhile.
     let p =
         unsafe { particles.as_mut() }.ok_or_else(|| invalid("particles", "must not be NULL"))?;
-    let name = opt_str(name, "name")?.ok_or_else(|| invalid("name", "must not be NULL"))?;
-    if name.is_empty() {
-        return Err(invalid("name", "must not be empty"));
-    }
-    if components == 0 {
-        return Err(invalid("components", "must be at least 1"));
-    }
-    if count != p.data.len() {
-        return Err(invalid(
-            "count",
-            format!(
-                "array '{name}' has {count} items for {} particles",
-                p.data.len()
-            ),
-        ));
-    }
-    p.data.attributes.retain(|a| a.name != name);
-    p.data.attributes.push(Attribute {
+    let items = p.data.len();
+    add_array(
+        &mut p.data.attributes,
+        items,
+        "particles",
         name,
+        count,
         components,
-        data,
-    });
-    p.refresh_names();
+        read,
+    )?;
+    p.names = names_of(&p.data.attributes);
     Ok(())
 }
 
@@ -121,11 +96,9 @@ pub extern "C" fn isobar_particles_add_array(
     components: usize,
 ) -> IsobarStatus {
     guard(|| {
-        let len = count
-            .checked_mul(components)
-            .ok_or_else(|| invalid("count", "too large"))?;
-        let values = slice(data, len, "data")?.to_vec();
-        add(particles, name, values, count, components)
+        add(particles, name, count, components, |len| {
+            Ok(slice(data, len, "data")?.to_vec())
+        })
     })
 }
 
@@ -139,14 +112,12 @@ pub extern "C" fn isobar_particles_add_array_f32(
     components: usize,
 ) -> IsobarStatus {
     guard(|| {
-        let len = count
-            .checked_mul(components)
-            .ok_or_else(|| invalid("count", "too large"))?;
-        let values = slice(data, len, "data")?
-            .iter()
-            .map(|&v| v as f64)
-            .collect();
-        add(particles, name, values, count, components)
+        add(particles, name, count, components, |len| {
+            Ok(slice(data, len, "data")?
+                .iter()
+                .map(|&v| v as f64)
+                .collect())
+        })
     })
 }
 

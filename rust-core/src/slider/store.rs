@@ -44,7 +44,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// First bytes of every store.
 pub const MAGIC: &[u8; 8] = b"ISOSLIDE";
 /// The version this build writes and reads.
-pub const VERSION: u32 = 2;
+pub(crate) const VERSION: u32 = 2;
 /// Bytes per checksummed chunk (a page: checking one touches no other).
 pub(crate) const CHUNK: usize = 4096;
 pub(crate) const FIXED_HEADER: usize = 104;
