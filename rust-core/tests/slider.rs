@@ -318,7 +318,7 @@ fn damaged_or_foreign_stores_are_refused_clearly() {
         assert!(e.contains("bad.isoslider"), "{e}");
         assert!(e.contains(want), "wanted '{want}': {e}");
     };
-    // Truncated anywhere.
+    // Truncated anywhere: refused at once, by `open` alone.
     for cut in [
         0,
         5,
@@ -330,8 +330,16 @@ fn damaged_or_foreign_stores_are_refused_clearly() {
         good.len() - 8,
         good.len() - 1,
     ] {
-        let want = if cut < 8 { "magic" } else { "" };
-        refuse(&good[..cut], want);
+        std::fs::write(&bad, &good[..cut]).unwrap();
+        let e = Store::open(&bad)
+            .err()
+            .unwrap_or_else(|| panic!("cut {cut} accepted"))
+            .to_string();
+        let want = if cut < 8 { "magic" } else { "truncated" };
+        assert!(
+            e.contains("bad.isoslider") && e.contains(want),
+            "cut {cut}: wanted '{want}': {e}"
+        );
     }
     refuse(&good[..good.len() / 2], "truncated");
     // Corrupted: one flipped bit in a section, in the header, in the directory.
@@ -382,16 +390,25 @@ fn corrupt_chunks_are_refused_when_first_read() {
         let mut b = good.clone();
         b[at] ^= 0x04;
         std::fs::write(&bad, &b).unwrap();
-        let Ok(mut s) = Slider::open(&bad) else {
-            continue; // refused at open (the chunk table or the level tables)
+        let mut s = match Slider::open(&bad) {
+            Ok(s) => s,
+            Err(e) => {
+                // Refused at open (the chunk table or the level tables).
+                let e = e.to_string();
+                assert!(e.contains("lazy-bad.isoslider"), "byte {at}: {e}");
+                continue;
+            }
         };
+        // Every isovalue is either the reference surface or refused as corrupt, also
+        // after an earlier refusal (the slider must not be left half updated).
         let mut failed = None;
         for (iso, want) in sweep.iter().zip(&expected) {
             match s.set_isovalue(*iso) {
                 Ok(_) => assert!(slider_canon(&s) == *want, "byte {at}: a different surface"),
                 Err(e) => {
-                    failed = Some(e.to_string());
-                    break;
+                    let e = e.to_string();
+                    assert!(e.contains("corrupt"), "byte {at}, iso {iso}: {e}");
+                    failed.get_or_insert(e);
                 }
             }
         }

@@ -4,8 +4,8 @@
 
 use super::sph::IsobarProgressFn;
 use super::{
-    add_array, attribute_out, copy_versioned_out, guard, invalid, names_of, non_null, opt_str, put,
-    slice, with_progress, IsobarStatus,
+    add_array, attribute_out, copy_versioned_out, free_boxed, guard, invalid, names_of, non_null,
+    opt_str, put, slice, with_progress, IsobarStatus,
 };
 use crate::field::fe::FeMesh;
 use crate::highorder::{self, Params, Stats};
@@ -293,10 +293,7 @@ pub extern "C" fn isobar_fe_mesh_cell_count(mesh: *const IsobarFeMesh) -> usize 
 /// Frees a mesh (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_fe_mesh_free(mesh: *mut IsobarFeMesh) {
-    if !mesh.is_null() {
-        // SAFETY: created by Box::into_raw in this crate and not freed before.
-        let _ = std::panic::catch_unwind(|| drop(unsafe { Box::from_raw(mesh) }));
-    }
+    free_boxed(mesh);
 }
 
 /// Samples the isosurface `params.iso` of the scalar point array `field` with the particle
@@ -433,10 +430,7 @@ pub extern "C" fn isobar_samples_write(
 /// Frees samples (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_samples_free(s: *mut IsobarSamples) {
-    if !s.is_null() {
-        // SAFETY: created by Box::into_raw in this crate and not freed before.
-        let _ = std::panic::catch_unwind(|| drop(unsafe { Box::from_raw(s) }));
-    }
+    free_boxed(s);
 }
 
 #[cfg(test)]

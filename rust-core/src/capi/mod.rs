@@ -96,6 +96,16 @@ pub(crate) fn guard(body: impl FnOnce() -> Result<(), Error>) -> IsobarStatus {
     }
 }
 
+/// Drops a handle made by `Box::into_raw` in this crate (NULL is ignored), a panic in
+/// its destructor caught. The handle is never looked at again, so unwind safety holds
+/// whatever it contains.
+pub(crate) fn free_boxed<T>(p: *mut T) {
+    if !p.is_null() {
+        // SAFETY: the caller's promise: made by Box::into_raw here and not freed before.
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(p) })));
+    }
+}
+
 /// An invalid-argument error naming the argument.
 pub(crate) fn invalid(name: &'static str, message: impl Into<String>) -> Error {
     Error::InvalidParameter {

@@ -1,6 +1,8 @@
 //! Particle handles: built from caller arrays or read from a file.
 
-use super::{add_array, guard, invalid, names_of, non_null, opt_str, put, slice, IsobarStatus};
+use super::{
+    add_array, free_boxed, guard, invalid, names_of, non_null, opt_str, put, slice, IsobarStatus,
+};
 use crate::field::particles::ParticleData;
 use glam::DVec3;
 use std::ffi::{c_char, CString};
@@ -210,10 +212,7 @@ pub extern "C" fn isobar_particles_copy_array(
 /// Frees a particle set (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_particles_free(particles: *mut IsobarParticles) {
-    if !particles.is_null() {
-        // SAFETY: created by Box::into_raw in this module and not freed before.
-        let _ = std::panic::catch_unwind(|| drop(unsafe { Box::from_raw(particles) }));
-    }
+    free_boxed(particles);
 }
 
 /// A caller buffer of exactly `needed` values.

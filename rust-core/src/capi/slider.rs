@@ -6,7 +6,8 @@
 //! `isobar_slider_free` on that handle.
 
 use super::{
-    guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarProgressFn, IsobarStatus,
+    free_boxed, guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarProgressFn,
+    IsobarStatus,
 };
 use crate::field::grid::{Lattice, Values, Volume};
 use crate::slider::{build_store, BuildParams, Change, Slider};
@@ -310,11 +311,5 @@ pub extern "C" fn isobar_slider_stats(
 /// Frees a slider and unmaps its store (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_slider_free(s: *mut IsobarSlider) {
-    if !s.is_null() {
-        // SAFETY: created by Box::into_raw in this crate and not freed before. Nothing of
-        // the handle is observed after a panic (its lazily filled arrays are not unwind
-        // safe by type), so asserting unwind safety is sound.
-        let free = std::panic::AssertUnwindSafe(|| drop(unsafe { Box::from_raw(s) }));
-        let _ = std::panic::catch_unwind(free);
-    }
+    free_boxed(s);
 }

@@ -1,7 +1,8 @@
 //! Extraction results: core-owned arrays, valid until `isobar_surface_free`.
 
 use super::{
-    attribute_out, copy_versioned_out, guard, invalid, names_of, non_null, opt_str, IsobarStatus,
+    attribute_out, copy_versioned_out, free_boxed, guard, invalid, names_of, non_null, opt_str,
+    IsobarStatus,
 };
 use crate::correctors::Extraction;
 use std::ffi::{c_char, CString};
@@ -175,8 +176,5 @@ pub extern "C" fn isobar_surface_write(
 /// Frees a surface (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_surface_free(s: *mut IsobarSurface) {
-    if !s.is_null() {
-        // SAFETY: created by Box::into_raw in this crate and not freed before.
-        let _ = std::panic::catch_unwind(|| drop(unsafe { Box::from_raw(s) }));
-    }
+    free_boxed(s);
 }

@@ -161,11 +161,10 @@ impl Slider {
                 ..Bucket::default()
             })
             .collect();
-        let iso = store.value_range().0 as f64 - 1.0;
-        Slider {
+        let mut slider = Slider {
             store,
             rank: 0,
-            iso,
+            iso: 0.0,
             edges: Vec::new(),
             data: Vec::new(),
             he: FxHashMap::default(),
@@ -177,7 +176,25 @@ impl Slider {
             spare_triangles: RefCell::default(),
             scratch: Scratch::default(),
             stats: SliderStats::default(),
+        };
+        slider.clear();
+        slider
+    }
+
+    /// Back to the empty surface below every value (as [`Slider::new`] leaves it).
+    fn clear(&mut self) {
+        self.rank = 0;
+        self.iso = self.store.value_range().0 as f64 - 1.0;
+        self.edges.clear();
+        self.data.clear();
+        self.he.clear();
+        self.hc.clear();
+        for b in &mut self.buckets {
+            b.triangles.clear();
+            b.cells.clear();
         }
+        self.vertices.take();
+        self.all_triangles.take();
     }
 
     /// Opens the store at `path`.
@@ -304,6 +321,12 @@ impl Slider {
             self.apply(&delta, &mut change)
         });
         self.scratch.delta = delta;
+        if applied.is_err() {
+            // A chunk found corrupt while applying leaves cells, edges and buckets half
+            // updated; the empty surface is the one state known to be right, so the next
+            // update walks up from it.
+            self.clear();
+        }
         applied?;
         change.seconds = start.elapsed().as_secs_f64();
         self.stats.updates += 1;

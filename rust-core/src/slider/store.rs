@@ -136,9 +136,11 @@ fn f64_at(b: &[u8], at: usize) -> f64 {
 }
 
 impl Store {
-    /// Maps `path` and checks it whole: magic, version, header and section checksums,
-    /// section sizes against the header, and the skip-list tables. A store from another
-    /// version, a truncated or a corrupt one is refused with an error naming the file.
+    /// Maps `path` and checks what opening needs: magic, version, the header and chunk
+    /// table checksums, section sizes against the file length, and the skip-list tables.
+    /// A store from another version, a truncated one or a corrupt header is refused here
+    /// with an error naming the file; data chunks are checked when first read (or all at
+    /// once by [`Store::verify`]).
     pub fn open(path: &Path) -> Result<Store> {
         let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
         // SAFETY: the map is read-only; isobar writes stores by rename, never in place, so
@@ -150,11 +152,14 @@ impl Store {
     fn from_map(map: Mmap, path: &Path) -> Result<Store> {
         let err = |m: String| Error::format(path, m);
         let b = &map[..];
-        if b.len() < 12 || &b[..8] != MAGIC {
+        if b.len() < 8 || &b[..8] != MAGIC {
             return Err(err(
                 "not an isobar slider store (no ISOSLIDE magic); build one with `isobar slide-build`"
                     .into(),
             ));
+        }
+        if b.len() < 12 {
+            return Err(err(format!("truncated: {} bytes, no version", b.len())));
         }
         let version = u32_at(b, 8);
         if version != VERSION {
@@ -337,7 +342,7 @@ impl Store {
         let what = self
             .sections
             .iter()
-            .find(|s| s.2 <= hi && lo < s.2 + s.3)
+            .find(|s| s.2 < hi && lo < s.2 + s.3)
             .map_or("padding".to_string(), |s| match s.0 {
                 Kind::Level => format!("section 'level' {}", s.1),
                 k => format!("section '{}'", k.name()),
