@@ -206,7 +206,16 @@ pub fn extract(
             let n0 = mc::edge_node_axis(edge).0;
             let n1 = mc::edge_upper_node(edge);
             let ends = [n0, n1].map(|n| (grid.node_position(n), *node_at(n)));
-            edge_vertex(mesh, &index, values, ends, iso, target, scratch)
+            edge_vertex(
+                mesh,
+                &index,
+                values,
+                ends,
+                iso,
+                target,
+                params.tolerance,
+                scratch,
+            )
         })
         .collect();
     progress.report(1.0)?;
@@ -262,6 +271,8 @@ struct EdgeVertex {
 /// Newton along the edge from `ends[0]` to `ends[1]` (values on opposite sides of `iso`),
 /// kept inside the shrinking bracket, bisecting when a step would leave it. Each step
 /// locates the point (inverting T from the previous reference point) and evaluates F.
+/// Newton aims at `target`; the vertex counts as resolved when within `tolerance`.
+#[allow(clippy::too_many_arguments)]
 fn edge_vertex(
     mesh: &FeMesh,
     index: &CellIndex,
@@ -269,6 +280,7 @@ fn edge_vertex(
     ends: [(DVec3, Node); 2],
     iso: f64,
     target: f64,
+    tolerance: f64,
     scratch: &mut Scratch,
 ) -> EdgeVertex {
     let (a, b) = (ends[0].0, ends[1].0);
@@ -293,7 +305,7 @@ fn edge_vertex(
             grad: e.grad,
             cell: c as u32,
             residual: g.abs(),
-            resolved: true,
+            resolved: false,
             evaluations: 0,
         };
         let done = v.residual <= target;
@@ -329,6 +341,9 @@ fn edge_vertex(
             evaluations: 0,
         }
     });
+    // Only a vertex on the level set to the tolerance counts as resolved: Newton can run
+    // out of steps or bracket without getting there.
+    v.resolved = v.residual <= tolerance;
     v.evaluations = evaluations;
     v
 }
