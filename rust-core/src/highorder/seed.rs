@@ -1,6 +1,7 @@
 //! Initial particles: in every cell whose nodal values straddle C, a small reference-space
-//! lattice is scanned for sign changes along its axes and each crossing is projected onto
-//! the surface. Cells are visited in parallel and their seeds joined in cell order.
+//! lattice is scanned for sign changes along its axes (the lattice of the cell's nodes
+//! when that one finds none) and each crossing is projected onto the surface. Cells are
+//! visited in parallel and their seeds joined in cell order.
 
 use super::particle::{Particle, Surface};
 use crate::field::fe::{Kind, Scratch};
@@ -18,22 +19,39 @@ pub(crate) fn seeds(surface: &Surface, lambda: f64) -> Vec<Particle> {
 }
 
 fn cell_seeds(surface: &Surface, c: usize, lambda: f64, sc: &mut Scratch) -> Vec<Particle> {
-    let mesh = surface.mesh;
-    let iso = surface.iso;
-    let nodes = mesh.nodes(c);
-    let above = nodes
+    let nodes = surface.mesh.nodes(c);
+    let below = nodes
         .iter()
-        .filter(|&&n| surface.values[n as usize] > iso)
+        .filter(|&&n| surface.values[n as usize] < surface.iso)
         .count();
-    if above == 0 || above == nodes.len() {
+    if below == 0 || below == nodes.len() {
         return Vec::new();
     }
-    let shape = mesh.shape(c);
-    // The lattice holds every node of the cell (m is a multiple of the order on each
-    // axis), so when the nodes straddle the isovalue some lattice edge does too and the
-    // cell is never left without seeds, however small the surface inside it (a sphere
-    // around the body node of one cell has no coarser lattice point inside it).
-    let m = lattice_divisions(shape.order) as i32;
+    let order = surface.mesh.shape(c).order;
+    let probe = (order.iter().max().copied().unwrap_or(1) + 1).max(3);
+    let seeds = lattice_seeds(surface, c, probe, lambda, sc);
+    let nodal = node_lattice(order);
+    if !seeds.is_empty() || probe % nodal == 0 {
+        return seeds;
+    }
+    // The nodes straddle C but no probe edge crosses it: a small surface around a node
+    // the probe lattice misses (a sphere about the body node of one quadratic cell). The
+    // node lattice holds every node, so one of its edges crosses.
+    lattice_seeds(surface, c, nodal, lambda, sc)
+}
+
+/// Seeds from the sign changes of F* − C along the axes of an m-per-axis lattice of
+/// reference points of cell `c`, each crossing projected onto the surface.
+fn lattice_seeds(
+    surface: &Surface,
+    c: usize,
+    m: usize,
+    lambda: f64,
+    sc: &mut Scratch,
+) -> Vec<Particle> {
+    let iso = surface.iso;
+    let shape = surface.mesh.shape(c);
+    let m = m as i32;
     let inside = |i: i32, j: i32, k: i32| -> bool {
         let ok = |v: i32| (0..=m).contains(&v);
         ok(i)
@@ -96,9 +114,9 @@ impl Surface<'_> {
     }
 }
 
-/// Divisions per axis of the seeding lattice: a multiple of every axis order, at least
-/// max(order + 1, 3) so that curved cells are probed between their nodes.
-fn lattice_divisions(order: [usize; 3]) -> usize {
+/// Divisions per axis of the smallest lattice that holds every node of a cell of these
+/// orders (the least common multiple of the axis orders).
+fn node_lattice(order: [usize; 3]) -> usize {
     fn gcd(a: usize, b: usize) -> usize {
         if b == 0 {
             a
@@ -106,9 +124,7 @@ fn lattice_divisions(order: [usize; 3]) -> usize {
             gcd(b, a % b)
         }
     }
-    let lcm = order
+    order
         .iter()
-        .fold(1, |l, &o| if o == 0 { l } else { l / gcd(l, o) * o });
-    let want = (order.iter().max().copied().unwrap_or(1) + 1).max(3);
-    lcm * want.div_ceil(lcm)
+        .fold(1, |l, &o| if o == 0 { l } else { l / gcd(l, o) * o })
 }
