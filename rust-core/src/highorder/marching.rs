@@ -298,7 +298,7 @@ fn edge_vertex(
             break;
         };
         evaluations += 1;
-        let e = mesh.evaluate(values, c, u, scratch);
+        let e = mesh.evaluate_to(values, c, u, 1, scratch);
         let g = e.value - iso;
         let v = EdgeVertex {
             x,

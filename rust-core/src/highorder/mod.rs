@@ -26,11 +26,12 @@ use energy::BETA;
 pub use energy::{alpha, energy, energy_derivative, ideal_energy};
 
 use crate::error::{Error, Result};
-use crate::field::fe::FeMesh;
+use crate::field::fe::{FeMesh, Scratch};
 use crate::field::particles::Attribute;
 use crate::progress::Progress;
 use crate::samples::PointSamples;
 use particle::Surface;
+use rayon::prelude::*;
 use std::sync::atomic::AtomicU64;
 
 /// Parameters of [`sample`].
@@ -128,9 +129,17 @@ pub fn sample(
         values,
         iso: params.iso,
         tolerance: params.tolerance,
+        curvature_in_projection: params.rho > 0.0,
         evaluations: AtomicU64::new(0),
     };
-    let (particles, mut stats) = system::run(&surface, params, spacing, progress)?;
+    let (mut particles, mut stats) = system::run(&surface, params, spacing, progress)?;
+    if !surface.curvature_in_projection {
+        particles
+            .par_iter_mut()
+            .for_each_init(Scratch::default, |sc, p| {
+                p.d = surface.curvature(p, sc);
+            });
+    }
     stats.spacing = spacing;
     stats.particles = particles.len();
     stats.evaluations = surface.evaluations.into_inner();

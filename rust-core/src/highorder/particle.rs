@@ -33,6 +33,10 @@ pub(crate) struct Surface<'a> {
     pub values: &'a [f64],
     pub iso: f64,
     pub tolerance: f64,
+    /// Whether projections compute the curvature D (ρ > 0 scales the spacing by it).
+    /// Without, D stays 0 until [`Surface::curvature`] fills it in for the output: the
+    /// second derivatives cost more than the rest of an evaluation.
+    pub curvature_in_projection: bool,
     /// Forward evaluations (basis + mapping at one point).
     pub evaluations: AtomicU64,
 }
@@ -55,7 +59,8 @@ impl Surface<'_> {
         let (mut cell, mut u) = self.mesh.relocate(cell, u, sc)?;
         for _ in 0..12 {
             self.count();
-            let e = self.mesh.evaluate(self.values, cell, u, sc);
+            let order = if self.curvature_in_projection { 2 } else { 1 };
+            let e = self.mesh.evaluate_to(self.values, cell, u, order, sc);
             let r = e.value - self.iso;
             let g2 = e.grad_ref.length_squared();
             if !r.is_finite() || g2 <= 0.0 || !g2.is_finite() {
@@ -69,7 +74,11 @@ impl Surface<'_> {
                     x: e.x,
                     n: e.grad / len,
                     k: e.inverse_jacobian(),
-                    d: curvature_magnitude(e.grad, e.hessian),
+                    d: if order == 2 {
+                        curvature_magnitude(e.grad, e.hessian)
+                    } else {
+                        0.0
+                    },
                     residual: r.abs(),
                     lambda,
                     energy: 0.0,
@@ -84,6 +93,13 @@ impl Surface<'_> {
             (cell, u) = self.mesh.relocate(cell, u + du, sc)?;
         }
         None
+    }
+
+    /// The curvature magnitude D at particle `p` (one forward evaluation).
+    pub fn curvature(&self, p: &Particle, sc: &mut Scratch) -> f64 {
+        self.count();
+        let e = self.mesh.evaluate(self.values, p.cell as usize, p.u, sc);
+        curvature_magnitude(e.grad, e.hessian)
     }
 
     /// The particle moved by the world displacement `dx` (mapped to reference space by K,

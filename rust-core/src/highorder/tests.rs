@@ -154,6 +154,16 @@ fn sphere_over_many_elements_is_evenly_sampled_and_every_cut_element_holds_sampl
         let f = DVec3::from(*x).length_squared() - r * r;
         assert!(f.abs() <= 1e-6 * (1.0 + 1e-9));
     }
+    // The Curvature array is D = sqrt(κ1² + κ2²) = √2 / r on a sphere (with ρ = 0 it is
+    // evaluated once per returned sample, not during the projections). A sample is on
+    // the sphere of |y|² = r² ± 1e-6, so D is √2/r to a few 1e-7 relative.
+    let want = 2f64.sqrt() / r;
+    for (i, d) in s.attribute("Curvature").unwrap().data.iter().enumerate() {
+        assert!(
+            (d - want).abs() <= 1e-5 * want,
+            "sample {i}: D = {d}, sphere {want}"
+        );
+    }
     // Count: a hexagonal packing of spacing s covers area/(√3/2 s²).
     let ideal =
         4.0 * std::f64::consts::PI * r * r / (0.75f64.sqrt() * params.spacing * params.spacing);

@@ -245,33 +245,55 @@ impl FeMesh {
         u: DVec3,
         scratch: &mut Scratch,
     ) -> Evaluation {
-        self.shape(c).evaluate(u, &mut scratch.basis);
+        self.evaluate_to(values, c, u, 2, scratch)
+    }
+
+    /// [`FeMesh::evaluate`] with derivatives of the field up to `order`: 1 leaves F_xx zero
+    /// and skips the second derivatives of the basis and of T, which cost more than the
+    /// rest of an evaluation (Newton steps and edge searches need only F and F_x).
+    pub fn evaluate_to(
+        &self,
+        values: &[f64],
+        c: usize,
+        u: DVec3,
+        order: u8,
+        scratch: &mut Scratch,
+    ) -> Evaluation {
+        let order = order.clamp(1, 2);
+        self.shape(c).evaluate_to(u, order, &mut scratch.basis);
         let b = &scratch.basis;
+        let nodes = self.nodes(c);
         let mut x = DVec3::ZERO;
         let mut jac = DMat3::ZERO;
-        // Hessians of the three world coordinates with respect to u (J's derivatives).
-        let mut hx = [DMat3::ZERO; 3];
         let mut f = 0.0;
         let mut fu = DVec3::ZERO;
-        let mut fuu = DMat3::ZERO;
-        for (k, &n) in self.nodes(c).iter().enumerate() {
+        for (k, &n) in nodes.iter().enumerate() {
             let p = self.points[n as usize];
             let v = values[n as usize];
-            let (phi, g, h) = (b.values[k], b.gradients[k], &b.hessians[k]);
+            let (phi, g) = (b.values[k], b.gradients[k]);
             x += p * phi;
             jac += outer(p, g);
-            hx[0] += *h * p.x;
-            hx[1] += *h * p.y;
-            hx[2] += *h * p.z;
             f += v * phi;
             fu += g * v;
-            fuu += *h * v;
         }
         let k = jac.inverse();
         let grad = k.transpose() * fu;
-        // F_xx = Kᵀ (F*_uu − Σ_m (F_x)_m ∂²x_m/∂u²) K (eq. 20 written out).
-        let m = fuu - hx[0] * grad.x - hx[1] * grad.y - hx[2] * grad.z;
-        let hessian = k.transpose() * m * k;
+        let mut hessian = DMat3::ZERO;
+        if order == 2 {
+            // Hessians of the three world coordinates with respect to u (J's derivatives).
+            let mut hx = [DMat3::ZERO; 3];
+            let mut fuu = DMat3::ZERO;
+            for (h, &n) in b.hessians.iter().zip(nodes) {
+                let p = self.points[n as usize];
+                hx[0] += *h * p.x;
+                hx[1] += *h * p.y;
+                hx[2] += *h * p.z;
+                fuu += *h * values[n as usize];
+            }
+            // F_xx = Kᵀ (F*_uu − Σ_m (F_x)_m ∂²x_m/∂u²) K (eq. 20 written out).
+            let m = fuu - hx[0] * grad.x - hx[1] * grad.y - hx[2] * grad.z;
+            hessian = k.transpose() * m * k;
+        }
         Evaluation {
             x,
             jacobian: jac,

@@ -1,0 +1,145 @@
+"""The high-order FE benchmark of issue #7: time and forward evaluations of `isobar fe` on
+the paper's problems, and accuracy against VTK's own contouring of the same Lagrange cells,
+in one run.
+
+    python bench/fe/bench_fe.py [--isobar target/release/isobar] [--out bench/fe/results.md]
+
+Rows:
+  - isobar samples: the particle system (`isobar fe`), at spacings that give about the
+    paper's particle counts (Fig. 9: 1,280 / 3,232 / 8,647 on the teardrop, rho = 8;
+    Fig. 11: 5,000 on 5,832 third-order hexahedra);
+  - isobar mc: the paper's baseline (`--method mc`: world grid, numerical inversion per
+    node, Newton along edges) at the same spacing;
+  - VTK contour: vtkContourFilter on the same vtkUnstructuredGrid (VTK linearises each
+    Lagrange cell), timed in this process.
+The accuracy column is max |F - C| at each method's points by one independent evaluator,
+VTK's vtkProbeFilter (its own inversion and Lagrange basis), so no method grades itself;
+isobar's own figure (its stats line) is reported beside it. Every run is a process of its
+own, started by bench/measure.py (wall, CPU, peak RSS).
+"""
+
+import argparse
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+import vtk
+from vtk.util.numpy_support import vtk_to_numpy
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+
+# name, file made by scripts/make_fe_bench.py, field, isovalue, [(label, isobar fe options)]
+CASES = [
+    ("teardrop (Fig. 9)", "teardrop", "f", 0.64, [
+        ("Fig. 9a: 1,280", ["--spacing", "0.11", "--rho", "8"]),
+        ("Fig. 9b: 3,232", ["--spacing", "0.05", "--rho", "8"]),
+        ("Fig. 9c: 8,647", ["--spacing", "0.028", "--rho", "8"]),
+    ]),
+    ("5,832 cubic hexahedra (Fig. 11)", "fig11", "p", 0.0, [
+        ("Fig. 11b: 5,000", ["--spacing", "0.043"]),
+    ]),
+]
+
+STATS = re.compile(r"(\d+) samples on \d+ cells .*?(\d+) forward evaluations.*max \|F - C\| = (\S+);")
+MC_STATS = re.compile(r"(\d+) vertices.*?(\d+) (?:forward )?evaluations.*?max \|F - C\| = (\S+);")
+
+
+def measure(cmd, timeout=600):
+    with tempfile.NamedTemporaryFile(suffix=".json") as f:
+        p = subprocess.run([sys.executable, "-I", "-S", os.path.join(ROOT, "bench", "measure.py"),
+                            f.name, str(timeout)] + cmd, capture_output=True, text=True)
+        if p.returncode != 0 or json.load(open(f.name))["exit_code"] != 0:
+            raise SystemExit(f"{' '.join(cmd)} failed:\n{p.stdout}{p.stderr}")
+        m = json.load(open(f.name))
+    return m, p.stdout + p.stderr
+
+
+def read(path, reader):
+    r = reader()
+    r.SetFileName(path)
+    r.Update()
+    return r.GetOutput()
+
+
+def vtk_residual(grid, points, field, iso):
+    """max |F - C| at `points` by vtkProbeFilter, and how many VTK could locate."""
+    pf = vtk.vtkProbeFilter()
+    pf.SetSourceData(grid)
+    pf.SetInputData(points)
+    pf.Update()
+    out = pf.GetOutput()
+    vals = vtk_to_numpy(out.GetPointData().GetArray(field))
+    ok = vtk_to_numpy(out.GetPointData().GetArray(pf.GetValidPointMaskArrayName())).astype(bool)
+    if not ok.any():
+        return float("nan"), 0, len(ok)
+    return float(abs(vals[ok] - iso).max()), int(ok.sum()), len(ok)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--isobar", default=os.path.join(ROOT, "target", "release", "isobar"))
+    ap.add_argument("--data", default=os.path.join(ROOT, "target", "bench"))
+    ap.add_argument("--out", default=os.path.join(HERE, "results.md"))
+    args = ap.parse_args()
+    os.makedirs(args.data, exist_ok=True)
+    work = tempfile.mkdtemp(prefix="bench_fe_")
+    lines = [
+        f"# isobar fe vs VTK contouring of Lagrange cells",
+        "",
+        f"{platform.node()}: {os.cpu_count()} cores, load average "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())} at start, VTK {vtk.vtkVersion.GetVTKVersion()}",
+        "",
+        "| problem | method | points | forward evals | wall s | CPU s | peak RSS MB "
+        "| max abs(F-C) by VTK probe (located) | max abs(F-C) isobar's own |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for title, case, field, iso, runs in CASES:
+        vtu = os.path.join(args.data, f"fe_{case}.vtu")
+        if not os.path.exists(vtu):
+            subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "make_fe_bench.py"),
+                            case, vtu], check=True)
+        grid = read(vtu, vtk.vtkXMLUnstructuredGridReader)
+        grid.GetPointData().SetActiveScalars(field)
+        for label, opts in runs:
+            for method in ("samples", "mc"):
+                out = os.path.join(work, f"{case}_{method}.vtp")
+                m, log = measure([args.isobar, "fe", vtu, "--field", field, "--iso", str(iso),
+                                  "--method", method, "-o", out] + opts)
+                pat = STATS if method == "samples" else MC_STATS
+                s = pat.search(log)
+                if not s:
+                    raise SystemExit(f"no stats line in:\n{log}")
+                n, evals, own = s.groups()
+                probe, located, total = vtk_residual(grid, read(out, vtk.vtkXMLPolyDataReader), field, iso)
+                lines.append(
+                    f"| {title} | isobar {method} ({label}, `{' '.join(opts)}`) | {int(n):,} | "
+                    f"{int(evals):,} | {m['wall_s']:.2f} | {m['cpu_s']:.2f} | {m['peak_rss_kib'] / 1024:.0f} | "
+                    f"{probe:.1e} ({located}/{total}) | {float(own):.1e} |")
+                print(lines[-1], flush=True)
+        t = time.perf_counter()
+        c = vtk.vtkContourFilter()
+        c.SetInputData(grid)
+        c.SetValue(0, iso)
+        c.Update()
+        wall = time.perf_counter() - t
+        contour = c.GetOutput()
+        probe, located, total = vtk_residual(grid, contour, field, iso)
+        lines.append(
+            f"| {title} | VTK vtkContourFilter (in-process) | {contour.GetNumberOfPoints():,} | - | "
+            f"{wall:.2f} | - | - | {probe:.1e} ({located}/{total}) | - |")
+        print(lines[-1], flush=True)
+    lines += ["", f"Command: `{' '.join([os.path.relpath(sys.executable, ROOT)] + sys.argv)}`", ""]
+    with open(args.out + ".part", "w") as f:
+        f.write("\n".join(lines))
+    os.replace(args.out + ".part", args.out)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
