@@ -100,12 +100,7 @@ pub fn extract(
     if !params.spacing.is_finite() {
         return Err(bad("spacing", "must be finite"));
     }
-    let (lo, hi) = mesh
-        .points
-        .iter()
-        .fold((mesh.points[0], mesh.points[0]), |(a, b), &p| {
-            (a.min(p), b.max(p))
-        });
+    let (lo, hi) = mesh.bounds();
     let spacing = if params.spacing > 0.0 {
         params.spacing
     } else {

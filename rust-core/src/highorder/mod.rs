@@ -116,12 +116,7 @@ pub fn sample(
     let spacing = if params.spacing > 0.0 {
         params.spacing
     } else {
-        let (lo, hi) = mesh
-            .points
-            .iter()
-            .fold((mesh.points[0], mesh.points[0]), |(a, b), &p| {
-                (a.min(p), b.max(p))
-            });
+        let (lo, hi) = mesh.bounds();
         (hi - lo).length() / 40.0
     };
     let surface = Surface {

@@ -207,6 +207,11 @@ impl FeMesh {
         &self.connectivity[self.offsets[c]..self.offsets[c + 1]]
     }
 
+    /// Axis-aligned bounds of the points (cells exist, so there are points).
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        crate::field::neighbours::bounds(&self.points)
+    }
+
     /// (neighbour cell, its face) across face `f` of cell `c`, if any.
     pub fn neighbour(&self, c: usize, f: usize) -> Option<(usize, usize)> {
         let (n, g) = self.neighbours[c][f];
@@ -375,12 +380,7 @@ impl FeMesh {
     fn weld_corners(&self) -> Vec<u32> {
         let n = self.points.len();
         let mut weld: Vec<u32> = (0..n as u32).collect();
-        let (lo, hi) = self
-            .points
-            .iter()
-            .fold((self.points[0], self.points[0]), |(a, b), &p| {
-                (a.min(p), b.max(p))
-            });
+        let (lo, hi) = self.bounds();
         let tol = 1e-10 * (hi - lo).length().max(1e-300);
         let key = |p: DVec3| ((p - lo) / tol).floor().as_i64vec3();
         let mut grid: FxHashMap<glam::I64Vec3, Vec<u32>> = FxHashMap::default();

@@ -35,7 +35,9 @@ impl CellIndex {
                     let p = mesh.points[n as usize];
                     (a.min(p), b.max(p))
                 });
-                let pad = (b - a) * BOX_PAD;
+                // Padded by a fraction of the largest side on every axis: a thin cell's
+                // curved face can bulge past its nodes' box across its thin side too.
+                let pad = DVec3::splat((b - a).max_element() * BOX_PAD);
                 (a - pad, b + pad)
             })
             .collect();
