@@ -18,9 +18,9 @@
 use super::device::{gpu_error, Gpu};
 use super::sph::GpuField;
 use crate::adaptive::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
-use crate::adaptive::levels::{EdgePoint, LevelArrays};
+use crate::adaptive::levels::{edge_point, LevelArrays};
 use crate::error::{Error, Result};
-use crate::mc::{case_table, edge_key, linear_crossing, VirtualGrid};
+use crate::mc::case_table;
 use crate::progress::Progress;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -250,30 +250,13 @@ pub fn build_level(
         .edges
         .par_iter()
         .enumerate()
-        .map(|(i, &id)| {
+        .map(|(i, &key)| {
             let [lo, flo, fhi, _] = bisected[2 * i];
             let [nx, ny, nz, _] = bisected[2 * i + 1];
-            let (node, axis) = crate::mc::edge_node_axis(id);
-            let base = VirtualGrid::coords(node).map(|c| (c as i64) << iterations);
-            let at = |t: i64| {
-                let mut s = base;
-                s[axis] += t;
-                grid.point(s, iterations)
-            };
-            let lo = lo as i64;
-            let (p0, p1) = (at(lo), at(lo + 1));
-            let t = linear_crossing(flo as f64, fhi as f64, iso64);
-            let finest = (base[axis] + lo) >> iterations;
-            let mut finest_node = VirtualGrid::coords(node);
-            finest_node[axis] = finest as u32;
-            EdgePoint {
-                id: edge_key(
-                    VirtualGrid::key(finest_node[0], finest_node[1], finest_node[2]),
-                    axis,
-                ),
-                position: p0 + (p1 - p0) * t,
-                normal: DVec3::new(nx as f64, ny as f64, nz as f64),
-            }
+            let ends = (flo as f64, fhi as f64);
+            edge_point(grid, key, iterations, lo as i64, ends, iso64, |_| {
+                DVec3::new(nx as f64, ny as f64, nz as f64)
+            })
         })
         .collect();
     let edges = &out.edges;
