@@ -335,21 +335,26 @@ mod tests {
             unsafe { *user.cast::<u32>() += 1 };
             0
         }
-        let mut calls = 0u32;
-        let mut bad = IsobarAdaptiveStats {
-            struct_size: 2,
-            ..IsobarAdaptiveStats::default()
+        // (status, surface, progress calls) of an extraction that fills a stats struct
+        // of `struct_size` bytes.
+        let counted = |struct_size: usize| {
+            let (mut calls, mut surface) = (0u32, std::ptr::null_mut());
+            let mut stats = IsobarAdaptiveStats {
+                struct_size: struct_size as u32,
+                ..IsobarAdaptiveStats::default()
+            };
+            let status = isobar_adaptive_extract(
+                handle,
+                &sph,
+                &IsobarAdaptiveParams::default(),
+                Some(count_calls),
+                (&mut calls as *mut u32).cast(),
+                &mut surface,
+                &mut stats,
+            );
+            (status, surface, calls)
         };
-        let mut none = std::ptr::null_mut();
-        let status = isobar_adaptive_extract(
-            handle,
-            &sph,
-            &IsobarAdaptiveParams::default(),
-            Some(count_calls),
-            (&mut calls as *mut u32).cast(),
-            &mut none,
-            &mut bad,
-        );
+        let (status, none, calls) = counted(2);
         assert_eq!(status, IsobarStatus::ErrInvalidArgument);
         assert!(none.is_null());
         assert_eq!(
@@ -357,19 +362,10 @@ mod tests {
             "the extraction ran before the stats struct was checked"
         );
         // The same call with a good struct does report progress (so 0 above means "no work").
-        bad.struct_size = std::mem::size_of::<IsobarAdaptiveStats>() as u32;
-        let status = isobar_adaptive_extract(
-            handle,
-            &sph,
-            &IsobarAdaptiveParams::default(),
-            Some(count_calls),
-            (&mut calls as *mut u32).cast(),
-            &mut none,
-            &mut bad,
-        );
+        let (status, surface, calls) = counted(std::mem::size_of::<IsobarAdaptiveStats>());
         assert_eq!(status, IsobarStatus::Ok);
         assert!(calls > 0);
-        isobar_surface_free(none);
+        isobar_surface_free(surface);
         isobar_particles_free(handle);
     }
 }
