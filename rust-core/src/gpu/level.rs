@@ -26,14 +26,16 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
-/// The SPH kernels followed by the level kernels: one module, one binding layout.
-fn level_source() -> (&'static str, &'static str) {
+/// The SPH kernels, the level kernels and crack filling (`gpu::cracks`): one module, one
+/// binding layout.
+pub(super) fn level_source() -> (&'static str, &'static str) {
     static SOURCE: OnceLock<String> = OnceLock::new();
     let s = SOURCE.get_or_init(|| {
         format!(
-            "{}\n{}",
+            "{}\n{}\n{}",
             include_str!("shaders/sph.wgsl"),
-            include_str!("shaders/level.wgsl")
+            include_str!("shaders/level.wgsl"),
+            include_str!("shaders/cracks.wgsl")
         )
     });
     ("level.wgsl", s.as_str())
@@ -41,22 +43,22 @@ fn level_source() -> (&'static str, &'static str) {
 
 const SCAN: (&str, &str) = ("scan.wgsl", include_str!("shaders/scan.wgsl"));
 
-/// `Level` of level.wgsl.
+/// `Level` of level.wgsl (crack filling reads the grid, `iso` and `count` from it too).
 #[repr(C)]
-#[derive(Clone, Copy)]
-struct LevelUniform {
-    fine: f32,
-    iso: f32,
-    k: u32,
-    step: u32,
-    shift: u32,
-    steps: u32,
-    cells_x: u32,
-    cells_y: u32,
-    count: u32,
-    normals: u32,
-    unit: f32,
-    pad: u32,
+#[derive(Clone, Copy, Default)]
+pub(super) struct LevelUniform {
+    pub fine: f32,
+    pub iso: f32,
+    pub k: u32,
+    pub step: u32,
+    pub shift: u32,
+    pub steps: u32,
+    pub cells_x: u32,
+    pub cells_y: u32,
+    pub count: u32,
+    pub normals: u32,
+    pub unit: f32,
+    pub pad: u32,
 }
 
 /// `Scan` of scan.wgsl.

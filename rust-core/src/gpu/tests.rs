@@ -248,10 +248,7 @@ fn level_arrays_equal_the_cpu_ones() {
         let p = params(0.5);
         let grid = grid_for(&field, &p).unwrap();
         let natural = adaptive::levels_for(&field, &grid, &p).unwrap();
-        let mut forced: Vec<u8> = (0..grid.cell_count())
-            .map(|i| 1 + (grid.coords(i)[0] % 3) as u8)
-            .collect();
-        grid::balance(&grid, &mut forced);
+        let forced = striped_levels(&grid);
         let on_device = GpuField::new(g, &field, grid.origin).unwrap();
         for (name, levels) in [("splash", &natural), ("forced", &forced)] {
             let (mut triangles, mut skipped) = (0, 0);
@@ -290,15 +287,15 @@ fn level_arrays_equal_the_cpu_ones() {
 }
 
 /// Whole extractions: same triangles (vertices are ordered by finest-edge identity, so
-/// equal triangle lists are equal triangle sets), positions within TOL of the extent,
-/// and the GPU mesh closed and oriented on its own.
-fn assert_same_surface(field: &SphField, p: &Params, what: &str) -> u64 {
-    let cpu = adaptive::extract_sph(field, p, &mut Progress::none()).unwrap();
-    let gp = Params {
-        backend: Backend::Gpu,
-        ..p.clone()
-    };
-    let gpu = adaptive::extract_sph(field, &gp, &mut Progress::none()).unwrap();
+/// equal triangle lists are equal triangle sets; the crack fills come last, face by
+/// face, so a missing or wrong fill changes the list), positions within TOL of the
+/// extent, and the GPU mesh closed and oriented on its own.
+fn assert_same_extraction(
+    cpu: &adaptive::Extraction,
+    gpu: &adaptive::Extraction,
+    scale: f64,
+    what: &str,
+) {
     assert_eq!(cpu.stats.backend, Backend::Cpu);
     assert_eq!(gpu.stats.backend, Backend::Gpu);
     let topo = gpu.mesh.topology();
@@ -308,8 +305,15 @@ fn assert_same_surface(field: &SphField, p: &Params, what: &str) -> u64 {
         cpu.stats.cells_per_level, gpu.stats.cells_per_level,
         "{what}"
     );
+    assert_eq!(
+        cpu.stats.transition_faces, gpu.stats.transition_faces,
+        "{what}"
+    );
+    assert_eq!(
+        cpu.stats.crack_triangles, gpu.stats.crack_triangles,
+        "{what}"
+    );
     assert_eq!(cpu.mesh.triangles, gpu.mesh.triangles, "{what}: triangles");
-    let scale = extent(&grid_for(field, p).unwrap());
     for (i, (a, b)) in cpu
         .mesh
         .positions
@@ -320,7 +324,110 @@ fn assert_same_surface(field: &SphField, p: &Params, what: &str) -> u64 {
         let d = (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max) / scale;
         assert!(d < TOL, "{what}: vertex {i} moved {d:e} of the extent");
     }
+}
+
+/// [`assert_same_extraction`] of `extract_sph` on both back ends; the triangle count.
+fn assert_same_surface(field: &SphField, p: &Params, what: &str) -> u64 {
+    let cpu = adaptive::extract_sph(field, p, &mut Progress::none()).unwrap();
+    let gp = Params {
+        backend: Backend::Gpu,
+        ..p.clone()
+    };
+    let gpu = adaptive::extract_sph(field, &gp, &mut Progress::none()).unwrap();
+    assert_same_extraction(&cpu, &gpu, extent(&grid_for(field, p).unwrap()), what);
     gpu.stats.triangles
+}
+
+/// Levels 1, 2, 3 in stripes along x, balanced: transition faces on most cells.
+fn striped_levels(grid: &CoarseGrid) -> Vec<u8> {
+    let mut levels: Vec<u8> = (0..grid.cell_count())
+        .map(|i| 1 + (grid.coords(i)[0] % 3) as u8)
+        .collect();
+    grid::balance(grid, &mut levels);
+    levels
+}
+
+/// Crack filling alone: the GPU's fills from the GPU's level arrays equal the CPU's fills
+/// from the same arrays, exactly and in order, on meshes with many transition faces of
+/// both kinds (level 1 | 2 and 2 | 3, fine cell on either side).
+#[test]
+fn gpu_crack_fills_equal_cpu_crack_fills() {
+    use crate::adaptive::cracks;
+    let Some(g) = gpu() else { return };
+    for kernel in [Kernel::CubicSpline, Kernel::QuinticSpline] {
+        let field = body(kernel);
+        let p = params(0.5);
+        let grid = grid_for(&field, &p).unwrap();
+        let natural = adaptive::levels_for(&field, &grid, &p).unwrap();
+        let on_device = GpuField::new(g, &field, grid.origin).unwrap();
+        let (mut all_kinds, mut fine_levels) = (HashSet::new(), HashSet::new());
+        for (name, levels) in [("splash", natural), ("striped", striped_levels(&grid))] {
+            let what = format!("{kernel:?} {name}");
+            let iso = p.isovalue as f32;
+            let arrays: Vec<LevelArrays> = (1..=3u8)
+                .map(|level| {
+                    build_level(
+                        g,
+                        &on_device,
+                        &grid,
+                        &levels,
+                        level,
+                        iso,
+                        p.bisection_iterations,
+                        false,
+                        &mut Progress::none(),
+                    )
+                    .unwrap()
+                })
+                .collect();
+            let faces = cracks::transition_faces(&grid, &levels);
+            let cpu = cracks::fill(&grid, &levels, &arrays, &faces, iso as f64);
+            let gpu = super::cracks::fill(g, &grid, &levels, &arrays, &faces, iso).unwrap();
+            let kinds: HashSet<(u8, u8)> = faces
+                .iter()
+                .map(|f| {
+                    let mut upper = grid.coords(f.cell);
+                    upper[f.axis] += 1;
+                    (levels[f.cell], levels[grid.index(upper)])
+                })
+                .collect();
+            eprintln!(
+                "{what}: {} faces, {} fills, kinds {kinds:?}",
+                faces.len(),
+                cpu.len()
+            );
+            assert!(
+                faces.len() > 100,
+                "{what}: {} transition faces",
+                faces.len()
+            );
+            assert!(cpu.len() > 50, "{what}: {} fill triangles", cpu.len());
+            all_kinds.extend(kinds);
+            fine_levels.extend(cpu.iter().map(|t| t[0].0));
+            assert_eq!(cpu.len(), gpu.len(), "{what}: fill triangles");
+            assert_eq!(cpu, gpu, "{what}");
+        }
+        // Faces of every kind (lower | upper level) were walked. On this body the 1 | 2
+        // faces happen to need no fill (cubic spline: every fill is on level 3); a wrong
+        // level-2 walk would still show as fills the CPU lacks.
+        assert_eq!(all_kinds.len(), 4, "{kernel:?}: {all_kinds:?}");
+        assert!(fine_levels.contains(&3), "{kernel:?}: {fine_levels:?}");
+    }
+}
+
+/// Whole extractions with the striped levels: GPU levels and cracks against the CPU's.
+#[test]
+fn gpu_surface_equals_cpu_surface_with_striped_levels() {
+    let Some(_) = gpu() else { return };
+    let field = body(Kernel::CubicSpline);
+    let p = params(0.5);
+    let grid = grid_for(&field, &p).unwrap();
+    let levels = striped_levels(&grid);
+    let cpu = adaptive::extract(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
+    let gpu = adaptive::extract_gpu(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
+    assert!(cpu.stats.transition_faces > 100, "{:?}", cpu.stats);
+    assert!(cpu.stats.crack_triangles > 50, "{:?}", cpu.stats);
+    assert_same_extraction(&cpu, &gpu, extent(&grid), "striped");
 }
 
 #[test]
