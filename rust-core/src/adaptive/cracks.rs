@@ -2,7 +2,8 @@
 //! in parallel. A face between a level-L and a level-(L+1) cell is cut into the
 //! 2^(L-1) × 2^(L-1) quads of the coarse side; each quad's nine fine-side vertex signs
 //! select a row of the committed pattern table, whose face points map to the fine level's
-//! compacted edges.
+//! compacted edges. `gpu::cracks` (shaders/cracks.wgsl) walks faces the same way on the
+//! GPU with the same table; its tests compare the two fill lists exactly.
 
 use super::crack_gen::{point_edge, ROW};
 use super::crack_table::CRACK_PATTERNS;

@@ -322,19 +322,12 @@ fn bisect<F: ScalarField + ?Sized>(
     steps: u32,
     normals: bool,
 ) -> EdgePoint {
-    let (node, axis) = crate::mc::edge_node_axis(key);
-    let base = VirtualGrid::coords(node).map(|c| (c as i64) << shift);
-    let at = |t: i64| -> [i64; 3] {
-        let mut s = base;
-        s[axis] += t;
-        s
-    };
     let (mut lo, mut hi) = (0i64, (step as i64) << shift);
     let (mut flo, mut fhi) = (f0, f1);
     let lo_inside = f0 > iso;
     for _ in 0..steps {
         let mid = (lo + hi) / 2;
-        let fm = field.value(grid.point(at(mid), shift));
+        let fm = field.value(along(grid, key, shift, mid));
         if (fm > iso) == lo_inside {
             lo = mid;
             flo = fm;
@@ -344,20 +337,46 @@ fn bisect<F: ScalarField + ?Sized>(
         }
     }
     debug_assert_eq!(hi - lo, 1);
-    let (p0, p1) = (grid.point(at(lo), shift), grid.point(at(hi), shift));
-    let t = crate::mc::linear_crossing(flo, fhi, iso);
-    let position = p0 + (p1 - p0) * t;
-    let normal = if normals {
-        let (_, g) = field.value_and_gradient(position);
-        (-g).try_normalize().unwrap_or(DVec3::Z)
-    } else {
-        DVec3::ZERO
-    };
-    let finest = at(lo).map(|s| (s >> shift) as u32);
+    edge_point(grid, key, shift, lo, (flo, fhi), iso, |position| {
+        if normals {
+            let (_, g) = field.value_and_gradient(position);
+            (-g).try_normalize().unwrap_or(DVec3::Z)
+        } else {
+            DVec3::ZERO
+        }
+    })
+}
+
+/// The point `t` bisection units (2^-`shift` finest cells) along edge `key` from its start.
+fn along(grid: &CoarseGrid, key: u64, shift: u32, t: i64) -> DVec3 {
+    let (node, axis) = crate::mc::edge_node_axis(key);
+    let mut s = VirtualGrid::coords(node).map(|c| (c as i64) << shift);
+    s[axis] += t;
+    grid.point(s, shift)
+}
+
+/// The surface point of edge `key` whose bisection (CPU or GPU) ended on the interval
+/// [`lo`, `lo` + 1] bisection units with end values `(flo, fhi)`: linear interpolation
+/// there, named by the finest edge holding that interval, with `normal(position)`. One
+/// definition for both back ends, so their points agree wherever their intervals do.
+pub(crate) fn edge_point(
+    grid: &CoarseGrid,
+    key: u64,
+    shift: u32,
+    lo: i64,
+    (flo, fhi): (f64, f64),
+    iso: f64,
+    normal: impl FnOnce(DVec3) -> DVec3,
+) -> EdgePoint {
+    let (p0, p1) = (along(grid, key, shift, lo), along(grid, key, shift, lo + 1));
+    let position = p0 + (p1 - p0) * crate::mc::linear_crossing(flo, fhi, iso);
+    let (node, axis) = crate::mc::edge_node_axis(key);
+    let mut finest = VirtualGrid::coords(node);
+    finest[axis] += (lo >> shift) as u32;
     EdgePoint {
         id: edge_key(VirtualGrid::key(finest[0], finest[1], finest[2]), axis),
         position,
-        normal,
+        normal: normal(position),
     }
 }
 

@@ -197,7 +197,6 @@ pub fn extract<F: ScalarField + ?Sized>(
         grid,
         levels,
         params,
-        params.isovalue,
         progress,
         |level, progress| {
             levels::build_level(
@@ -211,13 +210,14 @@ pub fn extract<F: ScalarField + ?Sized>(
                 progress,
             )
         },
+        |arrays, faces| Ok(cracks::fill(grid, levels, arrays, faces, params.isovalue)),
     )
 }
 
-/// [`extract_sph`]'s per-level work on the GPU (`gpu::level`); the levels, crack filling
-/// and assembly as on the CPU.
+/// [`extract_sph`]'s per-level work (`gpu::level`) and crack filling (`gpu::cracks`) on
+/// the GPU; the levels and the assembly as on the CPU.
 #[cfg(feature = "gpu")]
-fn extract_gpu(
+pub(crate) fn extract_gpu(
     field: &SphField,
     grid: &CoarseGrid,
     levels: &[u8],
@@ -226,13 +226,12 @@ fn extract_gpu(
 ) -> Result<Extraction> {
     let gpu = crate::gpu::device::get()?;
     let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
-    // The kernels compare with the f32 isovalue; cracks must see the same signs.
+    // The kernels compare with the f32 isovalue; cracks see the same signs.
     let iso = params.isovalue as f32;
     let mut out = extract_with(
         grid,
         levels,
         params,
-        iso as f64,
         progress,
         |level, progress| {
             crate::gpu::level::build_level(
@@ -247,13 +246,14 @@ fn extract_gpu(
                 progress,
             )
         },
+        |arrays, faces| crate::gpu::cracks::fill(gpu, grid, levels, arrays, faces, iso),
     )?;
     out.stats.backend = Backend::Gpu;
     Ok(out)
 }
 
 #[cfg(not(feature = "gpu"))]
-fn extract_gpu(
+pub(crate) fn extract_gpu(
     _: &SphField,
     _: &CoarseGrid,
     _: &[u8],
@@ -263,15 +263,19 @@ fn extract_gpu(
     Err(crate::gpu::adapter_name().expect_err("no GPU without the feature"))
 }
 
-/// Levels checked, then `build` for levels 1, 2, 3, cracks filled comparing node values
-/// with `iso`, and the mesh assembled.
+/// Fill triangles of the transition faces from the three levels' arrays, as
+/// [`cracks::fill`] gives them.
+type Fills = Vec<[(u8, u32); 3]>;
+
+/// Levels checked, then `build` for levels 1, 2, 3, `fill` for the cracks of every
+/// transition face, and the mesh assembled.
 fn extract_with(
     grid: &CoarseGrid,
     levels: &[u8],
     params: &Params,
-    iso: f64,
     progress: &mut Progress,
     mut build: impl FnMut(u8, &mut Progress) -> Result<LevelArrays>,
+    fill: impl FnOnce(&[LevelArrays], &[cracks::TransitionFace]) -> Result<Fills>,
 ) -> Result<Extraction> {
     params.validate()?;
     grid::check_levels(grid, levels)?;
@@ -300,7 +304,7 @@ fn extract_with(
     progress.phase("crack filling", 0.8, 0.9)?;
     let t = Instant::now();
     let faces = cracks::transition_faces(grid, levels);
-    let fills = cracks::fill(grid, levels, &arrays, &faces, iso);
+    let fills = fill(&arrays, &faces)?;
     stats.transition_faces = faces.len() as u64;
     stats.crack_triangles = fills.len() as u64;
     stats.timings.cracks = t.elapsed().as_secs_f64();

@@ -6,7 +6,8 @@ use super::particles::IsobarParticles;
 use super::sph::{read_params, settings, IsobarProgressFn};
 use super::surface::IsobarSurface;
 use super::{
-    copy_versioned_out, guard, invalid, non_null, put, with_progress, IsobarSphParams, IsobarStatus,
+    copy_versioned_out, guard, invalid, non_null, put, versioned_out_size, with_progress,
+    IsobarSphParams, IsobarStatus,
 };
 use crate::adaptive::{self, Params};
 use crate::correctors;
@@ -126,6 +127,10 @@ pub extern "C" fn isobar_adaptive_extract(
         }
         let p = read_params(sph)?;
         let a = read_adaptive(adaptive)?;
+        // A bad stats struct fails here, not after the extraction it would have reported.
+        if !stats.is_null() {
+            versioned_out_size(stats, "stats")?;
+        }
         let (field_settings, sph_params) = settings(&p)?;
         let [isovalue] = sph_params.isovalues[..] else {
             return Err(invalid(
@@ -323,6 +328,43 @@ mod tests {
         );
         assert_eq!(status, IsobarStatus::Ok);
         assert_eq!(stats.backend, ISOBAR_BACKEND_CPU);
+        isobar_surface_free(surface);
+        // A stats struct of a bad size is refused before any work: progress never runs.
+        extern "C" fn count_calls(user: *mut c_void, _: f64, _: *const std::ffi::c_char) -> i32 {
+            // SAFETY: `user` is the counter below, alive for the call.
+            unsafe { *user.cast::<u32>() += 1 };
+            0
+        }
+        // (status, surface, progress calls) of an extraction that fills a stats struct
+        // of `struct_size` bytes.
+        let counted = |struct_size: usize| {
+            let (mut calls, mut surface) = (0u32, std::ptr::null_mut());
+            let mut stats = IsobarAdaptiveStats {
+                struct_size: struct_size as u32,
+                ..IsobarAdaptiveStats::default()
+            };
+            let status = isobar_adaptive_extract(
+                handle,
+                &sph,
+                &IsobarAdaptiveParams::default(),
+                Some(count_calls),
+                (&mut calls as *mut u32).cast(),
+                &mut surface,
+                &mut stats,
+            );
+            (status, surface, calls)
+        };
+        let (status, none, calls) = counted(2);
+        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        assert!(none.is_null());
+        assert_eq!(
+            calls, 0,
+            "the extraction ran before the stats struct was checked"
+        );
+        // The same call with a good struct does report progress (so 0 above means "no work").
+        let (status, surface, calls) = counted(std::mem::size_of::<IsobarAdaptiveStats>());
+        assert_eq!(status, IsobarStatus::Ok);
+        assert!(calls > 0);
         isobar_surface_free(surface);
         isobar_particles_free(handle);
     }

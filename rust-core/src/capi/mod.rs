@@ -271,16 +271,12 @@ pub(crate) fn attribute_out(
     put(data, a.data.as_ptr(), "data")
 }
 
-/// Copies a statistics struct to the caller's `out`, whose leading `struct_size: u32` says
-/// how many bytes of the layout it holds (older, shorter structs get the prefix).
-pub(crate) fn copy_versioned_out<T: Copy>(
-    full: T,
-    out: *mut T,
-    name: &'static str,
-) -> Result<(), Error> {
-    let size = non_null(out as *const T, name)?;
+/// The `struct_size` of the caller's statistics struct `out`, checked: a call that will
+/// fill one checks it before its work, so a bad struct fails fast.
+pub(crate) fn versioned_out_size<T>(out: *mut T, name: &'static str) -> Result<usize, Error> {
+    let given = non_null(out as *const T, name)?;
     // SAFETY: T is repr(C) with a leading u32 struct_size (the callers' contract).
-    let size = unsafe { *(size as *const T).cast::<u32>() } as usize;
+    let size = unsafe { *(given as *const T).cast::<u32>() } as usize;
     let ours = std::mem::size_of::<T>();
     if !(4..=ours).contains(&size) {
         return Err(invalid(
@@ -288,6 +284,17 @@ pub(crate) fn copy_versioned_out<T: Copy>(
             format!("struct_size is {size}; set it to the struct's sizeof ({ours})"),
         ));
     }
+    Ok(size)
+}
+
+/// Copies a statistics struct to the caller's `out`, whose leading `struct_size: u32` says
+/// how many bytes of the layout it holds (older, shorter structs get the prefix).
+pub(crate) fn copy_versioned_out<T: Copy>(
+    full: T,
+    out: *mut T,
+    name: &'static str,
+) -> Result<(), Error> {
+    let size = versioned_out_size(out, name)?;
     // SAFETY: `out` holds at least `size` bytes of T's layout; its struct_size is kept.
     unsafe {
         std::ptr::copy_nonoverlapping(

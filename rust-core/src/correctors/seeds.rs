@@ -89,24 +89,22 @@ pub fn seed_cells(
     seed_cells_with(field, grid, iso, search, |i, visit| {
         search
             .pairs
-            .for_each_candidate_range(search.positions[i], 1, |range| {
-                for &j in &order[range] {
-                    visit(j as usize);
-                }
-            })
+            .for_each_candidate_range(search.positions[i], 1, |range| visit(&order[range]))
     })
 }
 
-/// [`seed_cells`] with each particle's neighbour candidates from `candidates(i, visit)`:
-/// any superset, in any order, of the particles within [`side_radius`] of particle i
-/// (grid slots). The exact tests here pick the pairs, so every such superset (the GPU's
-/// conservative f32 search, `gpu::seeds`) gives the same seeds.
+/// [`seed_cells`] with each particle's neighbour candidates from `candidates(i, visit)`,
+/// handed over as slices of grid slots (a neighbour-grid row, or the GPU's whole list):
+/// any superset, in any order, of the particles within [`side_radius`] of particle i.
+/// The exact tests here pick the pairs, so every such superset (the GPU's conservative
+/// f32 search, `gpu::seeds`) gives the same seeds. Slices, not single candidates, cross
+/// the `dyn` boundary, so the per-pair test stays an inlined loop.
 pub fn seed_cells_with(
     field: &SphField,
     grid: &VirtualGrid,
     iso: f64,
     search: &SeedSearch,
-    candidates: impl Fn(usize, &mut dyn FnMut(usize)) + Sync,
+    candidates: impl Fn(usize, &mut dyn FnMut(&[u32])) + Sync,
 ) -> Result<Vec<u64>> {
     let SeedSearch {
         positions,
@@ -136,32 +134,34 @@ pub fn seed_cells_with(
             let side_r2 = side_radius(field, i).powi(2);
             // Bit 2a+s: a neighbour lies on side s (0: negative, 1: positive) of axis a.
             let mut sides = 0u8;
-            candidates(i, &mut |j| {
-                let d = positions[j] - xi;
-                let d2 = d.length_squared();
-                if j == i || d2 >= side_r2 {
-                    return;
-                }
-                for a in 0..3 {
-                    if d[a] > 0.0 {
-                        sides |= 1 << (2 * a + 1);
-                    } else if d[a] < 0.0 {
-                        sides |= 1 << (2 * a);
+            candidates(i, &mut |row| {
+                for j in row.iter().map(|&j| j as usize) {
+                    let d = positions[j] - xi;
+                    let d2 = d.length_squared();
+                    if j == i || d2 >= side_r2 {
+                        continue;
                     }
-                }
-                if d2 >= r2 {
-                    return;
-                }
-                let cj = class(j);
-                if j > i && cj != ci {
-                    let values = ends(
-                        ci,
-                        cj,
-                        (smoothed[i], smoothed[j]),
-                        (field.raw_value(i), field.raw_value(j)),
-                    );
-                    let (a, b) = crossing_window(xi, positions[j], values, iso, window);
-                    cells_on_segment(grid, a, b, &mut out);
+                    for a in 0..3 {
+                        if d[a] > 0.0 {
+                            sides |= 1 << (2 * a + 1);
+                        } else if d[a] < 0.0 {
+                            sides |= 1 << (2 * a);
+                        }
+                    }
+                    if d2 >= r2 {
+                        continue;
+                    }
+                    let cj = class(j);
+                    if j > i && cj != ci {
+                        let values = ends(
+                            ci,
+                            cj,
+                            (smoothed[i], smoothed[j]),
+                            (field.raw_value(i), field.raw_value(j)),
+                        );
+                        let (a, b) = crossing_window(xi, positions[j], values, iso, window);
+                        cells_on_segment(grid, a, b, &mut out);
+                    }
                 }
             });
             if ci != outside {

@@ -18,22 +18,24 @@
 use super::device::{gpu_error, Gpu};
 use super::sph::GpuField;
 use crate::adaptive::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
-use crate::adaptive::levels::{EdgePoint, LevelArrays};
+use crate::adaptive::levels::{edge_point, LevelArrays};
 use crate::error::{Error, Result};
-use crate::mc::{case_table, edge_key, linear_crossing, VirtualGrid};
+use crate::mc::case_table;
 use crate::progress::Progress;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
-/// The SPH kernels followed by the level kernels: one module, one binding layout.
-fn level_source() -> (&'static str, &'static str) {
+/// The SPH kernels, the level kernels and crack filling (`gpu::cracks`): one module, one
+/// binding layout.
+pub(super) fn level_source() -> (&'static str, &'static str) {
     static SOURCE: OnceLock<String> = OnceLock::new();
     let s = SOURCE.get_or_init(|| {
         format!(
-            "{}\n{}",
+            "{}\n{}\n{}",
             include_str!("shaders/sph.wgsl"),
-            include_str!("shaders/level.wgsl")
+            include_str!("shaders/level.wgsl"),
+            include_str!("shaders/cracks.wgsl")
         )
     });
     ("level.wgsl", s.as_str())
@@ -41,22 +43,22 @@ fn level_source() -> (&'static str, &'static str) {
 
 const SCAN: (&str, &str) = ("scan.wgsl", include_str!("shaders/scan.wgsl"));
 
-/// `Level` of level.wgsl.
+/// `Level` of level.wgsl (crack filling reads the grid, `iso` and `count` from it too).
 #[repr(C)]
-#[derive(Clone, Copy)]
-struct LevelUniform {
-    fine: f32,
-    iso: f32,
-    k: u32,
-    step: u32,
-    shift: u32,
-    steps: u32,
-    cells_x: u32,
-    cells_y: u32,
-    count: u32,
-    normals: u32,
-    unit: f32,
-    pad: u32,
+#[derive(Clone, Copy, Default)]
+pub(super) struct LevelUniform {
+    pub fine: f32,
+    pub iso: f32,
+    pub k: u32,
+    pub step: u32,
+    pub shift: u32,
+    pub steps: u32,
+    pub cells_x: u32,
+    pub cells_y: u32,
+    pub count: u32,
+    pub normals: u32,
+    pub unit: f32,
+    pub pad: u32,
 }
 
 /// `Scan` of scan.wgsl.
@@ -250,30 +252,13 @@ pub fn build_level(
         .edges
         .par_iter()
         .enumerate()
-        .map(|(i, &id)| {
+        .map(|(i, &key)| {
             let [lo, flo, fhi, _] = bisected[2 * i];
             let [nx, ny, nz, _] = bisected[2 * i + 1];
-            let (node, axis) = crate::mc::edge_node_axis(id);
-            let base = VirtualGrid::coords(node).map(|c| (c as i64) << iterations);
-            let at = |t: i64| {
-                let mut s = base;
-                s[axis] += t;
-                grid.point(s, iterations)
-            };
-            let lo = lo as i64;
-            let (p0, p1) = (at(lo), at(lo + 1));
-            let t = linear_crossing(flo as f64, fhi as f64, iso64);
-            let finest = (base[axis] + lo) >> iterations;
-            let mut finest_node = VirtualGrid::coords(node);
-            finest_node[axis] = finest as u32;
-            EdgePoint {
-                id: edge_key(
-                    VirtualGrid::key(finest_node[0], finest_node[1], finest_node[2]),
-                    axis,
-                ),
-                position: p0 + (p1 - p0) * t,
-                normal: DVec3::new(nx as f64, ny as f64, nz as f64),
-            }
+            let ends = (flo as f64, fhi as f64);
+            edge_point(grid, key, iterations, lo as i64, ends, iso64, |_| {
+                DVec3::new(nx as f64, ny as f64, nz as f64)
+            })
         })
         .collect();
     let edges = &out.edges;

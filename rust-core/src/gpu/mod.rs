@@ -10,6 +10,8 @@
 use crate::error::{Error, Result};
 
 #[cfg(feature = "gpu")]
+pub mod cracks;
+#[cfg(feature = "gpu")]
 pub mod device;
 #[cfg(feature = "gpu")]
 pub mod level;

@@ -112,9 +112,7 @@ pub fn seed_cells(
 ) -> Result<Vec<u64>> {
     seed_cells_with(field, grid, iso, search, |i, visit| {
         let range = candidates.offsets[i] as usize..candidates.offsets[i + 1] as usize;
-        for &j in &candidates.list[range] {
-            visit(j as usize);
-        }
+        visit(&candidates.list[range])
     })
 }
 
