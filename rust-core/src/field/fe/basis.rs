@@ -96,8 +96,8 @@ impl Shape {
             // Hot: every forward evaluation runs this once per node, so the products
             // "all but m" and "all but m and k" are formed over fixed arrays (nv ≤ 4).
             let mut f = [Jet::ONE; 4];
-            for m in 0..nv {
-                f[m] = out.jets[m][node[m] as usize];
+            for ((fm, jets), &degree) in f.iter_mut().zip(&out.jets).zip(node) {
+                *fm = jets[degree as usize];
             }
             let value = f[0].v * f[1].v * f[2].v * f[3].v;
             out.values.push(value);
@@ -114,8 +114,8 @@ impl Shape {
                 p
             };
             let mut g = DVec3::ZERO;
-            for m in 0..nv {
-                g += self.variables[m].direction * (f[m].d1 * but(m));
+            for (m, (var, fm)) in self.variables.iter().zip(&f).enumerate() {
+                g += var.direction * (fm.d1 * but(m));
             }
             out.gradients.push(g);
             if order == 1 {
