@@ -278,6 +278,9 @@ pub fn extract(store: &Store, iso: f64, active: &[u32], params: &LodParams) -> R
     })
 }
 
+/// A leaf's triangles (edge ids, [`APEX`] for its fan apex) and its apex, if fanned.
+type LeafTriangles = (Vec<[u32; 3]>, Option<DVec3>);
+
 /// What one extraction reads: the store, its lattice, the isovalue and Δ.
 struct Lod<'a> {
     store: &'a Store,
@@ -470,7 +473,7 @@ impl Lod<'_> {
         &self,
         merged: &[FxHashSet<u32>],
         cell: LodCell,
-    ) -> Result<Option<(Vec<[u32; 3]>, Option<DVec3>)>> {
+    ) -> Result<Option<LeafTriangles>> {
         let table = case_table();
         let level = cell.level as usize;
         let size = 1usize << level;
@@ -514,7 +517,7 @@ impl Lod<'_> {
         // Transition cell: segments of the finest faces on its boundary.
         let mut next: FxHashMap<u32, u32> = FxHashMap::default();
         let mut incoming: FxHashSet<u32> = FxHashSet::default();
-        for f in 0..6 {
+        for (f, &fine) in finer.iter().enumerate() {
             if table.faces_crossed[case] >> f & 1 == 0 {
                 continue;
             }
@@ -523,7 +526,7 @@ impl Lod<'_> {
             let plane = o[a] + s * size;
             // Sub-faces as cubes on this cell's side: (edge, lowest node).
             let mut faces: Vec<(usize, [usize; 3])> = Vec::new();
-            if finer[f] {
+            if fine {
                 for u in 0..size {
                     for w in 0..size {
                         let mut across = o;
@@ -655,7 +658,7 @@ impl Lod<'_> {
             lo = lo.max(s0.min(s1));
             hi = hi.min(s0.max(s1));
         }
-        if !(lo < hi) {
+        if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
             return Ok(None);
         }
         // Brackets of 1/8 cell outwards from the centroid, nearest first; then bisection.
