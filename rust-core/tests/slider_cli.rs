@@ -19,9 +19,29 @@ fn temp(name: &str) -> PathBuf {
 
 /// Runs `isobar slide STORE` with `input` on stdin.
 fn slide(store: &std::path::Path, input: &[u8]) -> std::process::Output {
+    slide_with(store, &[], input)
+}
+
+/// The `n` output lines of a successful `isobar slide STORE ARGS` with `input` on stdin.
+fn slide_lines(store: &std::path::Path, args: &[&str], input: &str, n: usize) -> Vec<String> {
+    let out = slide_with(store, args, input.as_bytes());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<String> = text.lines().map(str::to_string).collect();
+    assert_eq!(lines.len(), n, "{text}");
+    lines
+}
+
+/// Runs `isobar slide STORE ARGS` with `input` on stdin.
+fn slide_with(store: &std::path::Path, args: &[&str], input: &[u8]) -> std::process::Output {
     let mut child = isobar()
         .arg("slide")
         .arg(store)
+        .args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -73,15 +93,7 @@ fn build_then_slide_from_stdin_matches_marching_cubes() {
 
     let isos = [1500.0, 1510.0, 800.0, 2900.0, 1500.0, 100.0];
     let input: String = isos.iter().map(|v| format!("{v}\n")).collect();
-    let out = slide(&store, input.as_bytes());
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
-    let lines: Vec<&str> = text.lines().collect();
-    assert_eq!(lines.len(), isos.len(), "{text}");
+    let lines = slide_lines(&store, &[], &input, isos.len());
     let layout = RawLayout {
         dims,
         ty: RawType::U16,
@@ -100,7 +112,40 @@ fn build_then_slide_from_stdin_matches_marching_cubes() {
         );
         assert!(line.starts_with(&want), "{line} vs {want}");
         assert!(line.contains("update_ms"), "{line}");
+        assert!(!line.contains("lod_"), "{line}");
     }
+
+    // --lod: bound 0 is the exact mesh; a loose bound merges cells into fewer triangles.
+    let field = |line: &str, name: &str| -> usize {
+        let mut words = line.split_whitespace();
+        words
+            .find(|w| *w == name)
+            .unwrap_or_else(|| panic!("{name}: {line}"));
+        words.next().unwrap().parse().unwrap()
+    };
+    for (bound, exact) in [("0", true), ("0.05", false)] {
+        let lines = slide_lines(&store, &["--lod", bound], &input, isos.len());
+        let (mut all, mut lod) = (0, 0);
+        for line in &lines {
+            let (t, l) = (field(line, "triangles"), field(line, "lod_triangles"));
+            assert!(line.contains("lod_ms"), "{line}");
+            if exact {
+                assert_eq!(l, t, "{line}");
+                assert_eq!(
+                    field(line, "lod_vertices"),
+                    field(line, "vertices"),
+                    "{line}"
+                );
+            }
+            (all, lod) = (all + t, lod + l);
+        }
+        if !exact {
+            assert!(lod < all, "--lod {bound}: {lod} of {all} triangles");
+        }
+    }
+    let out = slide_with(&store, &["--lod", "-1"], b"1500\n");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("lod error bound"));
 }
 
 #[test]

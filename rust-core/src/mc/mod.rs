@@ -4,7 +4,7 @@
 
 pub mod table;
 
-pub use table::{case_table, corner_offset, edge_corner_axis, CaseTable};
+pub use table::{case_table, corner_offset, edge_corner_axis, face_segments, CaseTable};
 
 use crate::error::{Error, Result};
 use glam::DVec3;

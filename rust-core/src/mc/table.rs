@@ -166,8 +166,11 @@ fn shares_a_face(edges: &[u8]) -> bool {
     })
 }
 
-/// Oriented segments (from edge, to edge) cutting face (axis `a`, side `s`).
-fn face_segments(case: usize, a: usize, s: usize) -> Vec<(usize, usize)> {
+/// Oriented segments (from local edge, to local edge) cutting face (axis `a`, side `s`)
+/// of a cell in `case`, the inside on their left as seen from outside the cell. They
+/// depend on the face's four corners only; the level-of-detail extraction applies them to
+/// faces of finer cells seen from a coarser one.
+pub fn face_segments(case: usize, a: usize, s: usize) -> Vec<(usize, usize)> {
     let (b, c) = ((a + 1) % 3, (a + 2) % 3);
     let base = s << a;
     // The face's corners in cyclic order.

@@ -2,7 +2,7 @@
 //! slide its isosurface from the keyboard (or from isovalues read one per line when stdin
 //! is not a terminal, so scripts and tests can drive it).
 
-use super::{build_store, BuildParams, Slider};
+use super::{build_store, BuildParams, LodParams, Slider};
 use crate::error::{Error, Result};
 use crate::io::{read_volume, RawLayout, RawType};
 use crate::progress::Progress;
@@ -60,6 +60,11 @@ pub struct SlideArgs {
     /// Isovalue step of one key press, as a fraction of the value range.
     #[arg(long, default_value_t = 0.001)]
     pub step: f64,
+    /// Also build the level-of-detail mesh after each change, merging cells while every
+    /// deleted sample stays within this fraction of the value range (the paper uses
+    /// 0.001); 0 gives the exact mesh.
+    #[arg(long)]
+    pub lod: Option<f64>,
 }
 
 /// Runs `slide-build`.
@@ -133,17 +138,25 @@ pub fn run_build(args: &BuildArgs) -> Result<()> {
 /// Runs `slide`: interactive on a terminal, else one isovalue per input line.
 pub fn run_slide(args: &SlideArgs) -> Result<()> {
     let mut slider = Slider::open(&args.store)?;
+    if let Some(error_bound) = args.lod {
+        slider.set_lod(LodParams {
+            error_bound,
+            ..LodParams::default()
+        })?;
+    }
+    let lod = args.lod.is_some();
     let (lo, hi) = slider.store().value_range();
     let range = (hi - lo).max(f32::MIN_POSITIVE) as f64;
     if std::io::stdin().is_terminal() {
         interactive(&mut slider, args, lo as f64, range)
     } else {
-        scripted(&mut slider)
+        scripted(&mut slider, lod)
     }
 }
 
-/// One line per isovalue read from stdin: iso, triangles, vertices, update time.
-fn scripted(slider: &mut Slider) -> Result<()> {
+/// One line per isovalue read from stdin: iso, triangles, vertices, update time (and,
+/// with `lod`, the LOD mesh's triangles, vertices and build time).
+fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
     let stdin = std::io::stdin();
     let mut out = std::io::stdout().lock();
     for (k, line) in stdin.lock().lines().enumerate() {
@@ -157,7 +170,7 @@ fn scripted(slider: &mut Slider) -> Result<()> {
             message: format!("line {}: '{text}' is not a number", k + 1),
         })?;
         let change = slider.set_isovalue(iso)?;
-        writeln!(
+        write!(
             out,
             "iso {iso} triangles {} vertices {} update_ms {:.3} added {} removed {}",
             slider.triangle_count(),
@@ -167,6 +180,18 @@ fn scripted(slider: &mut Slider) -> Result<()> {
             change.removed_triangles.len()
         )
         .map_err(|e| Error::io("<stdout>", e))?;
+        if lod {
+            let m = slider.lod_mesh()?;
+            write!(
+                out,
+                " lod_triangles {} lod_vertices {} lod_ms {:.3}",
+                m.triangles.len(),
+                m.positions.len(),
+                m.seconds * 1e3
+            )
+            .map_err(|e| Error::io("<stdout>", e))?;
+        }
+        writeln!(out).map_err(|e| Error::io("<stdout>", e))?;
     }
     Ok(())
 }
@@ -222,10 +247,15 @@ fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Re
     loop {
         let change = slider.set_isovalue(iso)?;
         eprint!(
-            "\riso {iso:<14.6} step {step:<10.4} triangles {:<10} update {:>8.3} ms   ",
+            "\riso {iso:<14.6} step {step:<10.4} triangles {:<10} update {:>8.3} ms",
             slider.triangle_count(),
             change.seconds * 1e3
         );
+        if args.lod.is_some() {
+            let m = slider.lod_mesh()?;
+            eprint!(" lod {:<10} {:>8.3} ms", m.triangles.len(), m.seconds * 1e3);
+        }
+        eprint!("   ");
         loop {
             if stdin.read(&mut key).map_err(|e| Error::io("<stdin>", e))? == 0 {
                 eprintln!();

@@ -7,15 +7,18 @@
 //! values vertices are interpolated from. [`runtime::Slider`] maps the store and keeps one
 //! isosurface in memory, updated coherently by [`runtime::Slider::set_isovalue`]: work is
 //! proportional to the change in the surface, not to the volume. [`full::extract`] is the
-//! from-scratch marching cubes of the same volume it must equal. `cli` holds the
+//! from-scratch marching cubes of the same volume it must equal. [`lod`] merges cells of
+//! the current surface into coarser ones within an error bound, crack-free. `cli` holds the
 //! `slide-build` and `slide` commands.
 
 pub mod build;
 pub mod cli;
 pub mod full;
+pub mod lod;
 pub mod runtime;
 pub mod store;
 
 pub use build::{build_store, BuildParams, BuildStats};
+pub use lod::{LodMesh, LodParams};
 pub use runtime::{Change, Slider, SliderStats};
 pub use store::Store;

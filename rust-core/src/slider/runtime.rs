@@ -18,6 +18,7 @@
 //! a steady slide allocates nothing but the returned [`Change`].
 
 use super::build::node_edges;
+use super::lod::{self, LodMesh, LodParams};
 use super::store::{neighbour, Store};
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice};
@@ -148,6 +149,10 @@ pub struct Slider {
     spare_triangles: RefCell<Vec<[u32; 3]>>,
     scratch: Scratch,
     stats: SliderStats,
+    /// Level of detail asked for (error bound 0: off, the LOD mesh is the exact one).
+    lod: LodParams,
+    /// The LOD mesh at `iso`, computed on first read after an update.
+    lod_mesh: OnceCell<LodMesh>,
 }
 
 impl Slider {
@@ -176,6 +181,11 @@ impl Slider {
             spare_triangles: RefCell::default(),
             scratch: Scratch::default(),
             stats: SliderStats::default(),
+            lod: LodParams {
+                error_bound: 0.0,
+                ..LodParams::default()
+            },
+            lod_mesh: OnceCell::new(),
         };
         slider.clear();
         slider
@@ -195,6 +205,7 @@ impl Slider {
         }
         self.vertices.take();
         self.all_triangles.take();
+        self.lod_mesh.take();
     }
 
     /// Opens the store at `path`.
@@ -285,6 +296,35 @@ impl Slider {
         &self.stats
     }
 
+    /// Sets the level of detail of [`Slider::lod_mesh`] (error bound 0: the exact mesh).
+    /// The exact arrays ([`Slider::positions`] ...) and the [`Change`]s are unaffected.
+    pub fn set_lod(&mut self, params: LodParams) -> Result<()> {
+        params.validate()?;
+        if params != self.lod {
+            self.lod = params;
+            self.lod_mesh.take();
+        }
+        Ok(())
+    }
+
+    /// The level of detail asked for.
+    pub fn lod(&self) -> LodParams {
+        self.lod
+    }
+
+    /// The level-of-detail mesh of the current surface ([`lod::extract`] over the active
+    /// cells), computed on the first read after an update or a change of [`Slider::lod`]:
+    /// O(surface), not coherent with the previous isovalue's.
+    pub fn lod_mesh(&self) -> Result<&LodMesh> {
+        if let Some(m) = self.lod_mesh.get() {
+            return Ok(m);
+        }
+        let mut active: Vec<u32> = self.hc.keys().copied().collect();
+        active.sort_unstable();
+        let mesh = lod::extract(&self.store, self.iso, &active, &self.lod)?;
+        Ok(self.lod_mesh.get_or_init(|| mesh))
+    }
+
     /// Moves the surface to isovalue `iso`.
     pub fn set_isovalue(&mut self, iso: f64) -> Result<Change> {
         self.set_isovalue_with(iso, &mut Progress::none())
@@ -312,6 +352,7 @@ impl Slider {
         if let Some(t) = self.all_triangles.take() {
             *self.spare_triangles.get_mut() = t;
         }
+        self.lod_mesh.take();
         let mut delta = std::mem::take(&mut self.scratch.delta);
         delta.clear();
         let walked = self.walk(target, &mut delta, &mut change, progress);
@@ -652,24 +693,9 @@ impl Slider {
         Ok(())
     }
 
-    /// Interpolation data of edge `e` from the mapped values (the chunks of every value
-    /// it reads checked first).
+    /// Interpolation data of edge `e` from the mapped values.
     fn edge_data(&self, e: u32) -> Result<EdgeData> {
-        let store = &self.store;
-        let lattice = store.lattice();
-        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-        let c = lattice.coords(node);
-        let mut up = c;
-        up[axis] += 1;
-        for end in [c, up] {
-            let i = lattice.index(end[0], end[1], end[2]);
-            store.checked_value(i)?;
-            for (d, _) in node_edges(lattice, i) {
-                store.checked_value(neighbour(lattice, i, d))?;
-            }
-        }
-        let value = |i: usize| store.value(i);
-        Ok(edge_data_from(lattice, value, c, axis, up))
+        store_edge_data(&self.store, e)
     }
 
     /// Computes V and N from E into `out`, reusing its memory.
@@ -690,6 +716,25 @@ impl Slider {
                 *nrm = m;
             });
     }
+}
+
+/// Interpolation data of edge `e` (`node · 3 + axis`) from `store`'s mapped values (the
+/// chunks of every value it reads checked first).
+pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
+    let lattice = store.lattice();
+    let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+    let c = lattice.coords(node);
+    let mut up = c;
+    up[axis] += 1;
+    for end in [c, up] {
+        let i = lattice.index(end[0], end[1], end[2]);
+        store.checked_value(i)?;
+        for (d, _) in node_edges(lattice, i) {
+            store.checked_value(neighbour(lattice, i, d))?;
+        }
+    }
+    let value = |i: usize| store.value(i);
+    Ok(edge_data_from(lattice, value, c, axis, up))
 }
 
 /// Interpolation data of the edge from node `c` to node `up` along `axis`.
