@@ -54,11 +54,11 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 /// The paper's error bound: 0.1 % of the value range.
-pub const DEFAULT_ERROR_BOUND: f64 = 0.001;
+pub(crate) const DEFAULT_ERROR_BOUND: f64 = 0.001;
 /// Merge levels above the lattice by default (cells of up to 8×8×8 lattice cells).
-pub const DEFAULT_MAX_LEVEL: u32 = 3;
+pub(crate) const DEFAULT_MAX_LEVEL: u32 = 3;
 /// Most merge levels accepted.
-pub const MAX_LEVEL: u32 = 6;
+pub(crate) const MAX_LEVEL: u32 = 6;
 
 /// [`LodMesh::vertex_edges`] of a fan apex, a vertex on no lattice edge.
 pub const APEX: u32 = u32::MAX;
