@@ -37,7 +37,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 # name, file made by scripts/make_fe_bench.py, field, isovalue, [(label, isobar fe options)]
 CASES = [
     ("teardrop (Fig. 9)", "teardrop", "f", 0.64, [
-        ("Fig. 9a: 1,280", ["--spacing", "0.11", "--rho", "8"]),
+        ("Fig. 9a: 1,280", ["--spacing", "0.08", "--rho", "8"]),
         ("Fig. 9b: 3,232", ["--spacing", "0.05", "--rho", "8"]),
         ("Fig. 9c: 8,647", ["--spacing", "0.028", "--rho", "8"]),
     ]),
