@@ -54,9 +54,9 @@ def measure(cmd, timeout=600):
     with tempfile.NamedTemporaryFile(suffix=".json") as f:
         p = subprocess.run([sys.executable, "-I", "-S", os.path.join(ROOT, "bench", "measure.py"),
                             f.name, str(timeout)] + cmd, capture_output=True, text=True)
-        if p.returncode != 0 or json.load(open(f.name))["exit_code"] != 0:
+        m = json.load(f) if p.returncode == 0 else {}
+        if m.get("exit_code") != 0:
             raise SystemExit(f"{' '.join(cmd)} failed:\n{p.stdout}{p.stderr}")
-        m = json.load(open(f.name))
     return m, p.stdout + p.stderr
 
 
