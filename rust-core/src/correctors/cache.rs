@@ -3,9 +3,9 @@
 //! visited, so its size follows the surface, not the grid.
 
 use crate::field::sph::SphField;
+use crate::mc::bricks::BrickMap;
 use crate::mc::VirtualGrid;
 use rayon::prelude::*;
-use rustc_hash::FxHashMap;
 
 /// (field value, sum of weights) at a node.
 pub type NodeSample = (f64, f64);
@@ -20,7 +20,7 @@ pub trait NodeValues: Sync {
 /// Sparse cache of evaluated nodes.
 #[derive(Default)]
 pub struct NodeCache {
-    map: FxHashMap<u64, NodeSample>,
+    map: BrickMap<NodeSample>,
     /// Node reads by cells.
     pub lookups: u64,
     /// Nodes evaluated (misses).
@@ -31,10 +31,12 @@ impl NodeCache {
     /// Makes sure the eight corners of every cell in `cells` are evaluated.
     pub fn ensure_corners(&mut self, field: &SphField, grid: &VirtualGrid, cells: &[u64]) {
         let mut missing: Vec<u64> = cells
-            .par_iter()
-            .flat_map_iter(|&c| (0..8).map(move |k| VirtualGrid::corner(c, k)))
-            .filter(|n| !self.map.contains_key(n))
+            .iter()
+            .flat_map(|&c| (0..8).map(move |k| VirtualGrid::corner(c, k)))
+            .filter(|&n| !self.map.contains(n))
             .collect();
+        // Sorted, neighbouring nodes are evaluated together (their particles are in
+        // cache) and stored brick by brick.
         missing.par_sort_unstable();
         missing.dedup();
         let samples: Vec<NodeSample> = missing
@@ -43,12 +45,14 @@ impl NodeCache {
             .collect();
         self.lookups += 8 * cells.len() as u64;
         self.evaluations += missing.len() as u64;
-        self.map.extend(missing.into_iter().zip(samples));
+        for (n, s) in missing.into_iter().zip(samples) {
+            self.map.insert(n, s);
+        }
     }
 
     /// The eight corner samples of `cell`.
     pub fn corners(&self, cell: u64) -> [NodeSample; 8] {
-        std::array::from_fn(|k| self.node(VirtualGrid::corner(cell, k)))
+        self.map.corners(cell)
     }
 
     /// Number of cached nodes.
@@ -73,6 +77,8 @@ impl NodeCache {
 
 impl NodeValues for NodeCache {
     fn node(&self, node: u64) -> NodeSample {
-        self.map[&node]
+        self.map
+            .get(node)
+            .expect("node evaluated before it is read")
     }
 }

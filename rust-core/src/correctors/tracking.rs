@@ -11,10 +11,10 @@ use super::cache::NodeCache;
 use super::Params;
 use crate::error::{Error, Result};
 use crate::field::sph::SphField;
+use crate::mc::bricks::BrickSet;
 use crate::mc::{case_index, case_table, ActiveCell, VirtualGrid};
 use crate::progress::Progress;
 use rayon::prelude::*;
-use rustc_hash::FxHashSet;
 
 /// Cells the surface passes through, and what the walk saw on the way.
 #[derive(Debug, Default)]
@@ -57,7 +57,7 @@ pub fn track(
     let memory_budget = params.memory_budget;
     let table = case_table();
     let mut out = Tracked::default();
-    let mut visited: FxHashSet<u64> = seeds.iter().copied().collect();
+    let mut visited: BrickSet = seeds.iter().copied().collect();
     let mut frontier = seeds;
     let mut is_seed_wave = true;
     while !frontier.is_empty() {

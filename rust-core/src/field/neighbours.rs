@@ -115,10 +115,10 @@ impl NeighbourGrid {
         [c.x.floor() as i64, c.y.floor() as i64, c.z.floor() as i64]
     }
 
-    /// Calls `f` with each sorted-slot range that may hold a particle within `reach` cell
-    /// sizes of `p`: at most (2·reach+1)² contiguous ranges.
+    /// Each sorted-slot range that may hold a particle within `reach` cell sizes of `p`:
+    /// at most (2·reach+1)² contiguous ranges, z-row by y-row.
     #[inline]
-    pub fn for_each_candidate_range(&self, p: DVec3, reach: i64, mut f: impl FnMut(Range<usize>)) {
+    pub fn candidate_ranges(&self, p: DVec3, reach: i64) -> CandidateRanges<'_> {
         let c = self.cell_coords(p);
         let mut lo = [0usize; 3];
         let mut hi = [0usize; 3];
@@ -126,20 +126,71 @@ impl NeighbourGrid {
             let d = self.dims[a] as i64;
             let (l, h) = ((c[a] - reach).max(0), (c[a] + reach).min(d - 1));
             if l > h {
-                return;
+                return CandidateRanges::empty(self);
             }
             lo[a] = l as usize;
             hi[a] = h as usize;
         }
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                let start = self.offsets[self.linear(lo[0], y, z)] as usize;
-                let end = self.offsets[self.linear(hi[0], y, z) + 1] as usize;
-                if start < end {
-                    f(start..end);
-                }
+        CandidateRanges {
+            grid: self,
+            x: (lo[0], hi[0]),
+            y: (lo[1], hi[1]),
+            z_end: hi[2] + 1,
+            row: (lo[1], lo[2]),
+        }
+    }
+
+    /// Calls `f` with each range of [`NeighbourGrid::candidate_ranges`].
+    #[inline]
+    pub fn for_each_candidate_range(&self, p: DVec3, reach: i64, f: impl FnMut(Range<usize>)) {
+        self.candidate_ranges(p, reach).for_each(f);
+    }
+}
+
+/// The slot ranges of one neighbour query (see [`NeighbourGrid::candidate_ranges`]).
+pub struct CandidateRanges<'a> {
+    grid: &'a NeighbourGrid,
+    /// First and last cell along x, the same for every row.
+    x: (usize, usize),
+    /// First and last row along y.
+    y: (usize, usize),
+    z_end: usize,
+    /// The next row's (y, z).
+    row: (usize, usize),
+}
+
+impl<'a> CandidateRanges<'a> {
+    fn empty(grid: &'a NeighbourGrid) -> Self {
+        CandidateRanges {
+            grid,
+            x: (0, 0),
+            y: (0, 0),
+            z_end: 0,
+            row: (0, 0),
+        }
+    }
+}
+
+impl Iterator for CandidateRanges<'_> {
+    type Item = Range<usize>;
+
+    #[inline]
+    fn next(&mut self) -> Option<Range<usize>> {
+        while self.row.1 < self.z_end {
+            let (y, z) = self.row;
+            self.row = if y < self.y.1 {
+                (y + 1, z)
+            } else {
+                (self.y.0, z + 1)
+            };
+            let g = self.grid;
+            let start = g.offsets[g.linear(self.x.0, y, z)] as usize;
+            let end = g.offsets[g.linear(self.x.1, y, z) + 1] as usize;
+            if start < end {
+                return Some(start..end);
             }
         }
+        None
     }
 }
 

@@ -138,6 +138,32 @@ impl Default for SphSettings {
 /// Neighbour-grid cells searched on each side of a query point (cells are half a support).
 const REACH: i64 = 2;
 
+/// Evaluates `$body` with `$k` a constant copy of `$kernel`: each kernel gets its own
+/// instance of the loop, so `shape`'s `match` folds away instead of being taken for
+/// every neighbour.
+macro_rules! with_kernel {
+    ($kernel:expr, $k:ident => $body:expr) => {
+        match $kernel {
+            Kernel::CubicSpline => {
+                const $k: Kernel = Kernel::CubicSpline;
+                $body
+            }
+            Kernel::WendlandC2 => {
+                const $k: Kernel = Kernel::WendlandC2;
+                $body
+            }
+            Kernel::QuinticSpline => {
+                const $k: Kernel = Kernel::QuinticSpline;
+                $body
+            }
+            Kernel::Quadratic => {
+                const $k: Kernel = Kernel::Quadratic;
+                $body
+            }
+        }
+    };
+}
+
 /// One particle as the evaluation loop wants it, stored in neighbour-grid order.
 #[derive(Clone, Copy, Debug)]
 struct Packed {
@@ -315,25 +341,38 @@ impl SphField {
     /// Calls `f(slot, particle, r²)` for every particle whose support contains `x`.
     #[inline(always)]
     fn for_each_neighbour(&self, x: DVec3, mut f: impl FnMut(usize, &Packed, f64)) {
-        self.grid.for_each_candidate_range(x, REACH, |range| {
+        for range in self.grid.candidate_ranges(x, REACH) {
             for (slot, p) in self.particles[range.clone()].iter().enumerate() {
                 let r2 = (x - p.pos).length_squared();
                 if r2 < p.support2 {
                     f(range.start + slot, p, r2);
                 }
             }
-        });
+        }
     }
 
     /// (A(x), S(x)): value and sum of weights, no gradients.
     #[inline]
     pub fn value_and_weight(&self, x: DVec3) -> (f64, f64) {
+        with_kernel!(self.kernel, K => self.value_and_weight_with(K, x))
+    }
+
+    /// [`SphField::value_and_weight`] with the kernel known at compile time. The sums are
+    /// plain locals in plain loops: behind a closure they lived in memory, stored back for
+    /// every neighbour.
+    #[inline(always)]
+    fn value_and_weight_with(&self, kernel: Kernel, x: DVec3) -> (f64, f64) {
         let (mut a, mut s) = (0.0, 0.0);
-        self.for_each_neighbour(x, |_, p, r2| {
-            let w = p.weight_scale * self.kernel.shape(r2.sqrt() * p.inv_h).0;
-            a += w * p.value;
-            s += w;
-        });
+        for range in self.grid.candidate_ranges(x, REACH) {
+            for p in &self.particles[range] {
+                let r2 = (x - p.pos).length_squared();
+                if r2 < p.support2 {
+                    let w = p.weight_scale * kernel.shape(r2.sqrt() * p.inv_h).0;
+                    a += w * p.value;
+                    s += w;
+                }
+            }
+        }
         if self.shepard {
             a = if s > 0.0 { a / s } else { 0.0 };
         }
@@ -343,21 +382,32 @@ impl SphField {
     /// Value, gradient, sum of weights and its gradient at `x`.
     #[inline]
     pub fn sample(&self, x: DVec3) -> Sample {
+        with_kernel!(self.kernel, K => self.sample_with(K, x))
+    }
+
+    /// [`SphField::sample`] with the kernel known at compile time.
+    #[inline(always)]
+    fn sample_with(&self, kernel: Kernel, x: DVec3) -> Sample {
         let (mut a, mut s) = (0.0, 0.0);
         let (mut ga, mut gs) = (DVec3::ZERO, DVec3::ZERO);
-        self.for_each_neighbour(x, |_, p, r2| {
-            let r = r2.sqrt();
-            let (f, df) = self.kernel.shape(r * p.inv_h);
-            let w = p.weight_scale * f;
-            a += w * p.value;
-            s += w;
-            if r > 0.0 {
-                // ∇W = dW/dr · (x − x_j)/r
-                let g = (x - p.pos) * (p.weight_scale * df * p.inv_h / r);
-                ga += g * p.value;
-                gs += g;
+        for range in self.grid.candidate_ranges(x, REACH) {
+            for p in &self.particles[range] {
+                let r2 = (x - p.pos).length_squared();
+                if r2 < p.support2 {
+                    let r = r2.sqrt();
+                    let (f, df) = kernel.shape(r * p.inv_h);
+                    let w = p.weight_scale * f;
+                    a += w * p.value;
+                    s += w;
+                    if r > 0.0 {
+                        // ∇W = dW/dr · (x − x_j)/r
+                        let g = (x - p.pos) * (p.weight_scale * df * p.inv_h / r);
+                        ga += g * p.value;
+                        gs += g;
+                    }
+                }
             }
-        });
+        }
         if self.shepard {
             if s > 0.0 {
                 let v = a / s;

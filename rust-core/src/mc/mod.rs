@@ -2,6 +2,7 @@
 //! cell and edge keys, and the assembly of triangles from active cells. An extractor only
 //! decides which cells are active and where on each cut edge its vertex goes.
 
+pub mod bricks;
 pub mod table;
 
 pub use table::{case_table, corner_offset, edge_corner_axis, face_segments, CaseTable};

@@ -1,0 +1,248 @@
+//! Sparse storage over virtual-grid keys in dense 8×8×8 bricks.
+//!
+//! A surface touches a thin shell of nodes and cells; a hash table per key spreads that
+//! shell over memory, so every lookup is a cache miss and every growth a rehash of
+//! everything seen so far. Bricks keep neighbouring keys together: the brick table is
+//! small enough to stay in cache, a cell's eight corners lie in one brick seven times in
+//! eight, and a scan in key order walks one brick at a time (the last brick is
+//! remembered). Memory still follows the surface: only touched bricks exist.
+
+use super::VirtualGrid;
+use rustc_hash::FxHashMap;
+
+/// Keys per brick edge (a power of two).
+const EDGE: u32 = 8;
+const SHIFT: u32 = EDGE.trailing_zeros();
+const LOCAL: u32 = EDGE - 1;
+/// Keys per brick.
+pub(crate) const BRICK: usize = (EDGE * EDGE * EDGE) as usize;
+const WORDS: usize = BRICK / 64;
+
+/// Brick key and index within the brick of a grid key.
+#[inline]
+fn split(key: u64) -> (u64, usize) {
+    let [x, y, z] = VirtualGrid::coords(key);
+    let brick = VirtualGrid::key(x >> SHIFT, y >> SHIFT, z >> SHIFT);
+    let local = (x & LOCAL) | (y & LOCAL) << SHIFT | (z & LOCAL) << (2 * SHIFT);
+    (brick, local as usize)
+}
+
+/// One brick: a value and a presence bit per key.
+struct Brick<T> {
+    values: Box<[T; BRICK]>,
+    present: [u64; WORDS],
+}
+
+/// A map from grid keys to `T`, stored brick by brick.
+pub struct BrickMap<T> {
+    index: FxHashMap<u64, u32>,
+    bricks: Vec<Brick<T>>,
+    len: usize,
+    /// (brick key, brick index) of the last brick found, for scans in key order.
+    last: Option<(u64, u32)>,
+}
+
+impl<T: Copy + Default> Default for BrickMap<T> {
+    fn default() -> Self {
+        BrickMap {
+            index: FxHashMap::default(),
+            bricks: Vec::new(),
+            len: 0,
+            last: None,
+        }
+    }
+}
+
+impl<T: Copy + Default> BrickMap<T> {
+    /// Number of keys present.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True when no key is present.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Bytes held by the bricks (values and presence bits) and their index.
+    pub fn bytes(&self) -> u64 {
+        let brick = std::mem::size_of::<[T; BRICK]>() + std::mem::size_of::<Brick<T>>();
+        (self.bricks.len() * brick + self.index.capacity() * 16) as u64
+    }
+
+    fn brick_index(&self, brick: u64) -> Option<u32> {
+        match self.last {
+            Some((b, i)) if b == brick => Some(i),
+            _ => self.index.get(&brick).copied(),
+        }
+    }
+
+    fn brick_index_or_insert(&mut self, brick: u64) -> u32 {
+        if let Some((b, i)) = self.last {
+            if b == brick {
+                return i;
+            }
+        }
+        let next = self.bricks.len() as u32;
+        let i = *self.index.entry(brick).or_insert(next);
+        if i == next {
+            self.bricks.push(Brick {
+                values: Box::new([T::default(); BRICK]),
+                present: [0; WORDS],
+            });
+        }
+        self.last = Some((brick, i));
+        i
+    }
+
+    /// The value at `key`, if present.
+    #[inline]
+    pub fn get(&self, key: u64) -> Option<T> {
+        let (brick, local) = split(key);
+        let b = &self.bricks[self.brick_index(brick)? as usize];
+        (b.present[local / 64] >> (local % 64) & 1 == 1).then(|| b.values[local])
+    }
+
+    /// Whether `key` is present.
+    #[inline]
+    pub fn contains(&self, key: u64) -> bool {
+        let (brick, local) = split(key);
+        self.brick_index(brick)
+            .is_some_and(|i| self.bricks[i as usize].present[local / 64] >> (local % 64) & 1 == 1)
+    }
+
+    /// Sets `key` to `value`; returns true when the key was not present before.
+    #[inline]
+    pub fn insert(&mut self, key: u64, value: T) -> bool {
+        let (brick, local) = split(key);
+        let i = self.brick_index_or_insert(brick) as usize;
+        let b = &mut self.bricks[i];
+        let word = &mut b.present[local / 64];
+        let bit = 1u64 << (local % 64);
+        let new = *word & bit == 0;
+        *word |= bit;
+        b.values[local] = value;
+        self.len += new as usize;
+        new
+    }
+
+    /// The values at the eight corners of `cell`, with one brick lookup when the cell
+    /// does not straddle a brick boundary. Every corner must be present.
+    #[inline]
+    pub fn corners(&self, cell: u64) -> [T; 8] {
+        let [x, y, z] = VirtualGrid::coords(cell);
+        if (x & LOCAL) != LOCAL && (y & LOCAL) != LOCAL && (z & LOCAL) != LOCAL {
+            let (brick, local) = split(cell);
+            if let Some(i) = self.brick_index(brick) {
+                let values = &self.bricks[i as usize].values;
+                return std::array::from_fn(|k| {
+                    let [dx, dy, dz] = super::corner_offset(k);
+                    values[local + (dx | dy << SHIFT | dz << (2 * SHIFT)) as usize]
+                });
+            }
+        }
+        std::array::from_fn(|k| {
+            self.get(VirtualGrid::corner(cell, k))
+                .expect("corner evaluated before it is read")
+        })
+    }
+}
+
+/// A set of grid keys, stored brick by brick.
+#[derive(Default)]
+pub struct BrickSet {
+    map: BrickMap<()>,
+}
+
+impl BrickSet {
+    /// Adds `key`; true when it was not in the set.
+    #[inline]
+    pub fn insert(&mut self, key: u64) -> bool {
+        self.map.insert(key, ())
+    }
+
+    /// Number of keys in the set.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// True when the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+impl FromIterator<u64> for BrickSet {
+    fn from_iter<I: IntoIterator<Item = u64>>(keys: I) -> Self {
+        let mut set = BrickSet::default();
+        for k in keys {
+            set.insert(k);
+        }
+        set
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashMap;
+
+    #[test]
+    fn agrees_with_a_hash_map_across_brick_boundaries() {
+        let mut s = 7u64;
+        let mut rnd = |n: u32| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 33) % n as u64) as u32
+        };
+        let mut map = BrickMap::<u64>::default();
+        let mut reference = HashMap::new();
+        for _ in 0..20_000 {
+            let key = VirtualGrid::key(rnd(40), rnd(40), rnd(40));
+            let value = rnd(1000) as u64;
+            assert_eq!(
+                map.insert(key, value),
+                reference.insert(key, value).is_none()
+            );
+        }
+        assert_eq!(map.len(), reference.len());
+        for x in 0..41 {
+            for y in 0..41 {
+                for z in 0..41 {
+                    let key = VirtualGrid::key(x, y, z);
+                    assert_eq!(map.get(key), reference.get(&key).copied());
+                    assert_eq!(map.contains(key), reference.contains_key(&key));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn corners_match_single_lookups_inside_and_across_bricks() {
+        let mut map = BrickMap::<u64>::default();
+        for x in 0..18 {
+            for y in 0..18 {
+                for z in 0..18 {
+                    let key = VirtualGrid::key(x, y, z);
+                    map.insert(key, key * 3 + 1);
+                }
+            }
+        }
+        for cell in [
+            VirtualGrid::key(1, 2, 3),
+            VirtualGrid::key(7, 2, 3),
+            VirtualGrid::key(3, 7, 15),
+            VirtualGrid::key(15, 15, 15),
+            VirtualGrid::key(8, 0, 16),
+        ] {
+            let expected: [u64; 8] = std::array::from_fn(|k| VirtualGrid::corner(cell, k) * 3 + 1);
+            assert_eq!(
+                map.corners(cell),
+                expected,
+                "cell {:?}",
+                VirtualGrid::coords(cell)
+            );
+        }
+    }
+}
