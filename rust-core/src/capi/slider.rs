@@ -440,8 +440,11 @@ mod tests {
         s
     }
 
+    /// Positions, normals and triangles.
+    type Arrays = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[u32; 3]>);
+
     /// Positions, normals and triangles of the LOD mesh, copied out of the C arrays.
-    fn lod_arrays(s: *const IsobarSlider) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    fn lod_arrays(s: *const IsobarSlider) -> Arrays {
         let (mut nv, mut nt) = (0usize, 0usize);
         let (mut p, mut n, mut t) = (std::ptr::null(), std::ptr::null(), std::ptr::null());
         let status = isobar_slider_lod_mesh(s, &mut nv, &mut nt, &mut p, &mut n, &mut t);
@@ -457,7 +460,7 @@ mod tests {
     }
 
     /// The exact arrays through the C accessors.
-    fn exact_arrays(s: *const IsobarSlider) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    fn exact_arrays(s: *const IsobarSlider) -> Arrays {
         let nv = isobar_slider_vertex_count(s);
         let nt = isobar_slider_triangle_count(s);
         // SAFETY: as above.
