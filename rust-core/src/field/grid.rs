@@ -271,22 +271,39 @@ pub fn node_gradient(lattice: &Lattice, value: impl Fn(usize) -> f32, c: [usize;
     g
 }
 
-impl Volume {
-    /// Cell (lower corner) containing `p` and the local coordinates in [0, 1]³, with
-    /// points outside clamped to the nearest cell.
-    fn locate(&self, p: DVec3) -> ([usize; 3], DVec3) {
-        let l = &self.lattice;
-        let g = (p - l.origin) / l.spacing;
+impl Lattice {
+    /// Cell (lower corner) holding the point at lattice index coordinates `g`, and the
+    /// local coordinates in [0, 1]³; points outside are clamped to the nearest cell.
+    pub fn cell_at(&self, g: DVec3) -> ([usize; 3], DVec3) {
         let mut c = [0usize; 3];
         let mut f = DVec3::ZERO;
         for a in 0..3 {
-            let max_cell = (l.dims[a] - 2) as f64;
+            let max_cell = (self.dims[a] - 2) as f64;
             let cell = g[a].floor().clamp(0.0, max_cell);
             c[a] = cell as usize;
             f[a] = (g[a] - cell).clamp(0.0, 1.0);
         }
         (c, f)
     }
+}
+
+/// Trilinear value and exact gradient (per unit of local coordinate) at local coordinates
+/// `f` of a cell whose corner k (at `mc::corner_offset(k)`) has value `v[k]`.
+pub fn trilinear(v: &[f64; 8], f: DVec3) -> (f64, DVec3) {
+    let (fx, fy, fz) = (f.x, f.y, f.z);
+    let c00 = v[0] * (1.0 - fx) + v[1] * fx;
+    let c10 = v[2] * (1.0 - fx) + v[3] * fx;
+    let c01 = v[4] * (1.0 - fx) + v[5] * fx;
+    let c11 = v[6] * (1.0 - fx) + v[7] * fx;
+    let c0 = c00 * (1.0 - fy) + c10 * fy;
+    let c1 = c01 * (1.0 - fy) + c11 * fy;
+    let value = c0 * (1.0 - fz) + c1 * fz;
+    let dx = |k: usize| v[k + 1] - v[k];
+    let gx =
+        (dx(0) * (1.0 - fy) + dx(2) * fy) * (1.0 - fz) + (dx(4) * (1.0 - fy) + dx(6) * fy) * fz;
+    let gy = (c10 - c00) * (1.0 - fz) + (c11 - c01) * fz;
+    let gz = c1 - c0;
+    (value, DVec3::new(gx, gy, gz))
 }
 
 impl ScalarField for Volume {
@@ -297,29 +314,35 @@ impl ScalarField for Volume {
     /// Trilinear value and its exact gradient (outside the lattice: the nearest boundary
     /// cell's value at the clamped point).
     fn value_and_gradient(&self, p: DVec3) -> (f64, DVec3) {
-        let (c, f) = self.locate(p);
-        let v = |dx: usize, dy: usize, dz: usize| self.at(c[0] + dx, c[1] + dy, c[2] + dz) as f64;
-        let (fx, fy, fz) = (f.x, f.y, f.z);
-        let c00 = v(0, 0, 0) * (1.0 - fx) + v(1, 0, 0) * fx;
-        let c10 = v(0, 1, 0) * (1.0 - fx) + v(1, 1, 0) * fx;
-        let c01 = v(0, 0, 1) * (1.0 - fx) + v(1, 0, 1) * fx;
-        let c11 = v(0, 1, 1) * (1.0 - fx) + v(1, 1, 1) * fx;
-        let c0 = c00 * (1.0 - fy) + c10 * fy;
-        let c1 = c01 * (1.0 - fy) + c11 * fy;
-        let value = c0 * (1.0 - fz) + c1 * fz;
-        let dx = |y: usize, z: usize| v(1, y, z) - v(0, y, z);
-        let gx = ((dx(0, 0) * (1.0 - fy) + dx(1, 0) * fy) * (1.0 - fz)
-            + (dx(0, 1) * (1.0 - fy) + dx(1, 1) * fy) * fz)
-            / self.lattice.spacing.x;
-        let gy = ((c10 - c00) * (1.0 - fz) + (c11 - c01) * fz) / self.lattice.spacing.y;
-        let gz = (c1 - c0) / self.lattice.spacing.z;
-        (value, DVec3::new(gx, gy, gz))
+        let l = &self.lattice;
+        let (c, f) = l.cell_at((p - l.origin) / l.spacing);
+        let v: [f64; 8] = std::array::from_fn(|k| {
+            let [x, y, z] = crate::mc::corner_offset(k).map(|d| d as usize);
+            self.at(c[0] + x, c[1] + y, c[2] + z) as f64
+        });
+        let (value, g) = trilinear(&v, f);
+        (value, g / l.spacing)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn trilinear_reproduces_corners_and_a_linear_field() {
+        // v = x + 2y + 4z at corner k = (x, y, z): corner values exact, and the
+        // interpolant of a linear field is that field, gradient (1, 2, 4) everywhere.
+        let v: [f64; 8] = std::array::from_fn(|k| k as f64);
+        for k in 0..8 {
+            let t = DVec3::from(crate::mc::corner_offset(k).map(f64::from));
+            assert_eq!(trilinear(&v, t), (v[k], DVec3::new(1.0, 2.0, 4.0)));
+        }
+        let t = DVec3::new(0.25, 0.5, 0.75);
+        let (value, grad) = trilinear(&v, t);
+        assert!((value - (0.25 + 1.0 + 3.0)).abs() < 1e-15);
+        assert_eq!(grad, DVec3::new(1.0, 2.0, 4.0));
+    }
 
     fn linear_volume() -> Volume {
         let lattice = Lattice::new(

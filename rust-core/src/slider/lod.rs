@@ -44,7 +44,7 @@
 use super::runtime::store_edge_data;
 use super::store::Store;
 use crate::error::{Error, Result};
-use crate::field::grid::Lattice;
+use crate::field::grid::{trilinear, Lattice};
 use crate::mc::{case_table, corner_offset, edge_corner_axis, face_segments, linear_crossing};
 use crate::mesh::Mesh;
 use glam::DVec3;
@@ -54,11 +54,11 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 /// The paper's error bound: 0.1 % of the value range.
-pub const DEFAULT_ERROR_BOUND: f64 = 0.001;
+pub(crate) const DEFAULT_ERROR_BOUND: f64 = 0.001;
 /// Merge levels above the lattice by default (cells of up to 8×8×8 lattice cells).
-pub const DEFAULT_MAX_LEVEL: u32 = 3;
+pub(crate) const DEFAULT_MAX_LEVEL: u32 = 3;
 /// Most merge levels accepted.
-pub const MAX_LEVEL: u32 = 6;
+pub(crate) const MAX_LEVEL: u32 = 6;
 
 /// [`LodMesh::vertex_edges`] of a fan apex, a vertex on no lattice edge.
 pub const APEX: u32 = u32::MAX;
@@ -439,8 +439,8 @@ impl Lod<'_> {
         for z in 0..n {
             for y in 0..n {
                 for x in 0..n {
-                    let t = [x as f64 / s, y as f64 / s, z as f64 / s];
-                    if (trilinear(&corner, t) - at(x, y, z)).abs() > self.delta {
+                    let t = DVec3::new(x as f64, y as f64, z as f64) / s;
+                    if (trilinear(&corner, t).0 - at(x, y, z)).abs() > self.delta {
                         return Ok(false);
                     }
                 }
@@ -608,15 +608,10 @@ impl Lod<'_> {
         Ok(g)
     }
 
-    /// The level-0 (trilinear) field at `g`, in lattice index coordinates.
-    fn field(&self, g: DVec3) -> Result<f64> {
-        let mut c = [0usize; 3];
-        let mut t = [0.0; 3];
-        for a in 0..3 {
-            let f = g[a].floor().clamp(0.0, (self.lattice.dims[a] - 2) as f64);
-            c[a] = f as usize;
-            t[a] = g[a] - f;
-        }
+    /// The level-0 (trilinear) field at `g`, in lattice index coordinates, and its
+    /// gradient per lattice step.
+    fn field(&self, g: DVec3) -> Result<(f64, DVec3)> {
+        let (c, f) = self.lattice.cell_at(g);
         let mut v = [0.0; 8];
         for (k, v) in v.iter_mut().enumerate() {
             let n = offset(c, corner_offset(k), 1);
@@ -624,7 +619,7 @@ impl Lod<'_> {
                 .store
                 .checked_value(self.lattice.index(n[0], n[1], n[2]))? as f64;
         }
-        Ok(trilinear(&v, t))
+        Ok(trilinear(&v, f))
     }
 
     /// The fan's apex, in lattice index coordinates: where the level-0 field crosses the
@@ -662,7 +657,7 @@ impl Lod<'_> {
             return Ok(None);
         }
         // Brackets of 1/8 cell outwards from the centroid, nearest first; then bisection.
-        let f = |s: f64| -> Result<f64> { Ok(self.field(c + n * s)? - self.iso) };
+        let f = |s: f64| -> Result<f64> { Ok(self.field(c + n * s)?.0 - self.iso) };
         let step = 0.125;
         let f0 = f(0.0_f64.clamp(lo, hi))?;
         let mut bracket = None;
@@ -699,14 +694,7 @@ impl Lod<'_> {
 
     /// Position (world) and unit normal (down the gradient) of a fan apex at `g`.
     fn apex_vertex(&self, g: DVec3) -> Result<([f32; 3], [f32; 3])> {
-        let h = 1e-3;
-        let mut grad = DVec3::ZERO;
-        for a in 0..3 {
-            let mut e = DVec3::ZERO;
-            e[a] = h;
-            grad[a] =
-                (self.field(g + e)? - self.field(g - e)?) / (2.0 * h) / self.lattice.spacing[a];
-        }
+        let grad = self.field(g)?.1 / self.lattice.spacing;
         let p = self.lattice.origin + g * self.lattice.spacing;
         Ok((
             p.as_vec3().to_array(),
@@ -722,16 +710,6 @@ fn offset(o: [usize; 3], d: [u32; 3], size: usize) -> [usize; 3] {
         o[1] + d[1] as usize * size,
         o[2] + d[2] as usize * size,
     ]
-}
-
-/// Trilinear interpolation of the cube corners `v` (corner order of `mc`) at `t`.
-fn trilinear(v: &[f64; 8], t: [f64; 3]) -> f64 {
-    let lerp = |a: f64, b: f64, s: f64| a + (b - a) * s;
-    let x00 = lerp(v[0], v[1], t[0]);
-    let x10 = lerp(v[2], v[3], t[0]);
-    let x01 = lerp(v[4], v[5], t[0]);
-    let x11 = lerp(v[6], v[7], t[0]);
-    lerp(lerp(x00, x10, t[1]), lerp(x01, x11, t[1]), t[2])
 }
 
 #[cfg(test)]
@@ -750,15 +728,5 @@ mod tests {
         for case in [1usize | 1 << 7, 1 | 1 << 3] {
             assert!(!s[case], "case {case}");
         }
-    }
-
-    #[test]
-    fn trilinear_reproduces_corners() {
-        let v = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
-        for k in 0..8 {
-            let t = corner_offset(k).map(f64::from);
-            assert_eq!(trilinear(&v, t), v[k]);
-        }
-        assert_eq!(trilinear(&v, [0.5; 3]), 3.5);
     }
 }
