@@ -273,6 +273,38 @@ def test_volume_slider_without_scalars_reports_an_error():
 
 
 @test
+def test_volume_slider_places_the_surface_in_the_images_own_coordinates():
+    from isobar_vtk import vtkIsobarVolumeSlider
+    from vtkmodules.vtkFiltersCore import vtkFlyingEdges3D
+
+    img, _arr = blobs_image()
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(0.5)
+    f.Update()
+    at_zero = h.arrays(f.GetOutput())[0]
+    # The same image with an extent that starts at (-3, 5, 2): every point moves by that
+    # many spacings, and so must the surface (as VTK's own contour's does).
+    img.SetExtent(-3, 20, 5, 28, 2, 25)
+    img.Modified()
+    f.Update()
+    moved = h.arrays(f.GetOutput())[0]
+    fe = vtkFlyingEdges3D()
+    fe.SetInputData(img)
+    fe.SetValue(0, 0.5)
+    fe.Update()
+    q = h.arrays(fe.GetOutput())[0]
+    shift = np.array([-3, 5, 2]) * 0.5
+    assert np.abs(moved.min(axis=0) - (at_zero.min(axis=0) + shift)).max() <= 1e-5
+    assert nearest_distances(moved, q).max() <= 1e-5 and nearest_distances(q, moved).max() <= 1e-5
+    # A rotated image is refused, not contoured in the wrong place.
+    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)
+    img.Modified()
+    f.Update()
+    assert f.GetOutput().GetNumberOfCells() == 0 and "direction matrix" in f.GetErrorMessage()
+
+
+@test
 def test_vector_magnitude_component_and_carried_arrays_match_cli():
     r = reader(h.FRAME_26)
     speed = np.linalg.norm(h.point_array(r.GetOutput(), "velocity"), axis=1)

@@ -6,6 +6,7 @@
 #include "vtkImageData.h"
 #include "vtkInformation.h"
 #include "vtkInformationVector.h"
+#include "vtkMatrix3x3.h"
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
@@ -113,13 +114,20 @@ int vtkIsobarVolumeSlider::RequestData(
   int dims[3];
   input->GetDimensions(dims);
   double origin[3], spacing[3];
-  input->GetOrigin(origin);
   input->GetSpacing(spacing);
   if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2)
   {
     this->Fail("the input image must have at least 2 points along each axis");
     return 1;
   }
+  if (!input->GetDirectionMatrix()->IsIdentity())
+  {
+    this->Fail("the input image has a direction matrix (rotated axes): not supported");
+    return 1;
+  }
+  // The first point, not the image origin: an extent need not start at index 0
+  // (ParaView's Wavelet spans -10..10), and the core's lattice starts at its first node.
+  input->GetPoint(0, origin);
 
   // The core checks the rest (a bound below 1, at most 6 levels) in isobar_slider_set_lod.
   if (!(this->LodErrorBound >= 0.0))
