@@ -252,6 +252,34 @@ def test_volume_slider_in_paraview_sits_where_contour_does():
 
 
 @test
+def test_volume_slider_level_of_detail_in_paraview():
+    iso = 200.0
+    _source, f, values, first, spacing = wavelet_slider(iso=iso)
+    value_range = float(values.max() - values.min())
+    assert "LodErrorBound" in f.ListProperties() and "LodMaxLevel" in f.ListProperties()
+    assert f.LodErrorBound == 0.0 and f.LodMaxLevel == 0
+    exact = sm.Fetch(f)
+    _, exact_tris = h.arrays(exact)
+    h.assert_closed_and_oriented(exact_tris, "exact")
+    counts = []
+    for bound in (0.02, 0.05, 0.1):
+        f.LodErrorBound = bound
+        out = sm.Fetch(f)
+        points, tris = h.arrays(out)
+        h.assert_closed_and_oriented(tris, f"bound {bound}")
+        off = np.abs(h.trilinear(values, first, spacing, points) - iso)
+        assert off.max() <= bound * value_range and off.max() <= 1e-5 * value_range, (bound, off.max())
+        counts.append(len(tris))
+        f.UpdatePropertyInformation()
+        # Only the level of detail ran again: no new store, no slide.
+        assert (f.GetPropertyValue("NumberOfStoreBuilds"), f.GetPropertyValue("NumberOfUpdates")) == (1, 1)
+    assert len(exact_tris) > counts[0] > counts[1] > counts[2], (len(exact_tris), counts)
+    f.LodErrorBound = 0.0
+    h.assert_same_surface(sm.Fetch(f), exact, tol=0.0, what="bound 0")
+    Delete(f)
+
+
+@test
 def test_fe_samples_in_paraview_equal_the_cli_and_keep_the_mesh_across_isovalues():
     from paraview.simple import XMLUnstructuredGridReader
 
