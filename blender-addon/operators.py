@@ -173,6 +173,17 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         default=";".join("*" + e for e in volume_slider.VOLUME_EXTENSIONS + (volume_slider.STORE_EXTENSION,)),
         options={"HIDDEN"},
     )
+    lod_error_bound: FloatProperty(
+        name="LOD Error Bound",
+        description="Level of detail, as a fraction of the value range (0: the exact surface); "
+        "editable later in the Isovalue Slider panel",
+        default=0.0,
+        min=0.0,
+        max=0.99,
+        soft_max=0.1,
+        step=0.1,
+        precision=4,
+    )
 
     def execute(self, context):
         path = bpy.path.abspath(self.filepath)
@@ -192,6 +203,7 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         settings = obj.isobar_slider
         settings.volume, settings.store = path, store
         settings.value_min, settings.value_max = lo, hi
+        settings.lod_error_bound = self.lod_error_bound  # not enabled yet: no slide
         settings.enabled = True
         settings.isovalue = 0.5 * (lo + hi)  # slides: the mesh appears
         if settings.status_error:

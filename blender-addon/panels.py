@@ -173,6 +173,7 @@ class ISOBAR_PT_slider(_Sidebar, bpy.types.Panel):
     def draw(self, context):
         def settings(layout, s):
             layout.prop(s, "isovalue", slider=True)
+            layout.prop(s, "lod_error_bound")
 
         _draw_isovalue_object(self.layout, context, "isobar.import_volume", "Import Volume", "isobar_slider", settings)
 

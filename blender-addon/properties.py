@@ -287,13 +287,15 @@ def _slide(self, context):
     if not self.enabled or not self.store:
         return
     try:
-        update = volume_slider.slide(obj, bpy.path.abspath(self.store), self.isovalue)
+        shown = volume_slider.show(obj, bpy.path.abspath(self.store), self.isovalue, self.lod_error_bound)
     except Exception as error:  # noqa: BLE001 - shown in the panel, never raised into Blender
         self.status, self.status_error = str(error), True
         return
-    self.triangles = int(update.triangles.shape[0])
-    self.update_ms = 1e3 * float(update.seconds)
-    self.status, self.status_error = f"{self.triangles:,} triangles in {self.update_ms:.2f} ms", False
+    self.triangles = shown.triangles
+    if shown.slid:
+        self.update_ms = 1e3 * shown.seconds
+    detail = f" (level of detail {self.lod_error_bound:g})" if self.lod_error_bound > 0 else ""
+    self.status, self.status_error = f"{self.triangles:,} triangles{detail}, update {self.update_ms:.2f} ms", False
 
 
 class IsobarSliderSettings(bpy.types.PropertyGroup):
@@ -309,9 +311,26 @@ class IsobarSliderSettings(bpy.types.PropertyGroup):
         precision=4,
         update=_slide,
     )
+    lod_error_bound: FloatProperty(
+        name="LOD Error Bound",
+        description=(
+            "Level of detail, as a fraction of the volume's value range (0: off, the exact surface). "
+            "Blocks of cells merge where the coarser cell's trilinear interpolant stays within this "
+            "fraction of every sample it drops and the topology is kept; the mesh stays closed and every "
+            "vertex lies on the exact surface. 0.001 is the paper's setting; larger gives fewer triangles. "
+            "Changing it does not slide the isovalue"
+        ),
+        default=0.0,
+        min=0.0,
+        max=0.99,
+        soft_max=0.1,
+        step=0.1,
+        precision=4,
+        update=_slide,
+    )
     value_min: FloatProperty(name="Minimum", description="Smallest value in the volume")
     value_max: FloatProperty(name="Maximum", description="Largest value in the volume")
-    triangles: IntProperty(name="Triangles", description="Triangles of the current surface")
+    triangles: IntProperty(name="Triangles", description="Triangles of the mesh shown (of the level of detail when on)")
     update_ms: FloatProperty(name="Update (ms)", description="Core time of the last isovalue change")
     status: StringProperty(name="Status", description="Result of the last isovalue change")
     status_error: BoolProperty(name="Status Is Error", default=False)

@@ -4,12 +4,18 @@ A volume (.vti, .nrrd, .npy, or a store already built) is pre-encoded once into 
 ``.isoslider`` store beside it; an object then keeps an open ``isobar.Slider`` on that
 store, and each isovalue change asks the core for the changed surface (milliseconds for
 small changes) and writes it into the object's mesh in place.
+
+With a level-of-detail error bound above 0 the mesh is the core's level of detail of
+that surface instead (fewer triangles where the field is nearly trilinear, still closed,
+every vertex on the exact surface); changing only the bound re-runs the level of detail
+and does not slide.
 """
 
 from __future__ import annotations
 
 import os
-from typing import Dict, Tuple
+from dataclasses import dataclass
+from typing import Dict, List, Optional
 
 import numpy as np
 
@@ -20,10 +26,21 @@ from .extraction import FrameMesh, isobar_module
 VOLUME_EXTENSIONS = (".vti", ".nrrd", ".npy")
 STORE_EXTENSION = ".isoslider"
 
-# Open sliders by object (session_uid), with the store each was opened on: a slider
-# holds the run-time state (active edges, triangle lists) that makes the next change
-# cheap, so it must outlive one update.
-_OPEN: Dict[int, Tuple[str, object]] = {}
+# Open sliders by object (session_uid): [store, slider, isovalue it stands at (None
+# before the first slide)]. A slider holds the run-time state (active edges, triangle
+# lists) that makes the next change cheap, so it must outlive one update.
+_OPEN: Dict[int, List[object]] = {}
+
+
+@dataclass
+class Shown:
+    """What :func:`show` wrote into the mesh."""
+
+    triangles: int
+    #: Core time of the isovalue change (0 when only the level of detail changed).
+    seconds: float
+    #: Whether the slider moved (False: only the level of detail was redone).
+    slid: bool
 
 
 def store_path_for(path: str) -> str:
@@ -50,7 +67,7 @@ def slider_for(obj, store: str):
         return opened[1]
     close(obj)
     slider = isobar_module().Slider(store)
-    _OPEN[key] = (store, slider)
+    _OPEN[key] = [store, slider, None]
     return slider
 
 
@@ -61,22 +78,45 @@ def close(obj) -> None:
 
 
 def close_all() -> None:
-    for _store, slider in _OPEN.values():
-        slider.close()
+    for opened in _OPEN.values():
+        opened[1].close()
     _OPEN.clear()
 
 
-def slide(obj, store: str, isovalue: float):
-    """Moves the object's surface to `isovalue` and writes it into its mesh; returns the
-    core's update (counts and time)."""
-    update = slider_for(obj, store).set_isovalue(float(isovalue))
+def show(obj, store: str, isovalue: float, lod_error_bound: float = 0.0) -> Shown:
+    """Shows the surface of `isovalue` in the object's mesh: the exact surface, or with
+    `lod_error_bound` > 0 (a fraction of the value range) the core's level of detail of
+    it. Slides only when the isovalue differs from the one the object's slider stands at,
+    so a new bound alone re-runs just the level of detail. Raises isobar.Error on a bad
+    bound (the mesh is then left as it was)."""
+    slider = slider_for(obj, store)
+    opened = _OPEN[obj.session_uid]
+    iso = float(isovalue)
+    update: Optional[object] = None
+    if opened[2] != iso:
+        opened[2] = None
+        update = slider.set_isovalue(iso)
+        opened[2] = iso
+    bound = float(lod_error_bound)
+    if bound > 0.0 or update is None:
+        # At bound 0 the core's level of detail is the exact mesh (vertices in another
+        # order): the exact surface without a slide.
+        slider.set_lod(bound)
+        lod = slider.lod_mesh()
+        points, triangles, normals = lod.points, lod.triangles, lod.normals
+    else:
+        points, triangles, normals = update.points, update.triangles, update.normals
     frame = FrameMesh(
-        points=np.ascontiguousarray(update.points, dtype=np.float32),
-        triangles=np.ascontiguousarray(update.triangles, dtype=np.int32),
-        normals=np.ascontiguousarray(update.normals, dtype=np.float32),
+        points=np.ascontiguousarray(points, dtype=np.float32),
+        triangles=np.ascontiguousarray(triangles, dtype=np.int32),
+        normals=np.ascontiguousarray(normals, dtype=np.float32),
     )
     mesh_io.write(obj.data, frame)
-    return update
+    return Shown(
+        triangles=int(frame.triangles.shape[0]),
+        seconds=float(update.seconds) if update is not None else 0.0,
+        slid=update is not None,
+    )
 
 
-__all__ = ["STORE_EXTENSION", "VOLUME_EXTENSIONS", "close", "close_all", "ensure_store", "slide", "slider_for", "store_path_for"]
+__all__ = ["STORE_EXTENSION", "VOLUME_EXTENSIONS", "close", "close_all", "Shown", "ensure_store", "show", "slider_for", "store_path_for"]

@@ -510,6 +510,34 @@ enum IsobarStatus isobar_slider_stats(const struct IsobarSlider *s,
                                       uint64_t *updates,
                                       double *total_seconds);
 
+// Sets the level of detail of `isobar_slider_lod_mesh`: `error_bound` is the largest
+// difference between a deleted sample and a merged cell's interpolant, as a fraction of
+// the value range in [0, 1) (0: off, the LOD mesh is the exact mesh; 0.001 is the paper's
+// bound); `max_level` is the most merge levels (a level-L cell spans 2^L lattice cells per
+// axis), 0 takes the default (3), at most 6. The exact arrays are unaffected. A new
+// setting invalidates the arrays of the last `isobar_slider_lod_mesh`.
+enum IsobarStatus isobar_slider_set_lod(struct IsobarSlider *s,
+                                        double error_bound,
+                                        uint32_t max_level);
+
+// The level of detail set (`isobar_slider_set_lod`; a new slider has error bound 0).
+enum IsobarStatus isobar_slider_get_lod(const struct IsobarSlider *s,
+                                        double *error_bound,
+                                        uint32_t *max_level);
+
+// The level-of-detail mesh of the current surface at the bound of
+// `isobar_slider_set_lod`, computed on the first call after an isovalue or LOD change
+// (O(surface)). Closed surfaces stay watertight and oriented like the exact mesh; every
+// vertex lies on the exact surface. At bound 0 it is the exact mesh, its vertices in
+// another order. `*vertex_count` and `*triangle_count` receive the counts,
+// `*positions` and `*normals` vertex_count × 3 f32, `*triangles` triangle_count × 3 u32.
+enum IsobarStatus isobar_slider_lod_mesh(const struct IsobarSlider *s,
+                                         size_t *vertex_count,
+                                         size_t *triangle_count,
+                                         const float **positions,
+                                         const float **normals,
+                                         const uint32_t **triangles);
+
 // Frees a slider and unmaps its store (NULL is ignored).
 void isobar_slider_free(struct IsobarSlider *s);
 

@@ -1,10 +1,12 @@
 """Isovalue sliding on a volume: the object's mesh follows its isovalue property, each
 change served by the core's slider, and equals the core's own slider mesh."""
 
+import sys
+
 import bpy
 import numpy as np
 import pytest
-from conftest import mesh_arrays
+from conftest import MODULE, mesh_arrays
 
 
 def _volume(path, n=28):
@@ -23,8 +25,8 @@ def _volume_of(points, triangles):
     return abs(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum()) / 6.0
 
 
-def _import(path):
-    assert bpy.ops.isobar.import_volume(filepath=str(path)) == {"FINISHED"}
+def _import(path, **settings):
+    assert bpy.ops.isobar.import_volume(filepath=str(path), **settings) == {"FINISHED"}
     obj = bpy.context.active_object
     assert obj.isobar_slider.enabled
     return obj
@@ -69,3 +71,105 @@ def test_bad_volume_is_reported_not_raised(scene, tmp_path):
     with pytest.raises(RuntimeError, match="broken.npy"):
         bpy.ops.isobar.import_volume(filepath=str(bad))
     assert not [o for o in bpy.data.objects if o.isobar_slider.enabled]
+
+
+def _trilinear(values, points):
+    """The trilinear interpolant of an .npy volume ([z, y, x], node (i, j, k) at (i, j, k))
+    at `points`, evaluated here with numpy, not by the core."""
+    v = np.asarray(values, np.float64)
+    g = np.asarray(points, np.float64)
+    i0 = np.clip(np.floor(g).astype(np.int64), 0, np.array(v.shape[::-1]) - 2)
+    t = g - i0
+    assert np.all((t > -1e-6) & (t < 1 + 1e-6)), "a vertex lies outside the volume"
+    out = np.zeros(len(g))
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                w = (t[:, 0] if dx else 1 - t[:, 0]) * (t[:, 1] if dy else 1 - t[:, 1]) * (t[:, 2] if dz else 1 - t[:, 2])
+                out += w * v[i0[:, 2] + dz, i0[:, 1] + dy, i0[:, 0] + dx]
+    return out
+
+
+def _assert_closed_and_oriented(triangles):
+    """Every edge in exactly two triangles, once each way; no degenerate triangle."""
+    t = np.asarray(triangles, np.int64)
+    assert len(t) and np.all((t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 2] != t[:, 0]))
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    assert np.unique(directed, axis=0, return_counts=True)[1].max() == 1, "an edge is traversed twice the same way"
+    counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)[1]
+    assert np.all(counts == 2), f"{int(np.sum(counts != 2))} edges not in exactly two triangles"
+
+
+def _canonical(points, triangles):
+    """Triangles as sorted corner positions, rows sorted: independent of vertex numbering."""
+    corners = np.asarray(points, np.float64)[np.asarray(triangles, np.int64)].reshape(-1, 3)
+    tri = np.repeat(np.arange(len(triangles)), 3)
+    rows = corners[np.lexsort((corners[:, 2], corners[:, 1], corners[:, 0], tri))].reshape(-1, 9)
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+def test_lod_error_bound_coarsens_a_closed_mesh_on_the_surface(scene, isobar, tmp_path):
+    path = _volume(tmp_path / "blobs.npy", n=48)
+    values = np.load(path)
+    value_range = float(values.max() - values.min())
+    obj = _import(path)
+    settings = obj.isobar_slider
+    assert settings.lod_error_bound == 0.0
+    settings.isovalue = 0.5
+    iso = settings.isovalue
+    exact_points, exact_triangles = mesh_arrays(obj)
+    with isobar.Slider(settings.store) as core:
+        want = core.set_isovalue(iso)
+    # (A fresh slider numbers vertices its own way: compare the triangles as positions.)
+    exact = _canonical(exact_points, exact_triangles)
+    np.testing.assert_array_equal(exact, _canonical(want.points, want.triangles))
+    slider = sys.modules[MODULE + ".volume_slider"]._OPEN[obj.session_uid][1]
+    updates = slider.stats["updates"]
+
+    counts = []
+    for bound in (0.01, 0.03, 0.1):
+        settings.lod_error_bound = bound
+        assert not settings.status_error, settings.status
+        points, triangles = mesh_arrays(obj)
+        _assert_closed_and_oriented(triangles)
+        # On the volume's trilinear surface: within the bound, in fact to float rounding.
+        off = np.abs(_trilinear(values, points) - iso)
+        assert off.max() <= bound * value_range and off.max() <= 1e-5 * value_range, (bound, off.max())
+        assert settings.triangles == len(triangles)
+        # The core's own level of detail of this surface, at the bound Blender stored.
+        with isobar.Slider(settings.store, lod_error_bound=settings.lod_error_bound) as core:
+            core.set_isovalue(iso)
+            lod = core.lod_mesh()
+        np.testing.assert_array_equal(_canonical(points, triangles), _canonical(lod.points, lod.triangles))
+        counts.append(len(triangles))
+        # A new bound re-ran the level of detail only: the slider did not move.
+        assert slider.stats["updates"] == updates
+    assert len(exact_triangles) > counts[0] > counts[1] > counts[2], (len(exact_triangles), counts)
+
+    # Bound 0: the exact surface again (the same triangles, whatever the numbering).
+    settings.lod_error_bound = 0.0
+    points, triangles = mesh_arrays(obj)
+    np.testing.assert_array_equal(_canonical(points, triangles), exact)
+
+    # Sliding with a level of detail on shows the level of detail of the new surface.
+    settings.lod_error_bound = 0.03
+    settings.isovalue = 0.3
+    points, triangles = mesh_arrays(obj)
+    _assert_closed_and_oriented(triangles)
+    assert np.abs(_trilinear(values, points) - settings.isovalue).max() <= 1e-5 * value_range
+    assert slider.stats["updates"] == updates + 1
+    assert "level of detail" in settings.status
+
+
+def test_import_with_a_lod_error_bound(scene, isobar, tmp_path):
+    path = _volume(tmp_path / "blobs.npy", n=48)
+    obj = _import(path, lod_error_bound=0.03)
+    settings = obj.isobar_slider
+    assert abs(settings.lod_error_bound - 0.03) < 1e-7 and not settings.status_error
+    points, triangles = mesh_arrays(obj)
+    _assert_closed_and_oriented(triangles)
+    with isobar.Slider(settings.store) as core:
+        exact = core.set_isovalue(settings.isovalue)
+        core.set_lod(settings.lod_error_bound)
+        lod = core.lod_mesh()
+    assert len(triangles) == len(lod.triangles) < len(exact.triangles)

@@ -83,3 +83,109 @@ def test_bad_stores_raise_clear_errors(tmp_path):
         isobar.Slider(bad)
     with pytest.raises(isobar.InvalidArgumentError):
         isobar.Slider.build_array(np.zeros((3, 3)), tmp_path / "x.isoslider")
+
+
+def _sphere_distance(n=48):
+    """Minus the distance to a point off the lattice, [z, y, x]: closed spheres at -r."""
+    z, y, x = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+    c = n / 2 + np.array([0.3, 0.17, -0.21])
+    return (-np.sqrt((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2)).astype(np.float32)
+
+
+def _trilinear(vol, points):
+    """The trilinear interpolant of vol [z, y, x] (origin 0, spacing 1) at (x, y, z) points."""
+    p = points.astype(np.float64)
+    b = np.minimum(np.floor(p).astype(int), np.array(vol.shape[::-1]) - 2)
+    f = p - b
+    out = np.zeros(len(p))
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                w = (f[:, 0] if dx else 1 - f[:, 0]) * (f[:, 1] if dy else 1 - f[:, 1]) * (f[:, 2] if dz else 1 - f[:, 2])
+                out += w * vol[b[:, 2] + dz, b[:, 1] + dy, b[:, 0] + dx]
+    return out
+
+
+def _closed_oriented(triangles):
+    tri = triangles.astype(np.int64)
+    if np.any((tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2]) | (tri[:, 0] == tri[:, 2])):
+        return False
+    directed = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    keys = set(map(tuple, directed))
+    return len(keys) == len(directed) and all((b, a) in keys for a, b in keys)
+
+
+def _canon(points, triangles):
+    """Triangles as position triples, rotated to start at the smallest, sorted."""
+    keys = [tuple(p) for p in points.view(np.uint32).reshape(-1, 3).tolist()]
+    out = []
+    for t in triangles.tolist():
+        k = [keys[i] for i in t]
+        r = k.index(min(k))
+        out.append((k[r], k[(r + 1) % 3], k[(r + 2) % 3]))
+    return sorted(out)
+
+
+def test_lod_mesh_is_coarser_closed_and_exact_at_bound_zero(tmp_path):
+    vol = _sphere_distance()
+    store = tmp_path / "sphere.isoslider"
+    isobar.Slider.build_array(vol, store)
+    with isobar.Slider(store) as slider:
+        assert slider.lod_error_bound == 0.0 and slider.lod_max_level == 3
+        exact = slider.set_isovalue(-19.0)
+        assert len(exact.triangles) > 1000
+        # Bound 0: the exact mesh, vertices renumbered.
+        lod = slider.lod_mesh()
+        assert len(lod.triangles) == len(exact.triangles)
+        assert _canon(lod.points, lod.triangles) == _canon(exact.points, exact.triangles)
+
+        counts = []
+        for bound in (0.001, 0.01, 0.03):
+            slider.lod_error_bound = bound
+            assert slider.lod_error_bound == bound
+            lod = slider.lod_mesh()
+            assert lod.error_bound == bound
+            assert lod.points.dtype == np.float32 and lod.triangles.dtype == np.uint32
+            assert _closed_oriented(lod.triangles), bound
+            assert np.allclose(np.linalg.norm(lod.normals, axis=1), 1.0, atol=1e-4)
+            # Every vertex (edge crossings and fan apexes) lies on the level-0 surface.
+            assert np.max(np.abs(_trilinear(vol, lod.points) + 19.0)) < 1e-3
+            # Normals point to decreasing values: outwards from the centre.
+            c = 24 + np.array([0.3, 0.17, -0.21])
+            assert np.all(np.sum(lod.normals * (lod.points - c), axis=1) > 0)
+            counts.append(len(lod.triangles))
+        assert counts[0] <= len(exact.triangles)
+        assert counts[1] <= counts[0] and counts[2] <= counts[1]
+        assert counts[1] < 0.6 * len(exact.triangles), (counts, len(exact.triangles))
+
+        # The setting survives updates; the exact arrays ignore it.
+        moved = slider.set_isovalue(-15.0)
+        fresh = isobar.Slider(store).set_isovalue(-15.0)
+        assert np.array_equal(moved.triangles, fresh.triangles)
+        lod = slider.lod_mesh()
+        assert len(lod.triangles) < len(moved.triangles) and _closed_oriented(lod.triangles)
+        assert np.max(np.abs(_trilinear(vol, lod.points) + 15.0)) < 1e-3
+
+        slider.lod_max_level = 1
+        assert (slider.lod_error_bound, slider.lod_max_level) == (0.03, 1)
+        one_level = slider.lod_mesh()
+        assert len(lod.triangles) <= len(one_level.triangles) < len(moved.triangles)
+
+
+def test_lod_parameters_are_checked(tmp_path):
+    store = tmp_path / "p.isoslider"
+    isobar.Slider.build_array(_volume(), store)
+    slider = isobar.Slider(store, lod_error_bound=0.01, lod_max_level=2)
+    assert (slider.lod_error_bound, slider.lod_max_level) == (0.01, 2)
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(isobar.InvalidArgumentError):
+            slider.lod_error_bound = bad
+    for bad in (7, -1, 2.5):
+        with pytest.raises(isobar.InvalidArgumentError):
+            slider.lod_max_level = bad
+    assert (slider.lod_error_bound, slider.lod_max_level) == (0.01, 2)
+    empty = slider.lod_mesh()  # no isovalue yet: an empty surface
+    assert empty.points.shape == (0, 3) and empty.triangles.shape == (0, 3)
+    slider.close()
+    with pytest.raises(isobar.InvalidArgumentError):
+        slider.lod_mesh()

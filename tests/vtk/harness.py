@@ -229,3 +229,40 @@ def xml_properties():
         if el.tag.endswith("Property") and el.tag != "InputProperty":
             out[el.get("name")] = (el.tag, dict(el.attrib), el)
     return proxy, out
+
+
+def trilinear(values, origin, spacing, points):
+    """The trilinear interpolant of a volume at `points` (n, 3), evaluated here with numpy
+    (independent of the core): `values` is indexed [z, y, x] (VTK's point order, x
+    fastest), `origin` and `spacing` are the image's."""
+    v = np.asarray(values, dtype=np.float64)
+    nz, ny, nx = v.shape
+    g = (np.asarray(points, dtype=np.float64) - np.asarray(origin)) / np.asarray(spacing)
+    hi = np.array([nx - 2, ny - 2, nz - 2])
+    i0 = np.clip(np.floor(g).astype(np.int64), 0, hi)
+    t = g - i0
+    assert np.all((t > -1e-6) & (t < 1 + 1e-6)), "a point lies outside the volume"
+    out = np.zeros(len(g))
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                w = ((t[:, 0] if dx else 1 - t[:, 0]) * (t[:, 1] if dy else 1 - t[:, 1])
+                     * (t[:, 2] if dz else 1 - t[:, 2]))
+                out += w * v[i0[:, 2] + dz, i0[:, 1] + dy, i0[:, 0] + dx]
+    return out
+
+
+def assert_closed_and_oriented(tris, what="surface"):
+    """Every edge is shared by exactly two triangles, traversed once each way (a closed,
+    consistently oriented triangle surface), and no triangle repeats a vertex."""
+    t = np.asarray(tris, dtype=np.int64)
+    assert len(t), f"{what}: no triangles"
+    assert np.all((t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 2] != t[:, 0])), (
+        f"{what}: degenerate triangle")
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    _, dcount = np.unique(directed, axis=0, return_counts=True)
+    assert dcount.max() == 1, f"{what}: a directed edge is used twice (orientation flips)"
+    undirected = np.sort(directed, axis=1)
+    _, ucount = np.unique(undirected, axis=0, return_counts=True)
+    bad = int(np.sum(ucount != 2))
+    assert bad == 0, f"{what}: {bad} edges not in exactly two triangles"

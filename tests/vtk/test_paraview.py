@@ -215,6 +215,70 @@ def test_volume_slider_in_paraview_slides_without_rebuilding():
     Delete(f)
 
 
+def wavelet_slider(ext=16, iso=200.0):
+    """A Wavelet (extent -ext..ext, not starting at 0), its RTData as a [z, y, x] array with
+    the image's first point and spacing, and an Isovalue Slider on it at `iso` (closed
+    there)."""
+    from paraview.simple import Wavelet
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    source = Wavelet(WholeExtent=[-ext, ext] * 3)
+    image = sm.Fetch(source)
+    n = 2 * ext + 1
+    values = vtk_to_numpy(image.GetPointData().GetArray("RTData")).reshape(n, n, n)
+    f = globals()["IsovalueSlider"](Input=source)
+    f.Scalars = ["POINTS", "RTData"]
+    f.Isovalue = iso
+    return source, f, values, image.GetPoint(0), image.GetSpacing()
+
+
+@test
+def test_volume_slider_in_paraview_sits_where_contour_does():
+    from paraview.simple import Contour
+
+    source, f, _values, _first, _spacing = wavelet_slider()
+    c = Contour(Input=source, ContourBy=["POINTS", "RTData"], Isosurfaces=[200.0])
+    p, t = h.arrays(sm.Fetch(f))
+    q, _ = h.arrays(sm.Fetch(c))
+    assert len(t) > 1000 and len(p) == len(q), (len(p), len(q))
+    # ParaView's Contour puts one vertex per cut edge by linear interpolation, as the
+    # slider does: the same points, in the image's own coordinates (its extent starts at
+    # -16, not 0).
+    for a, b in ((p, q), (q, p)):
+        d = np.array([np.min(np.linalg.norm(b - x, axis=1)) for x in a])
+        assert d.max() <= 1e-4, d.max()
+    Delete(c)
+    Delete(f)
+
+
+@test
+def test_volume_slider_level_of_detail_in_paraview():
+    iso = 200.0
+    _source, f, values, first, spacing = wavelet_slider(iso=iso)
+    value_range = float(values.max() - values.min())
+    assert "LodErrorBound" in f.ListProperties() and "LodMaxLevel" in f.ListProperties()
+    assert f.LodErrorBound == 0.0 and f.LodMaxLevel == 0
+    exact = sm.Fetch(f)
+    _, exact_tris = h.arrays(exact)
+    h.assert_closed_and_oriented(exact_tris, "exact")
+    counts = []
+    for bound in (0.02, 0.05, 0.1):
+        f.LodErrorBound = bound
+        out = sm.Fetch(f)
+        points, tris = h.arrays(out)
+        h.assert_closed_and_oriented(tris, f"bound {bound}")
+        off = np.abs(h.trilinear(values, first, spacing, points) - iso)
+        assert off.max() <= bound * value_range and off.max() <= 1e-5 * value_range, (bound, off.max())
+        counts.append(len(tris))
+        f.UpdatePropertyInformation()
+        # Only the level of detail ran again: no new store, no slide.
+        assert (f.GetPropertyValue("NumberOfStoreBuilds"), f.GetPropertyValue("NumberOfUpdates")) == (1, 1)
+    assert len(exact_tris) > counts[0] > counts[1] > counts[2], (len(exact_tris), counts)
+    f.LodErrorBound = 0.0
+    h.assert_same_surface(sm.Fetch(f), exact, tol=0.0, what="bound 0")
+    Delete(f)
+
+
 @test
 def test_fe_samples_in_paraview_equal_the_cli_and_keep_the_mesh_across_isovalues():
     from paraview.simple import XMLUnstructuredGridReader

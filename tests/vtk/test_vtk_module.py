@@ -176,6 +176,88 @@ def test_volume_slider_slides_without_rebuilding_and_matches_flying_edges():
 
 
 @test
+def test_volume_slider_level_of_detail_is_closed_on_the_surface_and_coarser():
+    from isobar_vtk import vtkIsobarVolumeSlider
+    from vtkmodules.vtkCommonDataModel import vtkPolyData
+
+    n, iso = 48, 0.5
+    img, arr = blobs_image(n)
+    values = vtk_to_numpy(arr).reshape(n, n, n)
+    value_range = float(values.max() - values.min())
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(iso)
+    assert f.GetLodErrorBound() == 0.0 and f.GetLodMaxLevel() == 0
+    f.Update()
+    exact = vtkPolyData()
+    exact.DeepCopy(f.GetOutput())
+    exact_triangles = exact.GetNumberOfCells()
+    assert exact_triangles > 1000 and h.open_edges(exact) == 0
+
+    counts = []
+    for bound in (0.01, 0.03, 0.1):
+        f.SetLodErrorBound(bound)
+        f.Update()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        out = f.GetOutput()
+        points, triangles = h.arrays(out)
+        h.assert_closed_and_oriented(triangles, f"bound {bound}")
+        assert h.open_edges(out) == 0, bound
+        # Every vertex on the input's trilinear surface (numpy, not the core): within the
+        # bound, and in fact to float rounding (the core puts LOD vertices on the surface).
+        off = np.abs(h.trilinear(values, img.GetOrigin(), img.GetSpacing(), points) - iso)
+        assert off.max() <= bound * value_range, (bound, off.max())
+        assert off.max() <= 1e-5 * value_range, (bound, off.max())
+        normals = vtk_to_numpy(out.GetPointData().GetNormals())
+        assert len(normals) == len(points)
+        assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-4), bound
+        # Still the same blobs: coarser chords cut a little off the convex surface (5 %
+        # at bound 0.1, under 1 % at 0.01), no more.
+        assert abs(h.volume(out) - h.volume(exact)) <= max(0.01, bound) * h.volume(exact), bound
+        counts.append(len(triangles))
+        # A new level of detail neither rebuilds the store nor slides.
+        assert f.GetNumberOfStoreBuilds() == 1 and f.GetNumberOfUpdates() == 1, bound
+    assert exact_triangles > counts[0] > counts[1] > counts[2], (exact_triangles, counts)
+
+    # Fewer merge levels, less merging.
+    f.SetLodMaxLevel(1)
+    f.Update()
+    assert counts[2] < f.GetOutput().GetNumberOfCells() < exact_triangles
+    f.SetLodMaxLevel(0)
+
+    # Bound 0 is the exact surface again, triangle for triangle.
+    f.SetLodErrorBound(0.0)
+    f.Update()
+    h.assert_same_surface(f.GetOutput(), exact, tol=0.0, what="bound 0")
+    assert f.GetNumberOfUpdates() == 1
+
+    # Sliding with a level of detail on: the level of detail of the new surface.
+    f.SetLodErrorBound(0.03)
+    f.SetIsovalue(0.3)
+    f.Update()
+    points, triangles = h.arrays(f.GetOutput())
+    h.assert_closed_and_oriented(triangles, "after a slide")
+    off = np.abs(h.trilinear(values, img.GetOrigin(), img.GetSpacing(), points) - 0.3)
+    assert off.max() <= 1e-5 * value_range
+    assert f.GetNumberOfStoreBuilds() == 1 and f.GetNumberOfUpdates() == 2
+
+    # Bounds the core refuses: an error and an empty output, then a good one recovers.
+    for bad in (-0.01, 1.5):
+        f.SetLodErrorBound(bad)
+        errors = Errors(f)
+        f.Update()
+        assert f.GetOutput().GetNumberOfCells() == 0, bad
+        assert "bound" in f.GetErrorMessage().lower() and errors.messages, (bad, f.GetErrorMessage())
+    f.SetLodErrorBound(0.03)
+    f.SetLodMaxLevel(7)
+    f.Update()
+    assert f.GetOutput().GetNumberOfCells() == 0 and "levels" in f.GetErrorMessage(), f.GetErrorMessage()
+    f.SetLodMaxLevel(0)
+    f.Update()
+    assert f.GetErrorMessage() == "" and f.GetOutput().GetNumberOfCells() == len(triangles)
+
+
+@test
 def test_volume_slider_without_scalars_reports_an_error():
     from isobar_vtk import vtkIsobarVolumeSlider
     from vtkmodules.vtkCommonDataModel import vtkImageData
@@ -188,6 +270,38 @@ def test_volume_slider_without_scalars_reports_an_error():
     f.Update()
     assert f.GetOutput().GetNumberOfCells() == 0
     assert "no point scalars" in f.GetErrorMessage() and errors.messages
+
+
+@test
+def test_volume_slider_places_the_surface_in_the_images_own_coordinates():
+    from isobar_vtk import vtkIsobarVolumeSlider
+    from vtkmodules.vtkFiltersCore import vtkFlyingEdges3D
+
+    img, _arr = blobs_image()
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(0.5)
+    f.Update()
+    at_zero = h.arrays(f.GetOutput())[0]
+    # The same image with an extent that starts at (-3, 5, 2): every point moves by that
+    # many spacings, and so must the surface (as VTK's own contour's does).
+    img.SetExtent(-3, 20, 5, 28, 2, 25)
+    img.Modified()
+    f.Update()
+    moved = h.arrays(f.GetOutput())[0]
+    fe = vtkFlyingEdges3D()
+    fe.SetInputData(img)
+    fe.SetValue(0, 0.5)
+    fe.Update()
+    q = h.arrays(fe.GetOutput())[0]
+    shift = np.array([-3, 5, 2]) * 0.5
+    assert np.abs(moved.min(axis=0) - (at_zero.min(axis=0) + shift)).max() <= 1e-5
+    assert nearest_distances(moved, q).max() <= 1e-5 and nearest_distances(q, moved).max() <= 1e-5
+    # A rotated image is refused, not contoured in the wrong place.
+    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)
+    img.Modified()
+    f.Update()
+    assert f.GetOutput().GetNumberOfCells() == 0 and "direction matrix" in f.GetErrorMessage()
 
 
 @test

@@ -6,6 +6,7 @@
 #include "vtkImageData.h"
 #include "vtkInformation.h"
 #include "vtkInformationVector.h"
+#include "vtkMatrix3x3.h"
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
@@ -47,10 +48,14 @@ std::string CoreError(const char* call, IsobarStatus status)
 //------------------------------------------------------------------------------
 vtkIsobarVolumeSlider::vtkIsobarVolumeSlider()
   : Isovalue(0.0)
+  , LodErrorBound(0.0)
+  , LodMaxLevel(0)
   , NumberOfStoreBuilds(0)
   , NumberOfUpdates(0)
   , LastUpdateSeconds(0.0)
   , Slider(nullptr)
+  , AtIsovalue(false)
+  , AppliedIsovalue(0.0)
 {
   this->SetInputArrayToProcess(
     0, 0, 0, vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
@@ -67,6 +72,7 @@ void vtkIsobarVolumeSlider::CloseStore()
 {
   isobar_slider_free(this->Slider);
   this->Slider = nullptr;
+  this->AtIsovalue = false;
   if (!this->StorePath.empty())
   {
     std::error_code ignored;
@@ -108,11 +114,30 @@ int vtkIsobarVolumeSlider::RequestData(
   int dims[3];
   input->GetDimensions(dims);
   double origin[3], spacing[3];
-  input->GetOrigin(origin);
   input->GetSpacing(spacing);
   if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2)
   {
     this->Fail("the input image must have at least 2 points along each axis");
+    return 1;
+  }
+  if (!input->GetDirectionMatrix()->IsIdentity())
+  {
+    this->Fail("the input image has a direction matrix (rotated axes): not supported");
+    return 1;
+  }
+  // The first point, not the image origin: an extent need not start at index 0
+  // (ParaView's Wavelet spans -10..10), and the core's lattice starts at its first node.
+  input->GetPoint(0, origin);
+
+  // The core checks the rest (a bound below 1, at most 6 levels) in isobar_slider_set_lod.
+  if (!(this->LodErrorBound >= 0.0))
+  {
+    this->Fail("LodErrorBound must be >= 0 (0: the exact surface)");
+    return 1;
+  }
+  if (this->LodMaxLevel < 0)
+  {
+    this->Fail("LodMaxLevel must be >= 0 (0: the core's default)");
     return 1;
   }
 
@@ -157,38 +182,74 @@ int vtkIsobarVolumeSlider::RequestData(
   }
 
   // 2. Slide to the isovalue: the slider applies only the change since the last one.
-  IsobarSliderChange change;
-  const IsobarStatus status =
-    isobar_slider_set_isovalue(this->Slider, this->Isovalue, nullptr, nullptr, &change);
-  if (status != ISOBAR_STATUS_OK)
+  //    A re-run for another reason (a new level of detail) does not slide again.
+  if (!this->AtIsovalue || this->AppliedIsovalue != this->Isovalue)
   {
-    this->Fail(CoreError("isobar_slider_set_isovalue", status));
-    return 1;
+    this->AtIsovalue = false;
+    IsobarSliderChange change;
+    const IsobarStatus status =
+      isobar_slider_set_isovalue(this->Slider, this->Isovalue, nullptr, nullptr, &change);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->Fail(CoreError("isobar_slider_set_isovalue", status));
+      return 1;
+    }
+    this->AtIsovalue = true;
+    this->AppliedIsovalue = this->Isovalue;
+    ++this->NumberOfUpdates;
+    this->LastUpdateSeconds = change.seconds;
   }
-  ++this->NumberOfUpdates;
-  this->LastUpdateSeconds = change.seconds;
 
-  // 3. The slider's arrays into the output.
-  const vtkIdType nv = static_cast<vtkIdType>(isobar_slider_vertex_count(this->Slider));
-  const vtkIdType nt = static_cast<vtkIdType>(isobar_slider_triangle_count(this->Slider));
+  // 3. The surface's arrays: the slider's exact ones, or its level of detail (computed
+  //    by the core on the first read after an isovalue or LOD change).
+  size_t nv = 0;
+  size_t nt = 0;
+  const float* xyzIn = nullptr;
+  const float* normalsIn = nullptr;
+  const uint32_t* tris = nullptr;
+  if (this->LodErrorBound > 0.0)
+  {
+    IsobarStatus status = isobar_slider_set_lod(
+      this->Slider, this->LodErrorBound, static_cast<uint32_t>(this->LodMaxLevel));
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->Fail(CoreError("isobar_slider_set_lod", status));
+      return 1;
+    }
+    status = isobar_slider_lod_mesh(this->Slider, &nv, &nt, &xyzIn, &normalsIn, &tris);
+    if (status != ISOBAR_STATUS_OK)
+    {
+      this->Fail(CoreError("isobar_slider_lod_mesh", status));
+      return 1;
+    }
+  }
+  else
+  {
+    nv = isobar_slider_vertex_count(this->Slider);
+    nt = isobar_slider_triangle_count(this->Slider);
+    xyzIn = isobar_slider_positions(this->Slider);
+    normalsIn = isobar_slider_normals(this->Slider);
+    tris = isobar_slider_triangles(this->Slider);
+  }
+
+  // 4. Into the output.
   vtkNew<vtkFloatArray> xyz;
   xyz->SetNumberOfComponents(3);
-  xyz->SetNumberOfTuples(nv);
+  xyz->SetNumberOfTuples(static_cast<vtkIdType>(nv));
   vtkNew<vtkFloatArray> normals;
   normals->SetName("Normals");
   normals->SetNumberOfComponents(3);
-  normals->SetNumberOfTuples(nv);
+  normals->SetNumberOfTuples(static_cast<vtkIdType>(nv));
   if (nv > 0)
   {
-    std::copy_n(isobar_slider_positions(this->Slider), 3 * nv, xyz->GetPointer(0));
-    std::copy_n(isobar_slider_normals(this->Slider), 3 * nv, normals->GetPointer(0));
+    std::copy_n(xyzIn, 3 * nv, xyz->GetPointer(0));
+    std::copy_n(normalsIn, 3 * nv, normals->GetPointer(0));
   }
   vtkNew<vtkPoints> points;
   points->SetData(xyz);
   vtkNew<vtkCellArray> polys;
-  polys->AllocateExact(nt, 3 * nt);
-  const uint32_t* tris = isobar_slider_triangles(this->Slider);
-  for (vtkIdType t = 0; t < nt; ++t)
+  polys->AllocateExact(static_cast<vtkIdType>(nt), static_cast<vtkIdType>(3 * nt));
+  for (size_t t = 0; t < nt; ++t)
   {
     const vtkIdType ids[3] = { tris[3 * t], tris[3 * t + 1], tris[3 * t + 2] };
     polys->InsertNextCell(3, ids);
@@ -204,6 +265,8 @@ void vtkIsobarVolumeSlider::PrintSelf(ostream& os, vtkIndent indent)
 {
   this->Superclass::PrintSelf(os, indent);
   os << indent << "Isovalue: " << this->Isovalue << "\n";
+  os << indent << "LodErrorBound: " << this->LodErrorBound << "\n";
+  os << indent << "LodMaxLevel: " << this->LodMaxLevel << "\n";
   os << indent << "NumberOfStoreBuilds: " << this->NumberOfStoreBuilds << "\n";
   os << indent << "NumberOfUpdates: " << this->NumberOfUpdates << "\n";
 }

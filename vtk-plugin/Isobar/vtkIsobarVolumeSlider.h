@@ -10,6 +10,13 @@
  * start crossing and the moved vertices. The output is the marching-cubes surface of the
  * trilinear volume (float points, "Normals" from the volume's gradient).
  *
+ * LodErrorBound > 0 asks for the core's level of detail of that surface instead (the
+ * paper's section 2.2): blocks of cells merge where the coarser trilinear interpolant stays
+ * within LodErrorBound x (value range) of every sample it replaces and the topology is
+ * kept; the mesh stays closed where merged cells meet finer ones, and every vertex lies
+ * on the exact surface. 0 (the default) shows the exact surface. Changing LodErrorBound or
+ * LodMaxLevel re-runs only the level of detail: no new store, no isovalue change.
+ *
  * A new input array, new values or new geometry rebuild the store. NumberOfStoreBuilds
  * and NumberOfUpdates count the work done, so that scripts (and tests) can tell a slide
  * from a start-over.
@@ -38,6 +45,21 @@ public:
   vtkGetMacro(Isovalue, double);
   ///@}
 
+  ///@{
+  /// Level of detail: the largest difference allowed between a sample that a merged cell
+  /// drops and that cell's trilinear interpolant, as a fraction of the volume's value
+  /// range, in [0, 1). 0 (default): the exact surface. 0.001 is the paper's bound.
+  vtkSetMacro(LodErrorBound, double);
+  vtkGetMacro(LodErrorBound, double);
+  ///@}
+
+  ///@{
+  /// Most merge levels of the level of detail (a level-L cell spans 2^L cells per axis),
+  /// at most 6; 0 (default) takes the core's default, 3. Used when LodErrorBound > 0.
+  vtkSetMacro(LodMaxLevel, int);
+  vtkGetMacro(LodMaxLevel, int);
+  ///@}
+
   /// Times the volume was pre-encoded (once per input volume).
   vtkGetMacro(NumberOfStoreBuilds, int);
   /// Isovalue changes applied by the slider.
@@ -62,11 +84,16 @@ private:
   void CloseStore();
 
   double Isovalue;
+  double LodErrorBound;
+  int LodMaxLevel;
   int NumberOfStoreBuilds;
   int NumberOfUpdates;
   double LastUpdateSeconds;
   std::string ErrorMessage;
   IsobarSlider* Slider;
+  /// Whether the open slider stands at Isovalue already (a LOD change needs no slide).
+  bool AtIsovalue;
+  double AppliedIsovalue;
   std::string StorePath;
   /// What the open store was built from: array identity, its MTime, the geometry.
   std::string BuiltFrom;

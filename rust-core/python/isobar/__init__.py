@@ -31,7 +31,7 @@ from .errors import (
 from .adaptive import extract_adaptive
 from .fe import FeMesh, Samples, sample_fe
 from .particles import Particles
-from .slider import Slider, SliderUpdate
+from .slider import Slider, SliderLodMesh, SliderUpdate
 from .sph import default_params, extract
 from .surface import Surface
 
@@ -65,6 +65,7 @@ __all__ = [
     "Particles",
     "Samples",
     "Slider",
+    "SliderLodMesh",
     "SliderUpdate",
     "Status",
     "Surface",

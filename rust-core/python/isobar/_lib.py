@@ -366,6 +366,19 @@ _PROTOTYPES = {
     ),
     "isobar_slider_value_range": (_Status, [POINTER(SliderHandle), POINTER(c_double), POINTER(c_double)]),
     "isobar_slider_stats": (_Status, [POINTER(SliderHandle), POINTER(c_uint64), POINTER(c_double)]),
+    "isobar_slider_set_lod": (_Status, [POINTER(SliderHandle), c_double, c_uint32]),
+    "isobar_slider_get_lod": (_Status, [POINTER(SliderHandle), POINTER(c_double), POINTER(c_uint32)]),
+    "isobar_slider_lod_mesh": (
+        _Status,
+        [
+            POINTER(SliderHandle),
+            POINTER(c_size_t),
+            POINTER(c_size_t),
+            POINTER(POINTER(c_float)),
+            POINTER(POINTER(c_float)),
+            POINTER(POINTER(c_uint32)),
+        ],
+    ),
     "isobar_slider_free": (None, [POINTER(SliderHandle)]),
 }
 

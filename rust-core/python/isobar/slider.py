@@ -6,6 +6,8 @@ isovalue and get the updated surface in milliseconds::
     update = slider.set_isovalue(420.0)
     update.points, update.normals, update.triangles         # numpy arrays
     update.added, update.removed, update.moved, update.seconds
+    slider.lod_error_bound = 0.01                            # level of detail (0: off)
+    lod = slider.lod_mesh()                                  # lod.points, lod.normals, lod.triangles
 
 The store is memory-mapped: the volume stays mostly on disk.
 """
@@ -13,7 +15,7 @@ The store is memory-mapped: the volume stays mostly on disk.
 from __future__ import annotations
 
 import weakref
-from ctypes import POINTER, byref, c_double, c_size_t, c_uint32, c_uint64
+from ctypes import POINTER, byref, c_double, c_float, c_size_t, c_uint32, c_uint64
 from typing import Optional
 
 import numpy as np
@@ -61,17 +63,45 @@ class SliderUpdate:
         )
 
 
+class SliderLodMesh:
+    """The level-of-detail surface (:meth:`Slider.lod_mesh`): merged cells where the field
+    is close to trilinear, watertight where they meet finer ones; every vertex lies on the
+    exact surface. At error bound 0 it is the exact mesh (vertices in another order).
+
+    Attributes:
+        error_bound: the bound it was made with (fraction of the value range).
+        points: (n, 3) float32 vertex positions.
+        normals: (n, 3) float32 unit normals, pointing to decreasing values.
+        triangles: (m, 3) uint32 vertex indices, oriented like the exact mesh's.
+    """
+
+    __slots__ = ("error_bound", "points", "normals", "triangles")
+
+    def __repr__(self) -> str:
+        return (
+            f"SliderLodMesh(error_bound={self.error_bound}, {len(self.points)} points, "
+            f"{len(self.triangles)} triangles)"
+        )
+
+
 class Slider:
-    """A memory-mapped slider store and the isosurface at the current isovalue."""
+    """A memory-mapped slider store and the isosurface at the current isovalue.
+
+    `lod_error_bound` (fraction of the value range, 0 = off) and `lod_max_level` (merge
+    levels, 0 = the core's default 3) set the level of detail of :meth:`lod_mesh`; the
+    exact arrays of :meth:`set_isovalue` do not depend on them.
+    """
 
     __slots__ = ("_handle", "_finalizer", "path", "__weakref__")
 
-    def __init__(self, path) -> None:
+    def __init__(self, path, lod_error_bound: float = 0.0, lod_max_level: int = 0) -> None:
         handle = POINTER(SliderHandle)()
         check(lib.isobar_slider_open(encode(path, "store path"), byref(handle)))
         self._handle = handle
         self._finalizer = weakref.finalize(self, lib.isobar_slider_free, handle)
         self.path = str(path)
+        if lod_error_bound or lod_max_level:
+            self.set_lod(lod_error_bound, lod_max_level)
 
     @staticmethod
     def build(volume_path, store_path, array: Optional[str] = None, threshold: float = 0.0, max_levels: int = 0) -> None:
@@ -164,6 +194,52 @@ class Slider:
         u.edges_removed = change.edges_removed
         u.seconds = change.seconds
         return u
+
+    def set_lod(self, error_bound: float, max_level: int = 0) -> None:
+        """Sets the level of detail of :meth:`lod_mesh`: `error_bound` in [0, 1) is the
+        largest deviation of a merged cell from the samples it replaces, as a fraction of
+        the value range (0: off; 0.001 is the paper's bound); `max_level` the most merge
+        levels (0: default 3, at most 6). Raises InvalidArgumentError out of range."""
+        if isinstance(max_level, bool) or int(max_level) != max_level or not 0 <= max_level <= 2**32 - 1:
+            raise InvalidArgumentError(f"lod max_level must be an integer >= 0, got {max_level!r}")
+        check(lib.isobar_slider_set_lod(self._live(), float(error_bound), int(max_level)))
+
+    def _lod(self) -> tuple:
+        bound, level = c_double(), c_uint32()
+        check(lib.isobar_slider_get_lod(self._live(), byref(bound), byref(level)))
+        return bound.value, level.value
+
+    @property
+    def lod_error_bound(self) -> float:
+        """Level-of-detail error bound, a fraction of the value range (0: off)."""
+        return self._lod()[0]
+
+    @lod_error_bound.setter
+    def lod_error_bound(self, value: float) -> None:
+        self.set_lod(value, self._lod()[1])
+
+    @property
+    def lod_max_level(self) -> int:
+        """Most level-of-detail merge levels (a level-L cell spans 2^L lattice cells)."""
+        return self._lod()[1]
+
+    @lod_max_level.setter
+    def lod_max_level(self, value: int) -> None:
+        self.set_lod(self._lod()[0], value)
+
+    def lod_mesh(self) -> SliderLodMesh:
+        """The level-of-detail mesh of the current surface at :attr:`lod_error_bound`
+        (computed by the core on the first call after an update, O(surface))."""
+        h = self._live()
+        nv, nt = c_size_t(), c_size_t()
+        p, n, t = POINTER(c_float)(), POINTER(c_float)(), POINTER(c_uint32)()
+        check(lib.isobar_slider_lod_mesh(h, byref(nv), byref(nt), byref(p), byref(n), byref(t)))
+        m = SliderLodMesh()
+        m.error_bound = self._lod()[0]
+        m.points = _copy(p, 3 * nv.value, np.float32).reshape(nv.value, 3)
+        m.normals = _copy(n, 3 * nv.value, np.float32).reshape(nv.value, 3)
+        m.triangles = _copy(t, 3 * nt.value, np.uint32).reshape(nt.value, 3)
+        return m
 
     def close(self) -> None:
         """Frees the core's state and unmaps the store (also done on garbage collection)."""

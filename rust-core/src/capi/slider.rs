@@ -3,14 +3,15 @@
 //!
 //! A slider handle is mutable state: one thread at a time may use it. Arrays returned by
 //! the accessors stay valid until the next `isobar_slider_set_isovalue` or
-//! `isobar_slider_free` on that handle.
+//! `isobar_slider_free` on that handle; those of `isobar_slider_lod_mesh` also until the
+//! next `isobar_slider_set_lod`.
 
 use super::{
     free_boxed, guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarProgressFn,
     IsobarStatus,
 };
 use crate::field::grid::{Lattice, Values, Volume};
-use crate::slider::{build_store, BuildParams, Change, Slider};
+use crate::slider::{build_store, BuildParams, Change, LodParams, Slider};
 use glam::DVec3;
 use std::ffi::{c_char, c_void};
 use std::path::Path;
@@ -308,8 +309,299 @@ pub extern "C" fn isobar_slider_stats(
     })
 }
 
+/// Sets the level of detail of `isobar_slider_lod_mesh`: `error_bound` is the largest
+/// difference between a deleted sample and a merged cell's interpolant, as a fraction of
+/// the value range in [0, 1) (0: off, the LOD mesh is the exact mesh; 0.001 is the paper's
+/// bound); `max_level` is the most merge levels (a level-L cell spans 2^L lattice cells per
+/// axis), 0 takes the default (3), at most 6. The exact arrays are unaffected. A new
+/// setting invalidates the arrays of the last `isobar_slider_lod_mesh`.
+#[no_mangle]
+pub extern "C" fn isobar_slider_set_lod(
+    s: *mut IsobarSlider,
+    error_bound: f64,
+    max_level: u32,
+) -> IsobarStatus {
+    guard(|| {
+        let h = slider_mut(s)?;
+        let d = LodParams::default();
+        h.slider.set_lod(LodParams {
+            error_bound,
+            max_level: if max_level > 0 {
+                max_level
+            } else {
+                d.max_level
+            },
+        })
+    })
+}
+
+/// The level of detail set (`isobar_slider_set_lod`; a new slider has error bound 0).
+#[no_mangle]
+pub extern "C" fn isobar_slider_get_lod(
+    s: *const IsobarSlider,
+    error_bound: *mut f64,
+    max_level: *mut u32,
+) -> IsobarStatus {
+    guard(|| {
+        let s = non_null(s, "slider")?;
+        let lod = s.slider.lod();
+        put(error_bound, lod.error_bound, "error_bound")?;
+        put(max_level, lod.max_level, "max_level")
+    })
+}
+
+/// The level-of-detail mesh of the current surface at the bound of
+/// `isobar_slider_set_lod`, computed on the first call after an isovalue or LOD change
+/// (O(surface)). Closed surfaces stay watertight and oriented like the exact mesh; every
+/// vertex lies on the exact surface. At bound 0 it is the exact mesh, its vertices in
+/// another order. `*vertex_count` and `*triangle_count` receive the counts,
+/// `*positions` and `*normals` vertex_count × 3 f32, `*triangles` triangle_count × 3 u32.
+#[no_mangle]
+pub extern "C" fn isobar_slider_lod_mesh(
+    s: *const IsobarSlider,
+    vertex_count: *mut usize,
+    triangle_count: *mut usize,
+    positions: *mut *const f32,
+    normals: *mut *const f32,
+    triangles: *mut *const u32,
+) -> IsobarStatus {
+    guard(|| {
+        let s = non_null(s, "slider")?;
+        for (p, name) in [
+            (vertex_count.is_null(), "vertex_count"),
+            (triangle_count.is_null(), "triangle_count"),
+            (positions.is_null(), "positions"),
+            (normals.is_null(), "normals"),
+            (triangles.is_null(), "triangles"),
+        ] {
+            if p {
+                return Err(invalid(name, "output pointer must not be NULL"));
+            }
+        }
+        let m = s.slider.lod_mesh()?;
+        put(vertex_count, m.positions.len(), "vertex_count")?;
+        put(triangle_count, m.triangles.len(), "triangle_count")?;
+        put(positions, m.positions.as_ptr().cast(), "positions")?;
+        put(normals, m.normals.as_ptr().cast(), "normals")?;
+        put(triangles, m.triangles.as_ptr().cast(), "triangles")
+    })
+}
+
 /// Frees a slider and unmaps its store (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_slider_free(s: *mut IsobarSlider) {
     free_boxed(s);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Mesh;
+
+    /// Minus the distance to a point off the lattice: closed spheres for isovalues −r.
+    fn sphere(n: usize) -> Vec<f32> {
+        let c = [
+            n as f64 / 2.0 + 0.3,
+            n as f64 / 2.0 + 0.17,
+            n as f64 / 2.0 - 0.21,
+        ];
+        let mut v = Vec::with_capacity(n * n * n);
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let d = [x as f64 - c[0], y as f64 - c[1], z as f64 - c[2]];
+                    v.push(-(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() as f32);
+                }
+            }
+        }
+        v
+    }
+
+    fn open_sphere(n: usize, name: &str) -> *mut IsobarSlider {
+        let dir = std::env::temp_dir().join(format!("isobar-capi-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = std::ffi::CString::new(dir.join(name).to_str().unwrap()).unwrap();
+        let values = sphere(n);
+        let dims = [n; 3];
+        let status = isobar_slider_build_f32(
+            values.as_ptr(),
+            dims.as_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+            path.as_ptr(),
+            0.0,
+            0,
+            None,
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::Ok);
+        let mut s = std::ptr::null_mut();
+        assert_eq!(isobar_slider_open(path.as_ptr(), &mut s), IsobarStatus::Ok);
+        s
+    }
+
+    /// Positions, normals and triangles.
+    type Arrays = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[u32; 3]>);
+
+    /// Positions, normals and triangles of the LOD mesh, copied out of the C arrays.
+    fn lod_arrays(s: *const IsobarSlider) -> Arrays {
+        let (mut nv, mut nt) = (0usize, 0usize);
+        let (mut p, mut n, mut t) = (std::ptr::null(), std::ptr::null(), std::ptr::null());
+        let status = isobar_slider_lod_mesh(s, &mut nv, &mut nt, &mut p, &mut n, &mut t);
+        assert_eq!(status, IsobarStatus::Ok);
+        // SAFETY: the arrays the call documents, alive until the next update.
+        unsafe {
+            (
+                std::slice::from_raw_parts(p.cast::<[f32; 3]>(), nv).to_vec(),
+                std::slice::from_raw_parts(n.cast::<[f32; 3]>(), nv).to_vec(),
+                std::slice::from_raw_parts(t.cast::<[u32; 3]>(), nt).to_vec(),
+            )
+        }
+    }
+
+    /// The exact arrays through the C accessors.
+    fn exact_arrays(s: *const IsobarSlider) -> Arrays {
+        let nv = isobar_slider_vertex_count(s);
+        let nt = isobar_slider_triangle_count(s);
+        // SAFETY: as above.
+        unsafe {
+            (
+                std::slice::from_raw_parts(isobar_slider_positions(s).cast::<[f32; 3]>(), nv)
+                    .to_vec(),
+                std::slice::from_raw_parts(isobar_slider_normals(s).cast::<[f32; 3]>(), nv)
+                    .to_vec(),
+                std::slice::from_raw_parts(isobar_slider_triangles(s).cast::<[u32; 3]>(), nt)
+                    .to_vec(),
+            )
+        }
+    }
+
+    /// Triangles as position triples, rotated to start at the smallest (orientation
+    /// kept), sorted: equal for two numberings of one mesh.
+    fn canon(pos: &[[f32; 3]], tris: &[[u32; 3]]) -> Vec<[[u32; 3]; 3]> {
+        let key = |i: u32| pos[i as usize].map(f32::to_bits);
+        let mut out: Vec<[[u32; 3]; 3]> = tris
+            .iter()
+            .map(|t| {
+                let k = t.map(key);
+                let r = (0..3).min_by_key(|&i| k[i]).unwrap();
+                [k[r], k[(r + 1) % 3], k[(r + 2) % 3]]
+            })
+            .collect();
+        out.sort_unstable();
+        out
+    }
+
+    fn watertight(pos: &[[f32; 3]], tris: &[[u32; 3]]) -> bool {
+        Mesh {
+            positions: pos.iter().map(|p| p.map(f64::from)).collect(),
+            triangles: tris.to_vec(),
+            ..Mesh::default()
+        }
+        .topology()
+        .is_watertight_oriented()
+    }
+
+    #[test]
+    fn lod_mesh_through_the_c_abi() {
+        let s = open_sphere(48, "lod.isoslider");
+        let (mut bound, mut levels) = (1.0, 99);
+        assert_eq!(
+            isobar_slider_get_lod(s, &mut bound, &mut levels),
+            IsobarStatus::Ok
+        );
+        assert_eq!((bound, levels), (0.0, 3), "a new slider has LOD off");
+        assert_eq!(
+            isobar_slider_set_isovalue(s, -19.0, None, std::ptr::null_mut(), std::ptr::null_mut()),
+            IsobarStatus::Ok
+        );
+        let (pos, nor, tris) = exact_arrays(s);
+        assert!(tris.len() > 1000);
+
+        // Bound 0: the exact mesh, in another vertex order.
+        let (lp, ln, lt) = lod_arrays(s);
+        assert_eq!(lt.len(), tris.len());
+        assert_eq!(canon(&lp, &lt), canon(&pos, &tris));
+        let mut a: Vec<_> = pos
+            .iter()
+            .zip(&nor)
+            .map(|(p, n)| (p.map(f32::to_bits), n.map(f32::to_bits)))
+            .collect();
+        let mut b: Vec<_> = lp
+            .iter()
+            .zip(&ln)
+            .map(|(p, n)| (p.map(f32::to_bits), n.map(f32::to_bits)))
+            .collect();
+        a.sort_unstable();
+        b.sort_unstable();
+        assert_eq!(a, b, "same vertices with the same normals");
+
+        // A loose bound: fewer triangles, still closed and oriented, unit normals.
+        assert_eq!(isobar_slider_set_lod(s, 0.01, 0), IsobarStatus::Ok);
+        assert_eq!(
+            isobar_slider_get_lod(s, &mut bound, &mut levels),
+            IsobarStatus::Ok
+        );
+        assert_eq!((bound, levels), (0.01, 3));
+        let (lp, ln, lt) = lod_arrays(s);
+        assert!(
+            (lt.len() as f64) < 0.6 * tris.len() as f64,
+            "{} LOD triangles for {} exact",
+            lt.len(),
+            tris.len()
+        );
+        assert!(watertight(&lp, &lt));
+        assert!(ln
+            .iter()
+            .all(|n| ((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() - 1.0).abs() < 1e-4));
+        // Equal to the Rust API's mesh.
+        // SAFETY: a live handle.
+        let rust = unsafe { &*s }.slider.lod_mesh().unwrap();
+        assert_eq!((rust.positions.clone(), rust.triangles.clone()), (lp, lt));
+
+        // The setting survives isovalue updates; the exact arrays do not change with it.
+        assert_eq!(
+            isobar_slider_set_isovalue(s, -15.0, None, std::ptr::null_mut(), std::ptr::null_mut()),
+            IsobarStatus::Ok
+        );
+        let (_, _, t15) = exact_arrays(s);
+        let (lp, _, lt) = lod_arrays(s);
+        assert!(lt.len() < t15.len() && watertight(&lp, &lt));
+        assert_eq!(isobar_slider_set_lod(s, 0.0, 0), IsobarStatus::Ok);
+        let (lp, _, lt) = lod_arrays(s);
+        let (pos, _, tris) = exact_arrays(s);
+        assert_eq!(canon(&lp, &lt), canon(&pos, &tris));
+
+        // Refusals: bad bounds and levels, NULL handle and outputs; the setting stays.
+        for (b, l) in [(-0.1, 0), (1.0, 0), (f64::NAN, 0), (0.01, 7)] {
+            assert_eq!(
+                isobar_slider_set_lod(s, b, l),
+                IsobarStatus::ErrInvalidArgument
+            );
+        }
+        assert_eq!(
+            isobar_slider_set_lod(std::ptr::null_mut(), 0.01, 0),
+            IsobarStatus::ErrInvalidArgument
+        );
+        assert_eq!(
+            isobar_slider_get_lod(s, &mut bound, &mut levels),
+            IsobarStatus::Ok
+        );
+        assert_eq!(bound, 0.0);
+        let (mut nv, mut nt) = (0usize, 0usize);
+        let (mut p, mut n, mut t) = (std::ptr::null(), std::ptr::null(), std::ptr::null());
+        assert_eq!(
+            isobar_slider_lod_mesh(std::ptr::null(), &mut nv, &mut nt, &mut p, &mut n, &mut t),
+            IsobarStatus::ErrInvalidArgument
+        );
+        assert_eq!(
+            isobar_slider_lod_mesh(s, &mut nv, &mut nt, &mut p, std::ptr::null_mut(), &mut t),
+            IsobarStatus::ErrInvalidArgument
+        );
+        assert_eq!(
+            isobar_slider_get_lod(s, std::ptr::null_mut(), &mut levels),
+            IsobarStatus::ErrInvalidArgument
+        );
+        isobar_slider_free(s);
+    }
 }
