@@ -788,6 +788,21 @@ mod tests {
         assert_eq!(cells[4], 5);
         assert!((values[4] - quadratic(DVec3::new(0.25, -0.5, 0.75))).abs() <= 1e-10);
 
+        // On the mesh boundary a rounding error outside (5e-9 reference units past cell 0's
+        // face x = -1) still counts, extrapolated by the cell's polynomial; 1e-6 out does not.
+        let edge = [
+            DVec3::new(-1.0 - 5e-9, -0.4, -0.3),
+            DVec3::new(-1.0 - 1e-6, -0.4, -0.3),
+        ];
+        let points: Vec<f64> = edge
+            .iter()
+            .flat_map(|&y| teardrop_map(y).to_array())
+            .collect();
+        let (status, values, cells, _) = probe(handle, c"q", &points);
+        assert_eq!(status, IsobarStatus::Ok, "{}", message());
+        assert_eq!(cells, [0, -1]);
+        assert!((values[0] - quadratic(edge[0])).abs() <= 1e-10 && values[1].is_nan());
+
         // Optional outputs may be NULL; no points is no work.
         let mut value = 0.0;
         let inside = teardrop_map(DVec3::new(0.5, 0.5, 0.5)).to_array();

@@ -381,7 +381,7 @@ mod tests {
 
         /// `size` bytes of `value` flush against the guard page.
         fn place<T: Copy>(&mut self, value: &T, size: usize) -> *mut T {
-            assert!(size <= std::mem::size_of::<T>() && (self.page - size) % 8 == 0);
+            assert!(size <= std::mem::size_of::<T>() && (self.page - size).is_multiple_of(8));
             let at = self.page - size;
             // SAFETY: bytes at..page of the accessible first page.
             unsafe {

@@ -12,6 +12,11 @@ use glam::DVec3;
 /// Lagrange cell may bulge past the hull of its nodes.
 const BOX_PAD: f64 = 0.1;
 
+/// How far outside a cell's reference domain (in reference units) the second pass of
+/// [`CellIndex::locate_thorough`] still takes a point to be in it; the field there is the
+/// cell's polynomial continued by at most this much.
+pub(crate) const PROBE_SLACK: f64 = 1e-8;
+
 /// Cells binned by bounding box, for [`CellIndex::locate`].
 #[derive(Clone, Debug)]
 pub struct CellIndex {
@@ -129,7 +134,11 @@ impl CellIndex {
     /// [`CellIndex::locate`] without a hint that, where the quick search finds no cell,
     /// tries the binned cells again with Newton never giving up early (a strongly curved
     /// cell can send the first iterates from its centroid far outside its reference
-    /// domain). For probing arbitrary points, where a missed cell is a wrong answer.
+    /// domain) and accepting points up to `PROBE_SLACK` (1e-8) outside a cell: surfaces
+    /// that reach the mesh boundary have points a rounding error outside it (the particle
+    /// system keeps particles within INSIDE_SLACK of their cell, and the inverse of such
+    /// a point lands a few ulps further out). For probing arbitrary points, where a
+    /// missed cell is a wrong answer.
     pub fn locate_thorough(
         &self,
         mesh: &FeMesh,
@@ -149,10 +158,7 @@ impl CellIndex {
             let u =
                 mesh.invert_counted(c, x, kind.centroid(), f64::INFINITY, scratch, evaluations)?;
             let (d, nf) = kind.face_distances(u);
-            d[..nf]
-                .iter()
-                .all(|&d| d >= -INSIDE_SLACK)
-                .then_some((c, u))
+            d[..nf].iter().all(|&d| d >= -PROBE_SLACK).then_some((c, u))
         })
     }
 
