@@ -343,6 +343,22 @@ size_t isobar_fe_mesh_cell_count(const struct IsobarFeMesh *mesh);
 // Frees a mesh (NULL is ignored).
 void isobar_fe_mesh_free(struct IsobarFeMesh *mesh);
 
+// Evaluates the scalar point array `field` at `n` world points (`points`: n × 3 f64,
+// xyz): finds the cell holding each point, inverts that cell's mapping T by Newton's
+// method and interpolates the field with the cell's Lagrange basis. Writes `values_out[i]`
+// (NaN where no cell holds point i) and, unless NULL, `cell_out[i]` (the cell, -1
+// outside the mesh) and `reference_out[3 i..3 i + 3]` (the reference coordinates in that
+// cell, NaN outside). A point with a NaN or infinite coordinate is refused, naming its
+// index, before anything is written. Thread-safe on a shared mesh; the first call builds
+// the mesh's cell index.
+enum IsobarStatus isobar_fe_probe(const struct IsobarFeMesh *mesh,
+                                  const char *field,
+                                  const double *points,
+                                  size_t n,
+                                  double *values_out,
+                                  int64_t *cell_out,
+                                  double *reference_out);
+
 // Samples the isosurface `params.iso` of the scalar point array `field` with the particle
 // system. The samples carry the arrays Element, Reference (3), Curvature and Energy.
 enum IsobarStatus isobar_fe_sample(const struct IsobarFeMesh *mesh,
@@ -587,6 +603,10 @@ enum IsobarStatus isobar_surface_write(const struct IsobarSurface *s, const char
 
 // Frees a surface (NULL is ignored).
 void isobar_surface_free(struct IsobarSurface *s);
+
+extern int32_t mprotect(void *addr, size_t len, int32_t prot);
+
+extern long sysconf(int32_t name);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -136,3 +136,67 @@ def test_bad_meshes_fields_and_cancellation_raise_clear_errors():
     with pytest.raises(isobar.Cancelled):
         isobar.sample_fe(mesh, "f", R * R, spacing=0.05, progress=lambda f, phase: seen.append(phase) or False)
     assert seen
+
+
+def quadratic(y):
+    """A field in the order-2 space of the teardrop cells (y is affine in each cell's
+    reference coordinates), not symmetric under swapping axes."""
+    return 0.7 + y[:, 0] + 2.0 * y[:, 1] - 0.5 * y[:, 2] + y[:, 0] * y[:, 2] + 0.3 * y[:, 1] ** 2
+
+
+def teardrop_map(y):
+    w = A + B * y[:, 2]
+    return np.stack([y[:, 0] * w, y[:, 1] * w, y[:, 2]], axis=1)
+
+
+def teardrop_inverse(x):
+    w = A + B * x[:, 2]
+    return np.stack([x[:, 0] / w, x[:, 1] / w, x[:, 2]], axis=1)
+
+
+def test_probe_inverts_curved_cells_and_reproduces_a_quadratic_field():
+    # VTK's own Lagrange hexahedra (order 2), curved by the teardrop map.
+    grid = teardrop_grid(blocks=2, order=2)
+    y_nodes = teardrop_inverse(np.asarray(grid.points, dtype=np.float64))
+    mesh = isobar.pyvista.fe_mesh_from_dataset(grid, arrays=[])
+    mesh.add_array("q", quadratic(y_nodes))
+    rng = np.random.default_rng(7)
+    y = rng.uniform(-0.999, 0.999, size=(2000, 3))
+    x = teardrop_map(y)
+    values, cells = mesh.probe(x)
+    assert values.dtype == np.float64 and cells.dtype == np.int64 and values.shape == (2000,)
+    # The analytic field at each world point, through the closed-form inverse of the map.
+    np.testing.assert_allclose(values, quadratic(teardrop_inverse(x)), rtol=0, atol=1e-10)
+    assert cells.min() >= 0 and cells.max() < mesh.n_cells
+    # Points of one grid octant lie in one cell, different octants in different cells.
+    octant = ((y > 0) * [1, 2, 4]).sum(axis=1)
+    away = np.abs(y).min(axis=1) > 1e-3
+    pairs = set(zip(octant[away].tolist(), cells[away].tolist()))
+    assert len(pairs) == 8 and len({c for _, c in pairs}) == 8
+
+    # Outside the mesh: cell -1 and NaN; the inside point among them keeps its value.
+    outside = teardrop_map(np.array([[1.2, 0.1, 0.0], [0.0, -1.1, 0.5], [0.2, 0.3, -1.05], [0.25, -0.5, 0.75]]))
+    outside = np.vstack([outside[:3], [[10.0, -3.0, 4.0]], outside[3:]])
+    values, cells = mesh.probe(outside, "q")
+    assert (cells[:4] == -1).all() and np.isnan(values[:4]).all()
+    assert cells[4] >= 0 and abs(values[4] - quadratic(np.array([[0.25, -0.5, 0.75]]))[0]) <= 1e-10
+    # One point as a (3,) array.
+    v, c = mesh.probe(teardrop_map(np.array([[0.5, 0.5, 0.5]]))[0])
+    assert v.shape == (1,) and abs(v[0] - quadratic(np.array([[0.5, 0.5, 0.5]]))[0]) <= 1e-10
+
+
+def test_probe_names_a_nan_point_and_an_unknown_field():
+    grid = teardrop_grid(blocks=1, order=2)
+    mesh = isobar.pyvista.fe_mesh_from_dataset(grid, arrays=["f"])
+    points = np.array([[0.1, 0.2, 0.3], [0.0, 0.0, 0.0], [0.4, np.nan, 0.0]])
+    with pytest.raises(isobar.InvalidArgumentError, match=r"point 2 .*NaN"):
+        mesh.probe(points, "f")
+    with pytest.raises(isobar.InvalidInputError, match="'nope'"):
+        mesh.probe(points[:2], "nope")
+    with pytest.raises(isobar.InvalidArgumentError, match="shape"):
+        mesh.probe(np.zeros((4, 2)), "f")
+    # With one scalar array the field may be left out; with two it must be named.
+    assert mesh.probe(points[:2])[1].min() >= 0
+    mesh.add_array("g", np.zeros(mesh.n_points))
+    with pytest.raises(isobar.InvalidArgumentError, match="name the field"):
+        mesh.probe(points[:2])

@@ -290,6 +290,18 @@ _PROTOTYPES = {
     "isobar_fe_mesh_point_count": (c_size_t, [POINTER(FeMeshHandle)]),
     "isobar_fe_mesh_cell_count": (c_size_t, [POINTER(FeMeshHandle)]),
     "isobar_fe_mesh_free": (None, [POINTER(FeMeshHandle)]),
+    "isobar_fe_probe": (
+        _Status,
+        [
+            POINTER(FeMeshHandle),
+            c_char_p,
+            POINTER(c_double),
+            c_size_t,
+            POINTER(c_double),
+            POINTER(c_int64),
+            POINTER(c_double),
+        ],
+    ),
     "isobar_fe_sample": (
         _Status,
         [

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import weakref
 from ctypes import POINTER, byref, c_double, c_int64, c_uint8, c_uint32, sizeof
-from typing import Dict, Mapping, Optional
+from typing import Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -120,6 +120,51 @@ class FeMesh:
         n = a.shape[0]
         k = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
         check(lib.isobar_fe_mesh_add_array(self._handle, encode(name, "name"), a.ctypes.data_as(POINTER(c_double)), n, k))
+
+    def probe(self, points, field: Optional[str] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """The scalar point array ``field`` at arbitrary world points.
+
+        The core finds the cell holding each point, inverts that cell's (curved) mapping
+        by Newton's method and interpolates with the cell's Lagrange basis, so the value
+        is the finite-element solution itself, not a linearisation.
+
+        Args:
+            points: (n, 3) world coordinates (a single (3,) point is taken as (1, 3)).
+                A NaN or infinite coordinate raises :class:`InvalidArgumentError` naming
+                the point's index.
+            field: a scalar point array; None takes the mesh's only scalar array.
+
+        Returns:
+            ``(values, cells)``: (n,) float64 values, NaN outside the mesh, and (n,)
+            int64 cell ids, -1 outside the mesh.
+        """
+        xyz = _contiguous(points, np.float64, "points")
+        if xyz.ndim == 1 and xyz.shape[0] == 3:
+            xyz = xyz.reshape(1, 3)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise InvalidArgumentError(f"points must have shape (n, 3), not {xyz.shape}")
+        if field is None:
+            scalars = [name for name, a in self.arrays.items() if a.ndim == 1]
+            if len(scalars) != 1:
+                raise InvalidArgumentError(
+                    f"name the field to probe: the mesh has scalar point arrays {scalars or 'none'}"
+                )
+            field = scalars[0]
+        n = xyz.shape[0]
+        values = np.empty(n, dtype=np.float64)
+        cells = np.empty(n, dtype=np.int64)
+        check(
+            lib.isobar_fe_probe(
+                self._handle,
+                encode(field, "field"),
+                xyz.ctypes.data_as(POINTER(c_double)),
+                n,
+                values.ctypes.data_as(POINTER(c_double)),
+                cells.ctypes.data_as(POINTER(c_int64)),
+                None,
+            )
+        )
+        return values, cells
 
     @property
     def arrays(self) -> Dict[str, np.ndarray]:

@@ -7,23 +7,31 @@ use super::{
     add_array, attribute_out, copy_versioned_out, free_boxed, guard, invalid, names_of, non_null,
     opt_str, put, slice, with_progress, IsobarStatus,
 };
-use crate::field::fe::FeMesh;
+use crate::field::fe::{CellIndex, FeMesh};
 use crate::highorder::{self, Params, Stats};
 use crate::samples::PointSamples;
 use glam::DVec3;
 use std::ffi::{c_char, c_void, CString};
+use std::sync::OnceLock;
 
 /// Opaque mesh of Lagrange cells with per-point arrays.
 pub struct IsobarFeMesh {
     mesh: FeMesh,
     /// NUL-terminated copies of the point arrays' names, for `isobar_fe_mesh_array`.
     names: Vec<CString>,
+    /// The cells binned for `isobar_fe_probe`, built by the first probe (the geometry never
+    /// changes after creation; adding arrays keeps it valid).
+    index: OnceLock<CellIndex>,
 }
 
 impl IsobarFeMesh {
     fn new(mesh: FeMesh) -> *mut IsobarFeMesh {
         let names = names_of(&mesh.point_data);
-        Box::into_raw(Box::new(IsobarFeMesh { mesh, names }))
+        Box::into_raw(Box::new(IsobarFeMesh {
+            mesh,
+            names,
+            index: OnceLock::new(),
+        }))
     }
 }
 
@@ -294,6 +302,89 @@ pub extern "C" fn isobar_fe_mesh_cell_count(mesh: *const IsobarFeMesh) -> usize 
 #[no_mangle]
 pub extern "C" fn isobar_fe_mesh_free(mesh: *mut IsobarFeMesh) {
     free_boxed(mesh);
+}
+
+/// Evaluates the scalar point array `field` at `n` world points (`points`: n × 3 f64,
+/// xyz): finds the cell holding each point, inverts that cell's mapping T by Newton's
+/// method and interpolates the field with the cell's Lagrange basis. Writes `values_out[i]`
+/// (NaN where no cell holds point i) and, unless NULL, `cell_out[i]` (the cell, -1
+/// outside the mesh) and `reference_out[3 i..3 i + 3]` (the reference coordinates in that
+/// cell, NaN outside). A point with a NaN or infinite coordinate is refused, naming its
+/// index, before anything is written. Thread-safe on a shared mesh; the first call builds
+/// the mesh's cell index.
+#[no_mangle]
+pub extern "C" fn isobar_fe_probe(
+    mesh: *const IsobarFeMesh,
+    field: *const c_char,
+    points: *const f64,
+    n: usize,
+    values_out: *mut f64,
+    cell_out: *mut i64,
+    reference_out: *mut f64,
+) -> IsobarStatus {
+    guard(|| {
+        let m = non_null(mesh, "mesh")?;
+        let field = opt_str(field, "field")?.ok_or_else(|| invalid("field", "must not be NULL"))?;
+        let values = highorder::field_values(&m.mesh, &field)?;
+        let len = n
+            .checked_mul(3)
+            .ok_or_else(|| invalid("n", format!("{n} points is too many")))?;
+        let xyz = slice(points, len, "points")?;
+        let mut world = Vec::with_capacity(n);
+        for (i, c) in xyz.chunks_exact(3).enumerate() {
+            let x = DVec3::new(c[0], c[1], c[2]);
+            if !x.is_finite() {
+                return Err(invalid(
+                    "points",
+                    format!(
+                        "point {i} is ({}, {}, {}): every coordinate must be finite",
+                        c[0], c[1], c[2]
+                    ),
+                ));
+            }
+            world.push(x);
+        }
+        let values_out = slice_out(values_out, n, "values_out")?
+            .ok_or_else(|| invalid("values_out", "must not be NULL"))?;
+        let cell_out = slice_out(cell_out, n, "cell_out")?;
+        let reference_out = slice_out(reference_out, len, "reference_out")?;
+        let index = m.index.get_or_init(|| CellIndex::new(&m.mesh));
+        let hits = crate::field::fe::probe(&m.mesh, index, values, &world);
+        for (i, hit) in hits.iter().enumerate() {
+            values_out[i] = hit.map_or(f64::NAN, |h| h.value);
+        }
+        if let Some(out) = cell_out {
+            for (o, hit) in out.iter_mut().zip(&hits) {
+                *o = hit.map_or(-1, |h| h.cell as i64);
+            }
+        }
+        if let Some(out) = reference_out {
+            for (o, hit) in out.chunks_exact_mut(3).zip(&hits) {
+                o.copy_from_slice(&hit.map_or([f64::NAN; 3], |h| h.reference.to_array()));
+            }
+        }
+        Ok(())
+    })
+}
+
+/// A caller's output array of `len` items at `p`: None for NULL (an optional output, or
+/// nothing to write when `len` is 0).
+fn slice_out<'a, T>(
+    p: *mut T,
+    len: usize,
+    name: &'static str,
+) -> Result<Option<&'a mut [T]>, crate::Error> {
+    if p.is_null() {
+        return Ok(if len == 0 { Some(&mut []) } else { None });
+    }
+    if len
+        .checked_mul(std::mem::size_of::<T>())
+        .is_none_or(|b| b > isize::MAX as usize)
+    {
+        return Err(invalid(name, format!("length {len} is too large")));
+    }
+    // SAFETY: non-null, the caller promises `len` writable items not aliased meanwhile.
+    Ok(Some(unsafe { std::slice::from_raw_parts_mut(p, len) }))
 }
 
 /// Samples the isosurface `params.iso` of the scalar point array `field` with the particle
@@ -575,6 +666,238 @@ mod tests {
         assert_eq!(stats.particles as usize, n);
         assert!(stats.evaluations > 0 && stats.max_residual <= params.tolerance);
         isobar_samples_free(out);
+        isobar_fe_mesh_free(handle);
+    }
+
+    /// A field in the order-2 space of `grid_mesh` cells (the grid coordinate y is affine
+    /// in each cell's reference coordinates), not symmetric under swapping axes, so a
+    /// probe that mixed up coordinates would not pass either.
+    fn quadratic(y: DVec3) -> f64 {
+        0.7 + y.x + 2.0 * y.y - 0.5 * y.z + y.x * y.z + 0.3 * y.y * y.y
+    }
+
+    /// The teardrop map inverted in closed form: world x back to the grid coordinate y.
+    fn teardrop_inverse(x: DVec3) -> DVec3 {
+        let w = crate::highorder::tests::TEAR_A + crate::highorder::tests::TEAR_B * x.z;
+        DVec3::new(x.x / w, x.y / w, x.z)
+    }
+
+    /// Deterministic uniform numbers in [0, 1) (xorshift64*).
+    fn uniform(state: &mut u64) -> f64 {
+        *state ^= *state >> 12;
+        *state ^= *state << 25;
+        *state ^= *state >> 27;
+        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Probes `points` (xyz) for `field`: (status, values, cells, reference coordinates),
+    /// the outputs prefilled with sentinels so an untouched entry shows.
+    fn probe(
+        handle: *const IsobarFeMesh,
+        field: &CStr,
+        points: &[f64],
+    ) -> (IsobarStatus, Vec<f64>, Vec<i64>, Vec<f64>) {
+        let n = points.len() / 3;
+        let (mut values, mut cells, mut reference) =
+            (vec![-7.0; n], vec![-7; n], vec![-7.0; 3 * n]);
+        let status = isobar_fe_probe(
+            handle,
+            field.as_ptr(),
+            points.as_ptr(),
+            n,
+            values.as_mut_ptr(),
+            cells.as_mut_ptr(),
+            reference.as_mut_ptr(),
+        );
+        (status, values, cells, reference)
+    }
+
+    #[test]
+    fn probe_inverts_curved_cells_and_reproduces_a_quadratic_field() {
+        // 2³ order-2 hexahedra through the teardrop map: curved faces, non-affine cells
+        // whose Jacobian varies by a factor of 7 between the narrow and wide ends.
+        let (n, p) = (2, 2);
+        let mesh = grid_mesh(n, p, teardrop_map, quadratic);
+        let a = arrays(&mesh);
+        let mut handle = std::ptr::null_mut();
+        assert_eq!(create(&a, &mut handle), IsobarStatus::Ok, "{}", message());
+        assert_eq!(
+            isobar_fe_mesh_add_array(handle, c"q".as_ptr(), a.values.as_ptr(), a.values.len(), 1),
+            IsobarStatus::Ok
+        );
+
+        // Random interior points, away from the faces between cells so the holding cell
+        // is unique: y in the open grid cube, x = T(y).
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut ys = Vec::new();
+        while ys.len() < 500 {
+            let y = DVec3::new(
+                uniform(&mut state),
+                uniform(&mut state),
+                uniform(&mut state),
+            ) * 1.998
+                - 0.999;
+            if y.abs().min_element() > 1e-3 {
+                ys.push(y);
+            }
+        }
+        let points: Vec<f64> = ys
+            .iter()
+            .flat_map(|&y| teardrop_map(y).to_array())
+            .collect();
+        let (status, values, cells, reference) = probe(handle, c"q", &points);
+        assert_eq!(status, IsobarStatus::Ok, "{}", message());
+        for (i, &y) in ys.iter().enumerate() {
+            let x = DVec3::from_slice(&points[3 * i..]);
+            // The analytic field at the world point, through the closed-form inverse.
+            let want = quadratic(teardrop_inverse(x));
+            assert!(
+                (values[i] - want).abs() <= 1e-10,
+                "point {i} {x:?}: probe {} vs analytic {want}",
+                values[i]
+            );
+            // The grid cell holding y and y's reference coordinates in it ([0, 1]³).
+            let g = (y + 1.0) * 0.5 * n as f64;
+            let ijk = g.floor();
+            let cell = ijk.x + n as f64 * (ijk.y + n as f64 * ijk.z);
+            assert_eq!(cells[i], cell as i64, "point {i} {x:?}");
+            let u = DVec3::from_slice(&reference[3 * i..]);
+            assert!(
+                u.distance(g - ijk) <= 1e-10,
+                "point {i}: reference {u:?} vs {:?}",
+                g - ijk
+            );
+        }
+
+        // Outside: past a side, below the narrow end, far away; and one inside point
+        // among them keeps its value.
+        let outside = [
+            teardrop_map(DVec3::new(1.2, 0.1, 0.0)),
+            teardrop_map(DVec3::new(0.0, -1.1, 0.5)),
+            teardrop_map(DVec3::new(0.2, 0.3, -1.05)),
+            DVec3::new(10.0, -3.0, 4.0),
+            teardrop_map(DVec3::new(0.25, -0.5, 0.75)),
+        ];
+        let points: Vec<f64> = outside.iter().flat_map(|x| x.to_array()).collect();
+        let (status, values, cells, reference) = probe(handle, c"q", &points);
+        assert_eq!(status, IsobarStatus::Ok, "{}", message());
+        for i in 0..4 {
+            assert_eq!(cells[i], -1, "point {i} {:?}", outside[i]);
+            assert!(values[i].is_nan() && reference[3 * i..3 * i + 3].iter().all(|r| r.is_nan()));
+        }
+        assert_eq!(cells[4], 5);
+        assert!((values[4] - quadratic(DVec3::new(0.25, -0.5, 0.75))).abs() <= 1e-10);
+
+        // On the mesh boundary a rounding error outside (5e-9 reference units past cell 0's
+        // face x = -1) still counts, extrapolated by the cell's polynomial; 1e-6 out does not.
+        let edge = [
+            DVec3::new(-1.0 - 5e-9, -0.4, -0.3),
+            DVec3::new(-1.0 - 1e-6, -0.4, -0.3),
+        ];
+        let points: Vec<f64> = edge
+            .iter()
+            .flat_map(|&y| teardrop_map(y).to_array())
+            .collect();
+        let (status, values, cells, _) = probe(handle, c"q", &points);
+        assert_eq!(status, IsobarStatus::Ok, "{}", message());
+        assert_eq!(cells, [0, -1]);
+        assert!((values[0] - quadratic(edge[0])).abs() <= 1e-10 && values[1].is_nan());
+
+        // Optional outputs may be NULL; no points is no work.
+        let mut value = 0.0;
+        let inside = teardrop_map(DVec3::new(0.5, 0.5, 0.5)).to_array();
+        let status = isobar_fe_probe(
+            handle,
+            c"q".as_ptr(),
+            inside.as_ptr(),
+            1,
+            &mut value,
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::Ok, "{}", message());
+        assert!((value - quadratic(DVec3::splat(0.5))).abs() <= 1e-10);
+        let status = isobar_fe_probe(
+            handle,
+            c"q".as_ptr(),
+            std::ptr::null(),
+            0,
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::Ok, "{}", message());
+        isobar_fe_mesh_free(handle);
+    }
+
+    #[test]
+    fn probe_refuses_nan_points_and_unknown_fields_naming_them() {
+        let mesh = grid_mesh(1, 2, teardrop_map, quadratic);
+        let a = arrays(&mesh);
+        let mut handle = std::ptr::null_mut();
+        assert_eq!(create(&a, &mut handle), IsobarStatus::Ok, "{}", message());
+        assert_eq!(
+            isobar_fe_mesh_add_array(handle, c"q".as_ptr(), a.values.as_ptr(), a.values.len(), 1),
+            IsobarStatus::Ok
+        );
+        let mut points = [
+            0.1,
+            0.2,
+            0.3,
+            0.0,
+            0.0,
+            0.0,
+            0.4,
+            f64::NAN,
+            0.0,
+            0.0,
+            0.1,
+            0.0,
+        ];
+        let (status, values, cells, _) = probe(handle, c"q", &points);
+        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        let m = message();
+        assert!(m.contains("point 2 ") && m.contains("NaN"), "{m}");
+        // Refused before anything was written.
+        assert!(values.iter().all(|&v| v == -7.0) && cells.iter().all(|&c| c == -7));
+        points[7] = f64::INFINITY;
+        assert_eq!(
+            probe(handle, c"q", &points).0,
+            IsobarStatus::ErrInvalidArgument
+        );
+        assert!(message().contains("point 2 "), "{}", message());
+        points[7] = 0.0;
+
+        let (status, values, ..) = probe(handle, c"nope", &points);
+        assert_eq!(status, IsobarStatus::ErrInvalidInput);
+        assert!(
+            message().contains("'nope'") && message().contains("q"),
+            "{}",
+            message()
+        );
+        assert!(values.iter().all(|&v| v == -7.0));
+        let status = isobar_fe_probe(
+            handle,
+            c"q".as_ptr(),
+            points.as_ptr(),
+            4,
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        assert!(message().contains("values_out"), "{}", message());
+        let status = isobar_fe_probe(
+            std::ptr::null(),
+            c"q".as_ptr(),
+            points.as_ptr(),
+            4,
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
+        assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+        assert!(message().contains("mesh"), "{}", message());
         isobar_fe_mesh_free(handle);
     }
 

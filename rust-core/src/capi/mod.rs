@@ -114,7 +114,8 @@ pub(crate) fn invalid(name: &'static str, message: impl Into<String>) -> Error {
     }
 }
 
-/// A required non-null pointer.
+/// A required non-null pointer to a whole `T` (a handle). Not for versioned structs: a
+/// caller's may be shorter than `T`; `read_versioned` and `versioned_out_size` read those.
 pub(crate) fn non_null<'a, T>(p: *const T, name: &'static str) -> Result<&'a T, Error> {
     // SAFETY: the caller promises `p` is null or points to a live T.
     unsafe { p.as_ref() }.ok_or_else(|| invalid(name, "must not be NULL"))
@@ -150,19 +151,30 @@ pub(crate) fn slice<'a, T>(p: *const T, len: usize, name: &'static str) -> Resul
     Ok(unsafe { std::slice::from_raw_parts(p, len) })
 }
 
+/// The leading `struct_size: u32` of a caller's versioned struct at `p`, read through
+/// the raw pointer: no `&T` is formed, since the caller's struct may be an older, shorter
+/// version than `T` and a reference would claim all `size_of::<T>()` bytes.
+fn struct_size_of<T>(p: *const T, name: &'static str) -> Result<usize, Error> {
+    if p.is_null() {
+        return Err(invalid(name, "must not be NULL"));
+    }
+    // SAFETY: non-null; every version of the struct starts with a u32 struct_size (the
+    // callers' contract), so these 4 bytes are readable whatever the version.
+    Ok(unsafe { p.cast::<u32>().read_unaligned() } as usize)
+}
+
 /// A caller's versioned parameter struct laid over our defaults: `T` is `#[repr(C)]` and
 /// starts with `struct_size: u32`; the caller's first `struct_size` bytes are taken, fields
 /// beyond them keep their defaults, so callers built against an older, shorter struct keep
 /// working. `min_size` is the first version's size; `filler` names the defaults function.
+/// Only `min(struct_size, size_of::<T>())` bytes of the caller's memory are read.
 pub(crate) fn read_versioned<T: Copy + Default>(
     p: *const T,
     name: &'static str,
     min_size: usize,
     filler: &str,
 ) -> Result<T, Error> {
-    let given = non_null(p, name)?;
-    // SAFETY: T is repr(C) with a leading u32 struct_size (the callers' contract).
-    let size = unsafe { *(given as *const T).cast::<u32>() } as usize;
+    let size = struct_size_of(p, name)?;
     let ours = std::mem::size_of::<T>();
     if !(min_size..=ours).contains(&size) {
         return Err(invalid(
@@ -173,14 +185,15 @@ pub(crate) fn read_versioned<T: Copy + Default>(
         ));
     }
     let mut out = T::default();
-    // SAFETY: both point to at least `size` bytes of T's layout; then struct_size is ours.
+    // SAFETY: the caller's struct holds `struct_size` readable bytes of T's layout (its
+    // promise), `out` holds `ours`; the copy takes the smaller. Then struct_size is ours.
     unsafe {
         std::ptr::copy_nonoverlapping(
-            (given as *const T).cast::<u8>(),
+            p.cast::<u8>(),
             (&mut out as *mut T).cast::<u8>(),
-            size,
+            size.min(ours),
         );
-        *(&mut out as *mut T).cast::<u32>() = ours as u32;
+        (&mut out as *mut T).cast::<u32>().write(ours as u32);
     }
     Ok(out)
 }
@@ -272,11 +285,10 @@ pub(crate) fn attribute_out(
 }
 
 /// The `struct_size` of the caller's statistics struct `out`, checked: a call that will
-/// fill one checks it before its work, so a bad struct fails fast.
+/// fill one checks it before its work, so a bad struct fails fast. Reads only the leading
+/// u32 (no `&T`: the caller's struct may be a shorter, older version).
 pub(crate) fn versioned_out_size<T>(out: *mut T, name: &'static str) -> Result<usize, Error> {
-    let given = non_null(out as *const T, name)?;
-    // SAFETY: T is repr(C) with a leading u32 struct_size (the callers' contract).
-    let size = unsafe { *(given as *const T).cast::<u32>() } as usize;
+    let size = struct_size_of(out as *const T, name)?;
     let ours = std::mem::size_of::<T>();
     if !(4..=ours).contains(&size) {
         return Err(invalid(
@@ -288,14 +300,16 @@ pub(crate) fn versioned_out_size<T>(out: *mut T, name: &'static str) -> Result<u
 }
 
 /// Copies a statistics struct to the caller's `out`, whose leading `struct_size: u32` says
-/// how many bytes of the layout it holds (older, shorter structs get the prefix).
+/// how many bytes of the layout it holds (older, shorter structs get the prefix): only
+/// bytes 4..min(struct_size, size_of::<T>()) are written, the caller's struct_size is kept.
 pub(crate) fn copy_versioned_out<T: Copy>(
     full: T,
     out: *mut T,
     name: &'static str,
 ) -> Result<(), Error> {
-    let size = versioned_out_size(out, name)?;
-    // SAFETY: `out` holds at least `size` bytes of T's layout; its struct_size is kept.
+    let size = versioned_out_size(out, name)?.min(std::mem::size_of::<T>());
+    // SAFETY: `out` holds at least `size` writable bytes of T's layout (the caller's
+    // promise behind struct_size), written through the raw pointer.
     unsafe {
         std::ptr::copy_nonoverlapping(
             (&full as *const T).cast::<u8>().add(4),
@@ -333,4 +347,136 @@ pub extern "C" fn isobar_abi_version() -> u32 {
 #[no_mangle]
 pub extern "C" fn isobar_version() -> *const c_char {
     concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast()
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+    use crate::capi::{IsobarFeParams, IsobarFeStats};
+    use std::ffi::c_void;
+
+    extern "C" {
+        fn mprotect(addr: *mut c_void, len: usize, prot: i32) -> i32;
+        fn sysconf(name: i32) -> std::ffi::c_long;
+    }
+
+    /// Two pages, the second inaccessible: a struct placed flush against the end of the
+    /// first has nothing readable or writable after it, so any access past its
+    /// `struct_size` crashes the test instead of passing unnoticed.
+    struct Guarded {
+        map: memmap2::MmapMut,
+        page: usize,
+    }
+
+    impl Guarded {
+        fn new() -> Guarded {
+            // SAFETY: sysconf(_SC_PAGESIZE) (30 on Linux) has no preconditions.
+            let page = unsafe { sysconf(30) } as usize;
+            let mut map = memmap2::MmapMut::map_anon(2 * page).unwrap();
+            // SAFETY: the second page of our own mapping; PROT_NONE is 0.
+            let rc = unsafe { mprotect(map.as_mut_ptr().add(page).cast(), page, 0) };
+            assert_eq!(rc, 0);
+            Guarded { map, page }
+        }
+
+        /// `size` bytes of `value` flush against the guard page.
+        fn place<T: Copy>(&mut self, value: &T, size: usize) -> *mut T {
+            assert!(size <= std::mem::size_of::<T>() && (self.page - size).is_multiple_of(8));
+            let at = self.page - size;
+            // SAFETY: bytes at..page of the accessible first page.
+            unsafe {
+                std::ptr::copy_nonoverlapping(
+                    (value as *const T).cast::<u8>(),
+                    self.map.as_mut_ptr().add(at),
+                    size,
+                );
+                self.map.as_mut_ptr().add(at).cast()
+            }
+        }
+    }
+
+    #[test]
+    fn shorter_versioned_structs_are_read_and_written_only_to_their_size() {
+        let mut guard = Guarded::new();
+        let ours = std::mem::size_of::<IsobarFeParams>();
+        // A caller built against a (hypothetical) older version whose struct ended before
+        // `seed`: 72 bytes, the minimum this read accepts.
+        let v1 = 72;
+        assert!(v1 < ours);
+        let given = IsobarFeParams {
+            struct_size: v1 as u32,
+            levels: 3,
+            iso: 0.25,
+            spacing: 0.5,
+            split_rounds: 2,
+            seed: 99,
+            ..IsobarFeParams::default()
+        };
+        let p = guard.place(&given, v1);
+        let read: IsobarFeParams = read_versioned(p, "params", v1, "defaults").unwrap();
+        assert_eq!(read.struct_size as usize, ours);
+        assert_eq!(
+            (read.levels, read.iso, read.spacing, read.split_rounds),
+            (3, 0.25, 0.5, 2)
+        );
+        // Past the caller's struct: the default, not what lay beyond it.
+        assert_eq!(read.seed, IsobarFeParams::default().seed);
+        // The whole struct is read as before.
+        let full = IsobarFeParams { seed: 99, ..given };
+        let full = IsobarFeParams {
+            struct_size: ours as u32,
+            ..full
+        };
+        let p = guard.place(&full, ours);
+        assert_eq!(
+            read_versioned(p, "params", v1, "defaults").unwrap().seed,
+            99
+        );
+        // Too short or too long is refused, naming the struct.
+        for bad in [8, ours + 8] {
+            let p = guard.place(
+                &IsobarFeParams {
+                    struct_size: bad as u32,
+                    ..given
+                },
+                v1,
+            );
+            let e = read_versioned(p, "params", v1, "defaults").unwrap_err();
+            assert!(
+                e.to_string().contains("params") && e.to_string().contains(&bad.to_string()),
+                "{e}"
+            );
+        }
+
+        // An output struct of an older version: only its first 40 bytes (through
+        // `evaluations`) exist and are written; its struct_size is kept.
+        let short = 40;
+        let stats = IsobarFeStats {
+            struct_size: short as u32,
+            ..IsobarFeStats::default()
+        };
+        let out = guard.place(&stats, short);
+        let full = IsobarFeStats {
+            struct_size: 0,
+            particles: 1,
+            seeds: 2,
+            iterations: 3,
+            evaluations: 4,
+            splits: 5,
+            deletes: 6,
+            spacing: 7.0,
+            max_residual: 8.0,
+        };
+        copy_versioned_out(full, out, "out").unwrap();
+        // SAFETY: the first `short` bytes of the placed struct, read field by field.
+        let got = unsafe {
+            let out = out.cast_const();
+            (
+                std::ptr::addr_of!((*out).struct_size).read(),
+                std::ptr::addr_of!((*out).particles).read(),
+                std::ptr::addr_of!((*out).evaluations).read(),
+            )
+        };
+        assert_eq!(got, (short as u32, 1, 4));
+    }
 }

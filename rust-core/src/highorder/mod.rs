@@ -174,7 +174,7 @@ fn check(p: &Params) -> Result<()> {
 }
 
 /// The scalar point array `name` ("NAME:K" for component K of a vector array).
-fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]> {
+pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]> {
     let missing = || {
         let available = mesh
             .point_data

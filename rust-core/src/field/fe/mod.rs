@@ -6,13 +6,15 @@
 //! derivatives, `mesh` assembles T, J, ∂J, the world-space gradient and Hessian (the
 //! paper's eqs. 19–20), checks elements and pairs faces, `locate` carries a reference
 //! point across a face into the neighbouring cell, `search` finds the cell and reference
-//! point of a world point (T⁻¹, for the marching-cubes baseline), `curvature` gives
+//! point of a world point (T⁻¹, for the marching-cubes baseline), `probe` evaluates the field at world points
+//! through it, `curvature` gives
 //! principal curvatures.
 
 mod basis;
 pub mod curvature;
 mod locate;
 mod mesh;
+mod probe;
 mod search;
 mod shape;
 #[cfg(test)]
@@ -20,5 +22,6 @@ mod tests;
 
 pub use basis::BasisValues;
 pub use mesh::{Evaluation, FeMesh, Scratch};
+pub use probe::{probe, Hit};
 pub use search::CellIndex;
 pub use shape::{Kind, Shape};

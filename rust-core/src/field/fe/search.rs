@@ -12,6 +12,11 @@ use glam::DVec3;
 /// Lagrange cell may bulge past the hull of its nodes.
 const BOX_PAD: f64 = 0.1;
 
+/// How far outside a cell's reference domain (in reference units) the second pass of
+/// [`CellIndex::locate_thorough`] still takes a point to be in it; the field there is the
+/// cell's polynomial continued by at most this much.
+pub(crate) const PROBE_SLACK: f64 = 1e-8;
+
 /// Cells binned by bounding box, for [`CellIndex::locate`].
 #[derive(Clone, Debug)]
 pub struct CellIndex {
@@ -111,19 +116,9 @@ impl CellIndex {
                 }
             }
         }
-        let mut k = 0;
-        for a in 0..3 {
-            let f = (x[a] - self.lo[a]) / self.bin;
-            if !(f >= 0.0 && f < self.dims[a] as f64) {
-                return None;
-            }
-            k += f as usize * [1, self.dims[0], self.dims[0] * self.dims[1]][a];
-        }
-        let range = self.starts[k] as usize..self.starts[k + 1] as usize;
-        for &c in &self.cells[range] {
+        for &c in self.candidates(x) {
             let c = c as usize;
-            let (a, b) = self.boxes[c];
-            if hint.is_some_and(|h| h.0 == c) || x.cmplt(a).any() || x.cmpgt(b).any() {
+            if hint.is_some_and(|h| h.0 == c) || !self.in_box(c, x) {
                 continue;
             }
             let guess = mesh.shape(c).kind.centroid();
@@ -134,5 +129,55 @@ impl CellIndex {
             }
         }
         None
+    }
+
+    /// [`CellIndex::locate`] without a hint that, where the quick search finds no cell,
+    /// tries the binned cells again with Newton never giving up early (a strongly curved
+    /// cell can send the first iterates from its centroid far outside its reference
+    /// domain) and accepting points up to `PROBE_SLACK` (1e-8) outside a cell: surfaces
+    /// that reach the mesh boundary have points a rounding error outside it (the particle
+    /// system keeps particles within INSIDE_SLACK of their cell, and the inverse of such
+    /// a point lands a few ulps further out). For probing arbitrary points, where a
+    /// missed cell is a wrong answer.
+    pub fn locate_thorough(
+        &self,
+        mesh: &FeMesh,
+        x: DVec3,
+        scratch: &mut Scratch,
+        evaluations: &mut u64,
+    ) -> Option<(usize, DVec3)> {
+        if let Some(found) = self.locate(mesh, x, None, scratch, evaluations) {
+            return Some(found);
+        }
+        self.candidates(x).iter().find_map(|&c| {
+            let c = c as usize;
+            if !self.in_box(c, x) {
+                return None;
+            }
+            let kind = mesh.shape(c).kind;
+            let u =
+                mesh.invert_counted(c, x, kind.centroid(), f64::INFINITY, scratch, evaluations)?;
+            let (d, nf) = kind.face_distances(u);
+            d[..nf].iter().all(|&d| d >= -PROBE_SLACK).then_some((c, u))
+        })
+    }
+
+    /// The cells binned where `x` lies, ascending (none outside the binned box).
+    fn candidates(&self, x: DVec3) -> &[u32] {
+        let mut k = 0;
+        for a in 0..3 {
+            let f = (x[a] - self.lo[a]) / self.bin;
+            if !(f >= 0.0 && f < self.dims[a] as f64) {
+                return &[];
+            }
+            k += f as usize * [1, self.dims[0], self.dims[0] * self.dims[1]][a];
+        }
+        &self.cells[self.starts[k] as usize..self.starts[k + 1] as usize]
+    }
+
+    /// Whether `x` lies in cell `c`'s padded bounding box.
+    fn in_box(&self, c: usize, x: DVec3) -> bool {
+        let (a, b) = self.boxes[c];
+        !(x.cmplt(a).any() || x.cmpgt(b).any())
     }
 }
