@@ -534,6 +534,48 @@ fn gpu_seed_cells_equal_cpu_seed_cells() {
     }
 }
 
+/// `isobar sph --backend gpu`'s path: Marching Correctors with the seed search on the GPU
+/// gives the CPU's mesh exactly (same vertices, triangles, normals) on real frames, and
+/// says which back end ran.
+#[test]
+fn correctors_gpu_backend_mesh_equals_cpu_mesh_on_real_frames() {
+    use crate::correctors;
+    if gpu().is_none() {
+        return;
+    }
+    for name in FRAMES {
+        let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/data/splashsurf")
+            .join(name);
+        let data = crate::io::read_particles(&path).unwrap();
+        let field = frame(name);
+        let run = |backend| {
+            let p = correctors::Params {
+                isovalues: vec![0.6],
+                backend,
+                ..correctors::Params::default()
+            };
+            correctors::extract(&field, &data, &p, &mut Progress::none()).unwrap()
+        };
+        let (cpu, gpu) = (run(Backend::Cpu), run(Backend::Gpu));
+        assert_eq!(cpu.stats.backend, Backend::Cpu);
+        assert_eq!(gpu.stats.backend, Backend::Gpu, "{name}");
+        assert!(!cpu.mesh.triangles.is_empty(), "{name}");
+        assert_eq!(cpu.stats.seed_cells, gpu.stats.seed_cells, "{name}");
+        assert_eq!(cpu.mesh.positions, gpu.mesh.positions, "{name}");
+        assert_eq!(cpu.mesh.triangles, gpu.mesh.triangles, "{name}");
+        assert_eq!(cpu.mesh.normals, gpu.mesh.normals, "{name}");
+        if name == FRAMES[1] {
+            // Auto takes a hardware GPU only (lavapipe is slower than the CPU path).
+            let auto = run(Backend::Auto);
+            let software = device::get().unwrap().software;
+            let expected = if software { Backend::Cpu } else { Backend::Gpu };
+            assert_eq!(auto.stats.backend, expected);
+            assert_eq!(auto.mesh.triangles, cpu.mesh.triangles);
+        }
+    }
+}
+
 /// Figures, not a check (lavapipe times say nothing about a GPU): run with
 /// `cargo test --release --lib gpu::tests::figures -- --ignored --nocapture`.
 #[test]
