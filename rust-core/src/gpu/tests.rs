@@ -265,7 +265,7 @@ fn level_arrays_equal_the_cpu_ones() {
                     &mut Progress::none(),
                 )
                 .unwrap();
-                let gpu = build_level(
+                let mut gpu = build_level(
                     g,
                     &on_device,
                     &grid,
@@ -277,6 +277,8 @@ fn level_arrays_equal_the_cpu_ones() {
                     &mut Progress::none(),
                 )
                 .unwrap();
+                gpu.read_values(g).unwrap();
+                let gpu = gpu.arrays;
                 skipped += assert_level_equal(&grid, &cpu, &gpu, p.isovalue, &what);
                 triangles += gpu.triangles.len();
             }
@@ -364,9 +366,9 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
         for (name, levels) in [("splash", natural), ("striped", striped_levels(&grid))] {
             let what = format!("{kernel:?} {name}");
             let iso = p.isovalue as f32;
-            let arrays: Vec<LevelArrays> = (1..=3u8)
+            let built: Vec<_> = (1..=3u8)
                 .map(|level| {
-                    build_level(
+                    let mut l = build_level(
                         g,
                         &on_device,
                         &grid,
@@ -377,12 +379,16 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
                         false,
                         &mut Progress::none(),
                     )
-                    .unwrap()
+                    .unwrap();
+                    l.read_values(g).unwrap();
+                    l
                 })
                 .collect();
+            let arrays: Vec<LevelArrays> = built.iter().map(|l| l.arrays.clone()).collect();
             let faces = cracks::transition_faces(&grid, &levels);
             let cpu = cracks::fill(&grid, &levels, &arrays, &faces, iso as f64);
-            let gpu = super::cracks::fill(g, &grid, &levels, &arrays, &faces, iso).unwrap();
+            let fine = [built[1].buffers.as_ref(), built[2].buffers.as_ref()];
+            let gpu = super::cracks::fill(g, &grid, &levels, fine, &faces, iso).unwrap();
             let kinds: HashSet<(u8, u8)> = faces
                 .iter()
                 .map(|f| {
