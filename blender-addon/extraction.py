@@ -65,7 +65,7 @@ class Params:
     grid_factor: float = 0.5
     method: str = "CORRECTORS"  # or "ADAPTIVE"
     splash_threshold: int = 1
-    backend: str = "CPU"  # adaptive: CPU, GPU (wgpu) or AUTO (a hardware GPU when there is one)
+    backend: str = "CPU"  # CPU, GPU (wgpu) or AUTO (a hardware GPU when there is one); both methods
     correct: bool = True
     trim: str = "AUTO"  # AUTO, OFF, ON, CUSTOM
     trim_node: float = 0.1
@@ -186,6 +186,7 @@ def _isobar_kwargs(params: Params) -> dict:
         grid_factor=float(params.grid_factor),
         correct=bool(params.correct),
         normals=bool(params.normals),
+        backend=params.backend.lower(),
     )
     if params.h_mode == "ARRAY":
         kwargs["h_array"] = params.h_array
@@ -249,7 +250,6 @@ def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn])
         particles,
         progress=progress,
         splash_threshold=int(params.splash_threshold),
-        backend=params.backend.lower(),
         **kwargs,
     )
     try:

@@ -94,9 +94,9 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
         layout.prop(settings, "h_scale")
         layout.prop(settings, "grid_factor")
         layout.prop(settings, "method")
+        layout.prop(settings, "backend")
         if settings.method == "ADAPTIVE":
             layout.prop(settings, "splash_threshold")
-            layout.prop(settings, "backend")
             return
         layout.prop(settings, "correct")
         layout.prop(settings, "trim")

@@ -196,7 +196,13 @@ class IsobarSettings(bpy.types.PropertyGroup):
         soft_max=8,
         update=_changed,
     )
-    backend: EnumProperty(name="Backend", description="Adaptive: where the grids run", items=BACKENDS, default="CPU", update=_changed)
+    backend: EnumProperty(
+        name="Backend",
+        description="Where the work runs: Marching Correctors' seed search (same surface on every back end) or the adaptive grids",
+        items=BACKENDS,
+        default="CPU",
+        update=_changed,
+    )
     correct: BoolProperty(
         name="Correction",
         description="Move every vertex onto the level set (off: a faster linear preview)",

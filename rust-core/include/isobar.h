@@ -148,6 +148,13 @@ typedef struct IsobarSphParams {
   int32_t clip;
   double clip_min[3];
   double clip_max[3];
+  // Where Marching Correctors' seed-cell neighbour search runs: `ISOBAR_BACKEND_CPU`
+  // (default), `ISOBAR_BACKEND_GPU` (wgpu; `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU
+  // adapter: ..." without one) or `ISOBAR_BACKEND_AUTO` (a hardware GPU when there is
+  // one, else the CPU). Every back end gives the same surface; `IsobarStats::backend`
+  // says which ran. The full-grid baseline refuses `ISOBAR_BACKEND_GPU`;
+  // `isobar_adaptive_extract` takes its back end from `IsobarAdaptiveParams` instead.
+  uint32_t backend;
 } IsobarSphParams;
 
 // Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
@@ -260,6 +267,9 @@ typedef struct IsobarStats {
   double seconds_trimming;
   double seconds_attributes;
   double seconds_total;
+  // The back end that ran (`ISOBAR_BACKEND_CPU` or `ISOBAR_BACKEND_GPU`): for Marching
+  // Correctors the seed cells' neighbour search. Added in version 2.
+  uint32_t backend;
 } IsobarStats;
 
 

@@ -29,7 +29,8 @@ impl NodeValues for DenseNodes {
 }
 
 /// Extracts the isosurfaces by full-grid resampling and marching cubes. Refuses, before
-/// allocating, a grid over `params.memory_budget` bytes.
+/// allocating, a grid over `params.memory_budget` bytes. It runs on the CPU only: an
+/// explicit GPU request is refused rather than quietly served by the CPU.
 pub fn extract(
     field: &SphField,
     data: &ParticleData,
@@ -38,6 +39,12 @@ pub fn extract(
 ) -> Result<Extraction> {
     let memory_budget = params.memory_budget;
     params.validate()?;
+    if params.backend == crate::gpu::Backend::Gpu {
+        return Err(Error::InvalidParameter {
+            name: "backend",
+            message: "the full-grid baseline runs on the CPU only; ask for cpu or auto".into(),
+        });
+    }
     let start = Instant::now();
     let grid = virtual_grid(field, params)?;
     let nodes = grid.cells.map(|c| c as usize + 1);

@@ -92,6 +92,49 @@ fn sph_command_writes_a_surface_and_stats() {
     );
 }
 
+/// `isobar sph --backend gpu` (wgpu; lavapipe in CI) on a real .bgeo frame writes the file
+/// `--backend cpu` writes, byte for byte, and its statistics say the GPU ran. Without an
+/// adapter this fails, unless ISOBAR_GPU_TESTS=skip (then the error must name the cause).
+#[test]
+fn sph_backend_gpu_writes_the_cpu_mesh_byte_for_byte() {
+    let frame = shared("dam_break_frame_9_6859_particles.bgeo");
+    let run = |backend: &str| {
+        let out = temp(&format!("backend_{backend}.ply"));
+        let json = temp(&format!("backend_{backend}.json"));
+        let run = isobar()
+            .args(["sph", &frame, "--iso", "0.6", "--h", "0.05", "--quiet"])
+            .args(["--backend", backend, "--stats-json"])
+            .arg(&json)
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr).to_string();
+        run.status
+            .success()
+            .then(|| {
+                (
+                    std::fs::read(&out).unwrap(),
+                    std::fs::read_to_string(&json).unwrap(),
+                )
+            })
+            .ok_or(err)
+    };
+    let (cpu, cpu_stats) = run("cpu").unwrap();
+    assert!(cpu_stats.contains("\"backend\": \"cpu\""), "{cpu_stats}");
+    let (gpu, gpu_stats) = match run("gpu") {
+        Ok(r) => r,
+        Err(e) if std::env::var("ISOBAR_GPU_TESTS").as_deref() == Ok("skip") => {
+            assert!(e.contains("no GPU adapter"), "{e}");
+            return;
+        }
+        Err(e) => panic!("{e}; install mesa-vulkan-drivers or set ISOBAR_GPU_TESTS=skip"),
+    };
+    assert!(gpu_stats.contains("\"backend\": \"gpu\""), "{gpu_stats}");
+    assert!(cpu.len() > 100_000);
+    assert!(cpu == gpu, "--backend gpu wrote another mesh");
+}
+
 fn fails_with(args: &[&str], expected: &[&str]) {
     let run = isobar().args(args).output().unwrap();
     assert!(!run.status.success(), "{args:?} should fail");
@@ -136,6 +179,37 @@ fn bad_input_gets_a_clear_error_and_no_output() {
         &["temperature"],
     );
     fails_with(&["sph", &frame, "--iso", "0.6", "-o", o], &["--h"]);
+    fails_with(
+        &[
+            "sph",
+            &frame,
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "--backend",
+            "cuda",
+            "-o",
+            o,
+        ],
+        &["backend", "cuda", "cpu, gpu, auto"],
+    );
+    fails_with(
+        &[
+            "sph",
+            &frame,
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "--full-grid",
+            "--backend",
+            "gpu",
+            "-o",
+            o,
+        ],
+        &["CPU only"],
+    );
     fails_with(
         &["sph", &frame, "--iso", "0.6", "--h", "-0.05", "-o", o],
         &["smoothing length"],

@@ -53,7 +53,7 @@ def test_panels_without_and_with_a_fluid_surface(scene, demo_sequence):
     bpy.ops.isobar.import_sequence(filepath=str(demo_sequence[0]), h=H, iso=ISO, grid_factor=GRID_FACTOR)
     log = draw_all(bpy.context)
     props = {name for kind, name in log if kind == "prop"}
-    assert {"field", "iso", "kernel", "h", "h_scale", "grid_factor", "correct", "trim"} <= props
+    assert {"field", "iso", "kernel", "h", "h_scale", "grid_factor", "method", "backend", "correct", "trim"} <= props
     assert {"directory", "pattern", "frame_offset", "cache_directory", "use_cache"} <= props
     assert ("operator", "isobar.bake") in log and ("operator", "isobar.free_bake") in log
     assert any(kind == "label" and text.startswith("Frame 1:") for kind, text in log)  # the status

@@ -266,3 +266,8 @@ def test_adaptive_method(scene, isobar, demo_sequence):
     settings.backend = "CPU"
     settings.method = "CORRECTORS"
     assert_mesh_equals(obj, correctors)
+    # Marching Correctors with Backend GPU: the seed search on the device, the same mesh.
+    settings.backend = "GPU"
+    assert not settings.status_error, settings.status
+    assert_mesh_equals(obj, correctors)
+    settings.backend = "CPU"

@@ -1104,6 +1104,7 @@ IsobarSphParams vtkIsobarSPHIsosurface::MakeParams(const std::string& field,
   params.memory_budget =
     static_cast<uint64_t>(std::min(this->MemoryBudget, 1.0e9) * 1024.0 * 1024.0 * 1024.0);
   params.full_grid = this->FullGrid ? 1 : 0;
+  params.backend = static_cast<uint32_t>(this->Backend);
   return params;
 }
 

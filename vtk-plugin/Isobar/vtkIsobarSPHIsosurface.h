@@ -166,9 +166,10 @@ public:
   ///@}
 
   ///@{
-  /// Adaptive method: where the grids run, ISOBAR_BACKEND_CPU (0, default),
-  /// ISOBAR_BACKEND_GPU (1, wgpu; an error when there is no adapter) or ISOBAR_BACKEND_AUTO
-  /// (2, a hardware GPU when there is one).
+  /// Where the work runs, ISOBAR_BACKEND_CPU (0, default), ISOBAR_BACKEND_GPU (1, wgpu;
+  /// an error when there is no adapter) or ISOBAR_BACKEND_AUTO (2, a hardware GPU when
+  /// there is one): Marching Correctors' seed-cell neighbour search (same surface on
+  /// every back end; FullGrid refuses GPU), or the Adaptive method's grids.
   vtkSetClampMacro(Backend, int, 0, 2);
   vtkGetMacro(Backend, int);
   ///@}

@@ -42,6 +42,15 @@ LIBRARY_NAME = "libisobar.so"
 
 KERNELS = {"cubic": 0, "wendland": 1, "quintic": 2, "quadratic": 3}
 
+#: ``backend`` values of ``IsobarSphParams`` and ``IsobarAdaptiveParams``
+#: (ISOBAR_BACKEND_CPU, _GPU, _AUTO).
+BACKENDS = {"cpu": 0, "gpu": 1, "auto": 2}
+
+
+def backend_name(value: int) -> str:
+    """The name of an ``ISOBAR_BACKEND_*`` value that ran ("cpu" or "gpu")."""
+    return {v: k for k, v in BACKENDS.items()}.get(value, "cpu")
+
 
 class ParticlesHandle(Structure):
     """Opaque ``IsobarParticles``."""
@@ -104,6 +113,8 @@ class SphParams(Structure):
         ("clip", c_int32),
         ("clip_min", c_double * 3),
         ("clip_max", c_double * 3),
+        # after ABI 2: where the seed search runs (ISOBAR_BACKEND_*)
+        ("backend", c_uint32),
     ]
 
 
@@ -133,6 +144,7 @@ class Stats(Structure):
         ("seconds_trimming", c_double),
         ("seconds_attributes", c_double),
         ("seconds_total", c_double),
+        ("backend", c_uint32),
     ]
 
 
@@ -486,4 +498,4 @@ def encode(text, what: str) -> bytes:
     return data
 
 
-__all__ = ["lib", "check", "last_error", "encode", "SphParams", "Stats", "PROGRESS_FN", "KERNELS", "Error"]
+__all__ = ["lib", "check", "last_error", "encode", "SphParams", "Stats", "PROGRESS_FN", "KERNELS", "BACKENDS", "backend_name", "Error"]

@@ -8,14 +8,10 @@ from typing import Optional, Tuple, Union
 
 import numpy as np
 
-from ._lib import AdaptiveParams, AdaptiveStats, check, lib
+from ._lib import BACKENDS, AdaptiveParams, AdaptiveStats, backend_name, check, lib
 from .particles import Particles
 from .sph import ProgressCallback, _run, _sph_params
 from .surface import Surface
-
-
-#: ``IsobarAdaptiveParams.backend`` values (ISOBAR_BACKEND_CPU, _GPU, _AUTO).
-_BACKENDS = {"cpu": 0, "gpu": 1, "auto": 2}
 
 
 def default_params() -> AdaptiveParams:
@@ -68,8 +64,8 @@ def extract_adaptive(
         ``triangles_per_level``, ``transition_faces``, ``crack_triangles``, ``vertices``,
         ``triangles``, ``field_evaluations``, ``array_bytes``, ``seconds_total`` and ``backend`` ("cpu" or "gpu").
     """
-    if backend not in _BACKENDS:
-        raise ValueError(f"backend must be one of {sorted(_BACKENDS)}, got {backend!r}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")
     if not isinstance(particles, Particles):
         particles = Particles.from_arrays(particles)
     params, keep = _sph_params(particles, float(iso), field, kernel, h, h_array, h_scale,
@@ -83,7 +79,7 @@ def extract_adaptive(
         adaptive.splash_dilation = int(splash_dilation)
     if bisection_iterations is not None:
         adaptive.bisection_iterations = int(bisection_iterations)
-    adaptive.backend = _BACKENDS[backend]
+    adaptive.backend = BACKENDS[backend]
     stats = AdaptiveStats()
     stats.struct_size = sizeof(AdaptiveStats)
     surface = _run(
@@ -98,7 +94,7 @@ def extract_adaptive(
     info = {name: getattr(stats, name) for name, _ in AdaptiveStats._fields_ if name != "struct_size"}
     info["cells_per_level"] = list(stats.cells_per_level)
     info["triangles_per_level"] = list(stats.triangles_per_level)
-    info["backend"] = {v: k for k, v in _BACKENDS.items()}.get(stats.backend, "cpu")
+    info["backend"] = backend_name(stats.backend)
     return surface, info
 
 

@@ -11,7 +11,7 @@ from typing import Callable, Iterable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from ._lib import KERNELS, PROGRESS_FN, SphParams, SurfaceHandle, check, encode, lib
+from ._lib import BACKENDS, KERNELS, PROGRESS_FN, SphParams, SurfaceHandle, check, encode, lib
 from .errors import InvalidArgumentError, Status
 from .particles import Particles
 from .surface import Surface
@@ -78,6 +78,7 @@ def extract(
     lattice: Optional[Tuple[float, float, float, float]] = None,
     clip: Optional[Tuple[Sequence[float], Sequence[float]]] = None,
     progress: Optional[ProgressCallback] = None,
+    backend: str = "cpu",
 ) -> Surface:
     """Extracts isosurfaces of the particles' SPH field; every vertex lies on the level set
     of the SPH interpolant to `tolerance` (relative), unless `correct` is False.
@@ -120,6 +121,10 @@ def extract(
         progress: ``callable(fraction, phase)`` called on this thread between chunks of
             work; return None or True to go on, False to cancel. An exception raised in
             it cancels the extraction and is re-raised here.
+        backend: where the seed cells' neighbour search runs: "cpu", "gpu" (wgpu; raises
+            "no GPU adapter: ..." without one) or "auto" (a hardware GPU when there is
+            one, else the CPU). Every back end gives the same surface;
+            ``surface.stats["backend"]`` says which ran. `full_grid` refuses "gpu".
 
     Returns:
         A :class:`Surface` (numpy arrays).
@@ -133,10 +138,13 @@ def extract(
     """
     if not isinstance(particles, Particles):
         particles = Particles.from_arrays(particles)
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")
     params, keep = _sph_params(particles, iso, field, kernel, h, h_array, h_scale, grid_factor,
                                correct, tolerance, trim, normals, attributes, volume_array,
                                density_array, mass, mass_array, shepard, memory_budget,
                                full_grid, lattice, clip)
+    params.backend = BACKENDS[backend]
     surface = _run(
         lambda callback, handle: lib.isobar_sph_extract(
             particles._handle, byref(params), callback, None, byref(handle)

@@ -8,7 +8,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from ._lib import Stats, check, encode, lib
+from ._lib import Stats, backend_name, check, encode, lib
 from .errors import InvalidArgumentError
 
 
@@ -47,7 +47,7 @@ class Surface:
         attributes: dict name -> float64 array, (n,) or (n, k): ``SumOfWeights``,
             ``Isovalue`` and the interpolated particle arrays that were asked for.
         stats: dict of the extraction statistics (cells, evaluations, corrections,
-            seconds per phase).
+            seconds per phase, ``backend``: "cpu" or "gpu", where the seed search ran).
 
     The arrays belong to numpy. The core's copy of the mesh is kept only for
     :meth:`write`; :meth:`release` (or garbage collection) frees it.
@@ -92,6 +92,7 @@ class Surface:
             stats.struct_size = sizeof(Stats)
             check(lib.isobar_surface_stats(handle, byref(stats)))
             stats_dict = {f: getattr(stats, f) for f, _ in Stats._fields_ if f != "struct_size"}
+            stats_dict["backend"] = backend_name(stats.backend)
         except BaseException:
             lib.isobar_surface_free(handle)
             raise

@@ -29,13 +29,9 @@ pub struct AdaptiveArgs {
     pub bisection_iterations: u32,
     /// Also run uniform marching cubes at the finest level (the full-grid baseline and the
     /// adaptive code with every cell at level 3) and print time, triangles, memory and
-    /// the Hausdorff distance.
+    /// the Hausdorff distance; both back ends (cpu, gpu) are timed too.
     #[arg(long)]
     pub compare: bool,
-    /// Where the per-level work runs: cpu, gpu (wgpu; an error without an adapter) or
-    /// auto (the GPU when an adapter exists). With --compare, both back ends are timed.
-    #[arg(long, default_value = "cpu")]
-    pub backend: String,
 }
 
 /// What the binary passes from its shared SPH options.
@@ -48,6 +44,8 @@ pub struct Common<'a> {
     pub memory_budget: u64,
     pub quiet: bool,
     pub stats_json: Option<&'a Path>,
+    /// `--backend`: where the per-level work and crack filling run.
+    pub backend: Backend,
 }
 
 /// Runs the subcommand on every frame of `common.input`.
@@ -73,7 +71,7 @@ pub fn run(
         bisection_iterations: args.bisection_iterations,
         normals: common.normals,
         memory_budget: common.memory_budget,
-        backend: Backend::parse(&args.backend)?,
+        backend: common.backend,
     };
     params.validate()?;
     let frames = io::expand_sequence(common.input)?;

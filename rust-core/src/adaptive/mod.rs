@@ -118,7 +118,8 @@ pub struct Stats {
     /// Points found on several levels whose positions differ (0 when bisection agrees).
     pub point_mismatches: u64,
     /// Bytes of the per-level arrays at their largest (values, cases, offsets, edges,
-    /// points, triangles).
+    /// points, triangles) on the host: on the GPU back end values and cases stay on the
+    /// device.
     pub array_bytes: u64,
     pub timings: Timings,
     /// The back end that ran (`Cpu` or `Gpu`, never `Auto`).
@@ -228,13 +229,15 @@ pub(crate) fn extract_gpu(
     let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
     // The kernels compare with the f32 isovalue; cracks see the same signs.
     let iso = params.isovalue as f32;
+    // Each level's device buffers, kept for crack filling to bind as they are.
+    let on_level = std::cell::RefCell::new(Vec::with_capacity(3));
     let mut out = extract_with(
         grid,
         levels,
         params,
         progress,
         |level, progress| {
-            crate::gpu::level::build_level(
+            let built = crate::gpu::level::build_level(
                 gpu,
                 &on_device,
                 grid,
@@ -244,9 +247,15 @@ pub(crate) fn extract_gpu(
                 params.bisection_iterations,
                 params.normals,
                 progress,
-            )
+            )?;
+            on_level.borrow_mut().push(built.buffers);
+            Ok(built.arrays)
         },
-        |arrays, faces| crate::gpu::cracks::fill(gpu, grid, levels, arrays, faces, iso),
+        |_, faces| {
+            let b = on_level.borrow();
+            let fine = [b[1].as_ref(), b[2].as_ref()];
+            crate::gpu::cracks::fill(gpu, grid, levels, fine, faces, iso)
+        },
     )?;
     out.stats.backend = Backend::Gpu;
     Ok(out)

@@ -8,6 +8,7 @@ use isobar::field::kernel::Kernel;
 use isobar::field::particles::ParticleData;
 use isobar::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
 use isobar::field::DEFAULT_MEMORY_BUDGET;
+use isobar::gpu::Backend;
 use isobar::progress::Progress;
 use isobar::{baseline, io, Error, Result};
 use std::path::{Path, PathBuf};
@@ -140,6 +141,13 @@ struct SphArgs {
     /// Memory budget in GiB for extent-sized structures.
     #[arg(long, default_value_t = (DEFAULT_MEMORY_BUDGET >> 30) as f64)]
     memory_budget: f64,
+    /// Where the work runs: cpu, gpu (wgpu; an error naming why when there is no GPU
+    /// adapter) or auto (a hardware GPU when there is one, else the CPU). `sph` runs the
+    /// seed cells' neighbour search there (same surface on every back end; --full-grid is
+    /// CPU only); `adaptive` the per-level grids and crack filling. The statistics say
+    /// which ran.
+    #[arg(long, default_value = "cpu")]
+    backend: String,
     /// Write the statistics as JSON here.
     #[arg(long)]
     stats_json: Option<PathBuf>,
@@ -275,6 +283,7 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Result<Params> {
             .clip
             .as_ref()
             .map(|c| (DVec3::new(c[0], c[1], c[2]), DVec3::new(c[3], c[4], c[5]))),
+        backend: Backend::parse(&args.backend)?,
     })
 }
 
@@ -355,6 +364,7 @@ fn run_adaptive(sph: &SphArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -
         memory_budget: (sph.memory_budget * (1u64 << 30) as f64) as u64,
         quiet: sph.quiet,
         stats_json: sph.stats_json.as_deref(),
+        backend: Backend::parse(&sph.backend)?,
     };
     isobar::adaptive::cli::run(adaptive, &common, &|data| settings_from(sph, data))
 }
@@ -482,6 +492,7 @@ fn stats_rows(
 ) -> Vec<(&'static str, String)> {
     vec![
         ("particles", data.len().to_string()),
+        ("backend", s.backend.name().to_string()),
         ("virtual cells", s.virtual_cells.to_string()),
         ("seed cells", s.seed_cells.to_string()),
         ("non-intersected seeds", s.non_intersected_seeds.to_string()),

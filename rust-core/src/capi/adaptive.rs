@@ -41,15 +41,24 @@ pub const ISOBAR_BACKEND_GPU: u32 = 1;
 /// `IsobarAdaptiveParams::backend`: the GPU when an adapter exists, else the CPU.
 pub const ISOBAR_BACKEND_AUTO: u32 = 2;
 
-fn backend_from_c(b: u32) -> Result<Backend, crate::Error> {
+/// An `ISOBAR_BACKEND_*` value of the field `name`.
+pub(super) fn backend_from_c(b: u32, name: &'static str) -> Result<Backend, crate::Error> {
     match b {
         ISOBAR_BACKEND_CPU => Ok(Backend::Cpu),
         ISOBAR_BACKEND_GPU => Ok(Backend::Gpu),
         ISOBAR_BACKEND_AUTO => Ok(Backend::Auto),
         _ => Err(invalid(
-            "adaptive.backend",
+            name,
             format!("{b} is not ISOBAR_BACKEND_CPU (0), _GPU (1) or _AUTO (2)"),
         )),
+    }
+}
+
+/// The `ISOBAR_BACKEND_*` value of the back end that ran (`Cpu` or `Gpu`).
+pub(super) fn backend_to_c(b: Backend) -> u32 {
+    match b {
+        Backend::Gpu => ISOBAR_BACKEND_GPU,
+        _ => ISOBAR_BACKEND_CPU,
     }
 }
 
@@ -149,7 +158,7 @@ pub extern "C" fn isobar_adaptive_extract(
             bisection_iterations: a.bisection_iterations,
             normals: sph_params.normals,
             memory_budget: sph_params.memory_budget,
-            backend: backend_from_c(a.backend)?,
+            backend: backend_from_c(a.backend, "adaptive.backend")?,
         };
         let extraction = with_progress(progress, user, |sink| {
             sink.window(0.0, 0.1);
@@ -170,10 +179,7 @@ pub extern "C" fn isobar_adaptive_extract(
                 field_evaluations: s.field_evaluations,
                 array_bytes: s.array_bytes,
                 seconds_total: s.timings.total,
-                backend: match s.backend {
-                    Backend::Gpu => ISOBAR_BACKEND_GPU,
-                    _ => ISOBAR_BACKEND_CPU,
-                },
+                backend: backend_to_c(s.backend),
             };
             copy_versioned_out(full, stats, "stats")?;
         }
@@ -182,6 +188,7 @@ pub extern "C" fn isobar_adaptive_extract(
                 vertices: s.vertices,
                 triangles: s.triangles,
                 field_evaluations: s.field_evaluations,
+                backend: s.backend,
                 timings: correctors::Timings {
                     total: s.timings.total,
                     ..correctors::Timings::default()

@@ -82,11 +82,23 @@ pub struct IsobarSphParams {
     pub clip: i32,
     pub clip_min: [f64; 3],
     pub clip_max: [f64; 3],
+    // ---- end of ABI 2 (SPH_PARAMS_V2_SIZE).
+    /// Where Marching Correctors' seed-cell neighbour search runs: `ISOBAR_BACKEND_CPU`
+    /// (default), `ISOBAR_BACKEND_GPU` (wgpu; `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU
+    /// adapter: ..." without one) or `ISOBAR_BACKEND_AUTO` (a hardware GPU when there is
+    /// one, else the CPU). Every back end gives the same surface; `IsobarStats::backend`
+    /// says which ran. The full-grid baseline refuses `ISOBAR_BACKEND_GPU`;
+    /// `isobar_adaptive_extract` takes its back end from `IsobarAdaptiveParams` instead.
+    pub backend: u32,
 }
 
 /// Size of the ABI-1 parameter struct: the smallest `struct_size` ever accepted. Fields
 /// added later go after it and keep their defaults for callers that predate them.
 const SPH_PARAMS_V1_SIZE: usize = 176;
+/// Size of the ABI-2 struct (lattice and clip box, no `backend`): callers built against
+/// it run on the CPU.
+#[cfg(test)]
+const SPH_PARAMS_V2_SIZE: usize = 264;
 
 /// Progress callback: fraction in [0, 1] and a phase name; return non-zero to cancel.
 pub type IsobarProgressFn =
@@ -127,6 +139,7 @@ impl Default for IsobarSphParams {
             clip: 0,
             clip_min: [0.0; 3],
             clip_max: [0.0; 3],
+            backend: super::adaptive::ISOBAR_BACKEND_CPU,
         }
     }
 }
@@ -229,6 +242,7 @@ pub(super) fn settings(p: &IsobarSphParams) -> Result<(SphSettings, Params), cra
         }),
         normals: p.normals != 0,
         attributes,
+        backend: super::adaptive::backend_from_c(p.backend, "params.backend")?,
     };
     Ok((sph, params))
 }
@@ -280,5 +294,93 @@ mod tests {
             SPH_PARAMS_V1_SIZE % std::mem::align_of::<IsobarSphParams>(),
             0
         );
+        // ABI 2 ends where `backend` begins.
+        assert_eq!(
+            std::mem::offset_of!(IsobarSphParams, backend),
+            SPH_PARAMS_V2_SIZE
+        );
+    }
+
+    /// `backend`: checked, reported in `IsobarStats::backend`, absent from ABI-2 structs
+    /// (which run on the CPU), refused by the full-grid baseline when it asks for the GPU;
+    /// ABI-1 stats structs (no `backend`) are still filled.
+    #[test]
+    fn backend_field_is_versioned_checked_and_reported() {
+        use crate::capi::{
+            isobar_particles_create, isobar_particles_free, isobar_surface_free,
+            isobar_surface_stats, IsobarStats, IsobarStatus, ISOBAR_BACKEND_CPU,
+            ISOBAR_BACKEND_GPU,
+        };
+        let mut flat = Vec::new();
+        for z in -4i32..=4 {
+            for y in -4i32..=4 {
+                for x in -4i32..=4 {
+                    flat.extend([x as f64 * 0.1, y as f64 * 0.1, z as f64 * 0.1]);
+                }
+            }
+        }
+        let mut handle = std::ptr::null_mut();
+        assert_eq!(
+            isobar_particles_create(flat.as_ptr(), flat.len() / 3, &mut handle),
+            IsobarStatus::Ok
+        );
+        let iso = [0.5f64];
+        let params = IsobarSphParams {
+            h: 0.2,
+            isovalues: iso.as_ptr(),
+            isovalue_count: 1,
+            ..IsobarSphParams::default()
+        };
+        let run = |p: &IsobarSphParams| {
+            let mut surface = std::ptr::null_mut();
+            let status = isobar_sph_extract(handle, p, None, std::ptr::null_mut(), &mut surface);
+            (status, surface)
+        };
+        let stats_of = |surface, size: usize| {
+            let mut stats = IsobarStats {
+                struct_size: size as u32,
+                backend: 99,
+                ..IsobarStats::default()
+            };
+            assert_eq!(isobar_surface_stats(surface, &mut stats), IsobarStatus::Ok);
+            stats
+        };
+        let full = std::mem::size_of::<IsobarStats>();
+        // Default: the CPU, reported.
+        let (status, surface) = run(&params);
+        assert_eq!(status, IsobarStatus::Ok);
+        assert_eq!(stats_of(surface, full).backend, ISOBAR_BACKEND_CPU);
+        // A stats struct from before `backend` gets its prefix only.
+        let v1 = stats_of(surface, std::mem::offset_of!(IsobarStats, backend));
+        assert_eq!(v1.backend, 99);
+        assert!(v1.triangles > 0);
+        isobar_surface_free(surface);
+        // An ABI-2 caller's struct ends before `backend`: whatever follows is not read.
+        let v2 = IsobarSphParams {
+            struct_size: SPH_PARAMS_V2_SIZE as u32,
+            backend: 7,
+            ..params
+        };
+        let (status, surface) = run(&v2);
+        assert_eq!(status, IsobarStatus::Ok);
+        assert_eq!(stats_of(surface, full).backend, ISOBAR_BACKEND_CPU);
+        isobar_surface_free(surface);
+        // An unknown value, and the GPU for the CPU-only baseline, are refused.
+        for bad in [
+            IsobarSphParams {
+                backend: 7,
+                ..params
+            },
+            IsobarSphParams {
+                backend: ISOBAR_BACKEND_GPU,
+                full_grid: 1,
+                ..params
+            },
+        ] {
+            let (status, surface) = run(&bad);
+            assert_eq!(status, IsobarStatus::ErrInvalidArgument);
+            assert!(surface.is_null());
+        }
+        isobar_particles_free(handle);
     }
 }

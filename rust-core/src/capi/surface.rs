@@ -47,6 +47,9 @@ pub struct IsobarStats {
     pub seconds_trimming: f64,
     pub seconds_attributes: f64,
     pub seconds_total: f64,
+    /// The back end that ran (`ISOBAR_BACKEND_CPU` or `ISOBAR_BACKEND_GPU`): for Marching
+    /// Correctors the seed cells' neighbour search. Added in version 2.
+    pub backend: u32,
 }
 
 fn surface<'a>(s: *const IsobarSurface) -> Option<&'a IsobarSurface> {
@@ -155,6 +158,7 @@ pub extern "C" fn isobar_surface_stats(
             seconds_trimming: t.trimming,
             seconds_attributes: t.attributes,
             seconds_total: t.total,
+            backend: super::adaptive::backend_to_c(st.backend),
         };
         copy_versioned_out(full, out, "out")
     })

@@ -13,6 +13,7 @@ pub mod vertices;
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
 use crate::field::sph::SphField;
+use crate::gpu::Backend;
 use crate::mc::VirtualGrid;
 use crate::mesh::Mesh;
 use crate::progress::Progress;
@@ -75,6 +76,9 @@ pub struct Params {
     /// tracking stops with `OverBudget` as soon as what it found would need more (a grid
     /// factor far too fine, say), before building any vertex.
     pub memory_budget: u64,
+    /// Where the seed cells' neighbour search runs (`gpu::seeds` on the GPU; the exact
+    /// tests stay on the CPU, so every back end gives the same seeds and surface).
+    pub backend: Backend,
 }
 
 impl Default for Params {
@@ -90,6 +94,7 @@ impl Default for Params {
             lattice: None,
             clip: None,
             memory_budget: crate::field::DEFAULT_MEMORY_BUDGET,
+            backend: Backend::Cpu,
         }
     }
 }
@@ -191,6 +196,8 @@ pub struct Stats {
     /// Vertices whose correction did not reach the tolerance (kept at their best point).
     pub unconverged_vertices: u64,
     pub trim_cut_points: u64,
+    /// The back end the seed search ran on: `Cpu` or `Gpu` (never `Auto`).
+    pub backend: Backend,
     pub timings: Timings,
 }
 
@@ -245,6 +252,45 @@ pub fn absolute_tolerance(field: &SphField, iso: f64, rel: f64) -> f64 {
     rel * scale
 }
 
+/// Where the seed search finds each particle's neighbours: the CPU's neighbour grid, or
+/// candidate lists found once per extraction on the GPU (`gpu::seeds`).
+enum Neighbours {
+    Cpu,
+    #[cfg(feature = "gpu")]
+    Gpu(crate::gpu::seeds::Candidates),
+}
+
+impl Neighbours {
+    /// For a resolved back end (`Cpu` or `Gpu`).
+    fn new(field: &SphField, backend: Backend) -> Result<Neighbours> {
+        match backend {
+            #[cfg(feature = "gpu")]
+            Backend::Gpu => {
+                let gpu = crate::gpu::device::get()?;
+                let on_device = crate::gpu::sph::GpuField::new(gpu, field, field.bounds().0)?;
+                Ok(Neighbours::Gpu(crate::gpu::seeds::Candidates::new(
+                    gpu, &on_device, field,
+                )?))
+            }
+            _ => Ok(Neighbours::Cpu),
+        }
+    }
+
+    fn seed_cells(
+        &self,
+        field: &SphField,
+        grid: &VirtualGrid,
+        iso: f64,
+        search: &seeds::SeedSearch,
+    ) -> Result<Vec<u64>> {
+        match self {
+            Neighbours::Cpu => seeds::seed_cells(field, grid, iso, search),
+            #[cfg(feature = "gpu")]
+            Neighbours::Gpu(c) => crate::gpu::seeds::seed_cells(c, field, grid, iso, search),
+        }
+    }
+}
+
 /// Extracts the isosurfaces of `field` by Marching Correctors. `data` supplies the arrays
 /// named in `params.attributes`.
 pub fn extract(
@@ -266,14 +312,16 @@ pub fn extract(
     let n = params.isovalues.len() as f64;
     progress.phase("seed cells", 0.0, 0.0)?;
     let t = Instant::now();
+    stats.backend = params.backend.resolve()?;
     let search = seeds::SeedSearch::new(field)?;
+    let neighbours = Neighbours::new(field, stats.backend)?;
     stats.field_evaluations += field.len() as u64;
     stats.timings.seeds += t.elapsed().as_secs_f64();
     for (k, &iso) in params.isovalues.iter().enumerate() {
         let at = |f: f64| (k as f64 + f) / n;
         progress.phase("seed cells", at(0.0), at(0.1))?;
         let t = Instant::now();
-        let seeds = seeds::seed_cells(field, &grid, iso, &search)?;
+        let seeds = neighbours.seed_cells(field, &grid, iso, &search)?;
         stats.seed_cells += seeds.len() as u64;
         stats.timings.seeds += t.elapsed().as_secs_f64();
 

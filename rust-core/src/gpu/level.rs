@@ -11,6 +11,10 @@
 //! | bisection of each edge of E and its gradient normal | GPU |
 //! | positions from the bisected interval in f64, triangle keys to E indices | CPU |
 //!
+//! The level's cells, node values and E stay on the device ([`LevelBuffers`]) for crack
+//! filling (`gpu::cracks`); node values and cases come back to the host only when asked
+//! ([`GpuLevel::read_values`], for the tests that compare them with the CPU's).
+//!
 //! A node shared by cells of the level is evaluated by each of them (the same kernel on
 //! the same integer coordinates gives the same bits), so `evaluations` counts (k+1)³ per
 //! cell.
@@ -86,6 +90,49 @@ fn table_words() -> Vec<u32> {
     words
 }
 
+/// A level's arrays on the device, as its kernels left them, for `gpu::cracks` to bind.
+pub struct LevelBuffers {
+    /// The level's coarse cells, ascending (`LevelArrays::cells`).
+    pub cells: wgpu::Buffer,
+    pub cells_len: usize,
+    /// f32 node values, cell by cell (`LevelArrays::values`).
+    pub values: wgpu::Buffer,
+    /// E as the bisection read it: per edge its key's two words and the end values
+    /// (`LevelArrays::edges` in the first two words).
+    pub edges: wgpu::Buffer,
+    pub edges_len: usize,
+    cases: wgpu::Buffer,
+    node_count: usize,
+    sub_count: usize,
+}
+
+/// What [`build_level`] gives: the host arrays the assembly needs (without node values
+/// and cases) and the device buffers (None for a level without cells).
+pub struct GpuLevel {
+    pub arrays: LevelArrays,
+    pub buffers: Option<LevelBuffers>,
+}
+
+impl GpuLevel {
+    /// Reads the node values (widened to f64) and sub-cell cases back into `arrays`, which
+    /// then equal `adaptive::levels::build_level`'s in every field.
+    pub fn read_values(&mut self, gpu: &Gpu) -> Result<()> {
+        if let Some(b) = &self.buffers {
+            self.arrays.values = gpu
+                .read::<f32>(&b.values, b.node_count)?
+                .into_iter()
+                .map(f64::from)
+                .collect();
+            self.arrays.cases = gpu
+                .read::<u32>(&b.cases, b.sub_count)?
+                .into_iter()
+                .map(|c| c as u8)
+                .collect();
+        }
+        Ok(())
+    }
+}
+
 /// Exclusive prefix sum, on the device, of the first `count` words of `data`.
 pub fn scan(gpu: &Gpu, data: &wgpu::Buffer, count: u64) -> Result<()> {
     let blocks = count.div_ceil(64);
@@ -107,8 +154,8 @@ pub fn scan(gpu: &Gpu, data: &wgpu::Buffer, count: u64) -> Result<()> {
 }
 
 /// The arrays of `level` with every per-node and per-cell step on the GPU (see the module
-/// table). `iso` is rounded to f32 as the kernels compare in f32; crack filling must use
-/// the same rounded value.
+/// table), and the device buffers crack filling binds. `iso` is rounded to f32 as the
+/// kernels compare in f32; crack filling must use the same rounded value.
 #[allow(clippy::too_many_arguments)]
 pub fn build_level(
     gpu: &Gpu,
@@ -120,7 +167,7 @@ pub fn build_level(
     iterations: u32,
     normals: bool,
     progress: &mut Progress,
-) -> Result<LevelArrays> {
+) -> Result<GpuLevel> {
     let k = subdivisions(level);
     let step = FINE_PER_COARSE / k;
     let n = (k + 1) as u64;
@@ -133,7 +180,10 @@ pub fn build_level(
         ..LevelArrays::default()
     };
     if out.cells.is_empty() {
-        return Ok(out);
+        return Ok(GpuLevel {
+            arrays: out,
+            buffers: None,
+        });
     }
     let steps = iterations + (3 - level as u32);
     // Lattice coordinates must stay exact in f32 (see level.wgsl).
@@ -272,20 +322,23 @@ pub fn build_level(
             })
         })
         .collect();
-    out.values = gpu
-        .read::<f32>(&values, node_count as usize)?
-        .into_iter()
-        .map(f64::from)
-        .collect();
-    out.cases = gpu
-        .read::<u32>(&cases, sub_count as usize)?
-        .into_iter()
-        .map(|c| c as u8)
-        .collect();
     out.triangle_offsets = tri_total;
     out.evaluations = node_count + cut.len() as u64 * (steps as u64 + normals as u64);
     progress.report(1.0)?;
-    Ok(out)
+    let buffers = LevelBuffers {
+        cells: cells_buf,
+        cells_len: out.cells.len(),
+        values,
+        edges: bisect_in,
+        edges_len: cut.len(),
+        cases,
+        node_count: node_count as usize,
+        sub_count: sub_count as usize,
+    };
+    Ok(GpuLevel {
+        arrays: out,
+        buffers: Some(buffers),
+    })
 }
 
 // SAFETY: plain `repr(C)` structs of 4-byte scalars without padding; any bits are valid.

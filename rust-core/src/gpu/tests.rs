@@ -265,7 +265,7 @@ fn level_arrays_equal_the_cpu_ones() {
                     &mut Progress::none(),
                 )
                 .unwrap();
-                let gpu = build_level(
+                let mut gpu = build_level(
                     g,
                     &on_device,
                     &grid,
@@ -277,6 +277,8 @@ fn level_arrays_equal_the_cpu_ones() {
                     &mut Progress::none(),
                 )
                 .unwrap();
+                gpu.read_values(g).unwrap();
+                let gpu = gpu.arrays;
                 skipped += assert_level_equal(&grid, &cpu, &gpu, p.isovalue, &what);
                 triangles += gpu.triangles.len();
             }
@@ -364,9 +366,9 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
         for (name, levels) in [("splash", natural), ("striped", striped_levels(&grid))] {
             let what = format!("{kernel:?} {name}");
             let iso = p.isovalue as f32;
-            let arrays: Vec<LevelArrays> = (1..=3u8)
+            let built: Vec<_> = (1..=3u8)
                 .map(|level| {
-                    build_level(
+                    let mut l = build_level(
                         g,
                         &on_device,
                         &grid,
@@ -377,12 +379,16 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
                         false,
                         &mut Progress::none(),
                     )
-                    .unwrap()
+                    .unwrap();
+                    l.read_values(g).unwrap();
+                    l
                 })
                 .collect();
+            let arrays: Vec<LevelArrays> = built.iter().map(|l| l.arrays.clone()).collect();
             let faces = cracks::transition_faces(&grid, &levels);
             let cpu = cracks::fill(&grid, &levels, &arrays, &faces, iso as f64);
-            let gpu = super::cracks::fill(g, &grid, &levels, &arrays, &faces, iso).unwrap();
+            let fine = [built[1].buffers.as_ref(), built[2].buffers.as_ref()];
+            let gpu = super::cracks::fill(g, &grid, &levels, fine, &faces, iso).unwrap();
             let kinds: HashSet<(u8, u8)> = faces
                 .iter()
                 .map(|f| {
@@ -530,6 +536,48 @@ fn gpu_seed_cells_equal_cpu_seed_cells() {
             let gpu = super::seeds::seed_cells(&candidates, field, &grid, iso, &search).unwrap();
             assert!(!cpu.is_empty(), "case {k} iso {iso}");
             assert_eq!(cpu, gpu, "case {k} iso {iso}");
+        }
+    }
+}
+
+/// `isobar sph --backend gpu`'s path: Marching Correctors with the seed search on the GPU
+/// gives the CPU's mesh exactly (same vertices, triangles, normals) on real frames, and
+/// says which back end ran.
+#[test]
+fn correctors_gpu_backend_mesh_equals_cpu_mesh_on_real_frames() {
+    use crate::correctors;
+    if gpu().is_none() {
+        return;
+    }
+    for name in FRAMES {
+        let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/data/splashsurf")
+            .join(name);
+        let data = crate::io::read_particles(&path).unwrap();
+        let field = frame(name);
+        let run = |backend| {
+            let p = correctors::Params {
+                isovalues: vec![0.6],
+                backend,
+                ..correctors::Params::default()
+            };
+            correctors::extract(&field, &data, &p, &mut Progress::none()).unwrap()
+        };
+        let (cpu, gpu) = (run(Backend::Cpu), run(Backend::Gpu));
+        assert_eq!(cpu.stats.backend, Backend::Cpu);
+        assert_eq!(gpu.stats.backend, Backend::Gpu, "{name}");
+        assert!(!cpu.mesh.triangles.is_empty(), "{name}");
+        assert_eq!(cpu.stats.seed_cells, gpu.stats.seed_cells, "{name}");
+        assert_eq!(cpu.mesh.positions, gpu.mesh.positions, "{name}");
+        assert_eq!(cpu.mesh.triangles, gpu.mesh.triangles, "{name}");
+        assert_eq!(cpu.mesh.normals, gpu.mesh.normals, "{name}");
+        if name == FRAMES[1] {
+            // Auto takes a hardware GPU only (lavapipe is slower than the CPU path).
+            let auto = run(Backend::Auto);
+            let software = device::get().unwrap().software;
+            let expected = if software { Backend::Cpu } else { Backend::Gpu };
+            assert_eq!(auto.stats.backend, expected);
+            assert_eq!(auto.mesh.triangles, cpu.mesh.triangles);
         }
     }
 }

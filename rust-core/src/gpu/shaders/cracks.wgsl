@@ -5,30 +5,22 @@
 // uploaded word for word) and maps the pattern's face points to the fine level's E.
 // `count_fills` writes each face's triangle count, the host scans them (scan.wgsl) and
 // `emit_fills` writes the triangles at the scanned offsets: the CPU's order, face by face.
-
-// Where one fine level (2 or 3) lies in the concatenated arrays below.
-struct FineLevel {
-    cells_start: u32,
-    cells_len: u32,
-    values_start: u32,
-    edges_start: u32,
-    edges_len: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
-}
+//
+// The fine level's arrays are level.wgsl's own buffers as its kernels left them: `cells`
+// (sorted coarse cells), `values` (node values) and `bisect_in` (E: key words, end
+// values). So each pass handles one fine level, the faces whose coarse side is
+// `fine.coarse`; the host runs it for level 2 and for level 3.
 
 struct Fine {
-    // [0]: level 2, [1]: level 3.
-    levels: array<FineLevel, 2>,
+    coarse: u32,    // the coarse side's level: 1 (fine level 2) or 2 (fine level 3)
+    cells_len: u32,
+    edges_len: u32,
+    pad: u32,
 }
 
 @group(0) @binding(14) var<uniform> fine: Fine;
 @group(0) @binding(15) var<storage, read> faces: array<vec2<u32>>;       // (lower cell, axis)
 @group(0) @binding(16) var<storage, read> cell_levels: array<u32>;
-@group(0) @binding(17) var<storage, read> fine_cells: array<u32>;        // levels 2, 3
-@group(0) @binding(18) var<storage, read> fine_values: array<f32>;       // levels 2, 3
-@group(0) @binding(19) var<storage, read> fine_edges: array<vec2<u32>>;  // levels 2, 3: E keys
 @group(0) @binding(20) var<storage, read> patterns: array<u32>;          // 512 rows of ROW
 @group(0) @binding(21) var<storage, read_write> fill_counts: array<u32>;
 @group(0) @binding(22) var<storage, read_write> fills: array<vec4<u32>>; // (level, 3 E indices)
@@ -37,19 +29,19 @@ const ROW: u32 = 37u;
 // An index that was not found: the host turns it into an error (the CPU's `expect`).
 const MISSING: u32 = 0xFFFFFFFFu;
 
-// Slot of coarse cell `cell` among the cells of fine level `f`, or MISSING.
-fn fine_slot(f: FineLevel, cell: u32) -> u32 {
+// Slot of coarse cell `cell` among the cells of the fine level, or MISSING.
+fn fine_slot(cell: u32) -> u32 {
     var lo = 0u;
-    var hi = f.cells_len;
+    var hi = fine.cells_len;
     while lo < hi {
         let mid = (lo + hi) / 2u;
-        if fine_cells[f.cells_start + mid] < cell {
+        if cells[mid] < cell {
             lo = mid + 1u;
         } else {
             hi = mid;
         }
     }
-    if lo < f.cells_len && fine_cells[f.cells_start + lo] == cell {
+    if lo < fine.cells_len && cells[lo] == cell {
         return lo;
     }
     return MISSING;
@@ -60,29 +52,38 @@ fn key_less(a: vec2<u32>, b: vec2<u32>) -> bool {
     return a.y < b.y || (a.y == b.y && a.x < b.x);
 }
 
-// Index in E of fine level `f` of the edge `key`, or MISSING.
-fn fine_edge(f: FineLevel, key: vec2<u32>) -> u32 {
+// Index in E of the fine level of the edge `key`, or MISSING.
+fn fine_edge(key: vec2<u32>) -> u32 {
     var lo = 0u;
-    var hi = f.edges_len;
+    var hi = fine.edges_len;
     while lo < hi {
         let mid = (lo + hi) / 2u;
-        if key_less(fine_edges[f.edges_start + mid], key) {
+        if key_less(bisect_in[mid].xy, key) {
             lo = mid + 1u;
         } else {
             hi = mid;
         }
     }
-    if lo < f.edges_len && all(fine_edges[f.edges_start + lo] == key) {
+    if lo < fine.edges_len && all(bisect_in[lo].xy == key) {
         return lo;
     }
     return MISSING;
 }
 
 // As `LevelArrays::value_at`: the value at finest node `node` of the fine cell at `c`.
-fn fine_value(f: FineLevel, k: u32, slot: u32, c: vec3<u32>, node: vec3<u32>) -> f32 {
+fn fine_value(k: u32, slot: u32, c: vec3<u32>, node: vec3<u32>) -> f32 {
     let n = k + 1u;
     let l = (node - c * 4u) / (4u / k);
-    return fine_values[f.values_start + slot * n * n * n + l.x + n * (l.y + n * l.z)];
+    return values[slot * n * n * n + l.x + n * (l.y + n * l.z)];
+}
+
+// The level of face `id`'s coarse side (the lower of its two cells' levels).
+fn coarse_side(id: u32) -> u32 {
+    let face = faces[id];
+    var uc = coarse_coords(face.x);
+    uc[face.y] += 1u;
+    let upper = uc.x + level.cells_x * (uc.y + level.cells_y * uc.z);
+    return min(cell_levels[face.x], cell_levels[upper]);
 }
 
 // Walks face `id`: its fill triangle count, and when `write` the triangles from `first`.
@@ -104,9 +105,8 @@ fn walk_face(id: u32, write: bool, first: u32) -> u32 {
         fine_cell = upper;
         flip = false;
     }
-    let f = fine.levels[coarse - 1u]; // fine level coarse + 1, stored from level 2
-    let k = 1u << coarse;             // its sub-cells per axis
-    let slot = fine_slot(f, fine_cell);
+    let k = 1u << coarse; // sub-cells per axis of the fine level, coarse + 1
+    let slot = fine_slot(fine_cell);
     if slot == MISSING {
         if write {
             fills[first] = vec4<u32>(MISSING);
@@ -131,7 +131,7 @@ fn walk_face(id: u32, write: bool, first: u32) -> u32 {
             var config = 0u;
             for (var j = 0u; j < 3u; j++) {
                 for (var i = 0u; i < 3u; i++) {
-                    if fine_value(f, k, slot, fc, origin + i * du + j * dv) > level.iso {
+                    if fine_value(k, slot, fc, origin + i * du + j * dv) > level.iso {
                         config |= 1u << (i + 3u * j);
                     }
                 }
@@ -151,7 +151,7 @@ fn walk_face(id: u32, write: bool, first: u32) -> u32 {
                             node = origin + ((p - 6u) % 3u) * du + ((p - 6u) / 3u) * dv;
                             axis = v;
                         }
-                        e[c] = fine_edge(f, edge_key(node, axis));
+                        e[c] = fine_edge(edge_key(node, axis));
                     }
                     if flip {
                         e = e.xzy;
@@ -168,7 +168,7 @@ fn walk_face(id: u32, write: bool, first: u32) -> u32 {
 @compute @workgroup_size(64)
 fn count_fills(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let id = index_of(gid, nwg);
-    if id >= level.count {
+    if id >= level.count || coarse_side(id) != fine.coarse {
         return;
     }
     fill_counts[id] = walk_face(id, false, 0u);
@@ -177,7 +177,7 @@ fn count_fills(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
 @compute @workgroup_size(64)
 fn emit_fills(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let id = index_of(gid, nwg);
-    if id >= level.count {
+    if id >= level.count || coarse_side(id) != fine.coarse {
         return;
     }
     walk_face(id, true, fill_counts[id]);
