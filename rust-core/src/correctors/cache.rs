@@ -55,6 +55,11 @@ impl NodeCache {
         self.map.corners(cell)
     }
 
+    /// Bytes the cache holds.
+    pub fn bytes(&self) -> u64 {
+        self.map.bytes()
+    }
+
     /// Number of cached nodes.
     pub fn len(&self) -> usize {
         self.map.len()

@@ -35,11 +35,12 @@ enum Visit {
     Discarded,
 }
 
-/// Bytes an extraction will need for what tracking has found: cached nodes (key and
-/// sample, with hash-table slack), visited cells, and per active cell its share of edges,
+/// Bytes an extraction will need for what tracking has found: the node cache's and the
+/// visited set's bricks as allocated (a brick is allocated whole, so scattered droplets
+/// cost more per node than a smooth sheet), and per active cell its share of edges,
 /// placed vertices, triangles and the output mesh.
-fn estimated_bytes(cached_nodes: usize, visited: usize, active: usize) -> u64 {
-    cached_nodes as u64 * 40 + visited as u64 * 16 + active as u64 * 240
+fn estimated_bytes(cache: &NodeCache, visited: &BrickSet, active: usize) -> u64 {
+    cache.bytes() + visited.bytes() + active as u64 * 240
 }
 
 /// Walks the surface `iso` from `seeds` (sorted, unique), discarding cells below the
@@ -103,7 +104,7 @@ pub fn track(
             }
         }
         next.par_sort_unstable();
-        let needed = estimated_bytes(cache.len(), visited.len(), out.active.len());
+        let needed = estimated_bytes(cache, &visited, out.active.len());
         if needed > memory_budget {
             return Err(Error::OverBudget {
                 what: format!(

@@ -161,6 +161,11 @@ impl BrickSet {
         self.map.insert(key, ())
     }
 
+    /// Bytes the set holds.
+    pub fn bytes(&self) -> u64 {
+        self.map.bytes()
+    }
+
     /// Number of keys in the set.
     pub fn len(&self) -> usize {
         self.map.len()
