@@ -165,16 +165,6 @@ impl BrickSet {
     pub fn bytes(&self) -> u64 {
         self.map.bytes()
     }
-
-    /// Number of keys in the set.
-    pub fn len(&self) -> usize {
-        self.map.len()
-    }
-
-    /// True when the set is empty.
-    pub fn is_empty(&self) -> bool {
-        self.map.is_empty()
-    }
 }
 
 impl FromIterator<u64> for BrickSet {
