@@ -30,10 +30,15 @@ pub struct NodeCache {
 impl NodeCache {
     /// Makes sure the eight corners of every cell in `cells` are evaluated.
     pub fn ensure_corners(&mut self, field: &SphField, grid: &VirtualGrid, cells: &[u64]) {
+        let map = &self.map;
         let mut missing: Vec<u64> = cells
-            .iter()
-            .flat_map(|&c| (0..8).map(move |k| VirtualGrid::corner(c, k)))
-            .filter(|&n| !self.map.contains(n))
+            .par_iter()
+            .flat_map_iter(|&c| {
+                let present = map.present_corners(c);
+                (0..8)
+                    .filter(move |k| present >> k & 1 == 0)
+                    .map(move |k| VirtualGrid::corner(c, k))
+            })
             .collect();
         // Sorted, neighbouring nodes are evaluated together (their particles are in
         // cache) and stored brick by brick.

@@ -1,7 +1,8 @@
 //! Vertex placement on cut grid edges (paper §III-D2): linear interpolation for previews,
 //! and the correction step — Newton along the edge with the directional derivative,
 //! falling back to bisection whenever Newton would leave the bracket — until
-//! |F(v) − iso| <= tolerance.
+//! |F(v) − iso| <= tolerance. The first step goes to the root of the cubic that matches
+//! the two node values and the first sample's value and slope, not to the tangent's.
 
 use super::cache::NodeValues;
 use crate::field::sph::{Sample, SphField};
@@ -85,8 +86,16 @@ pub fn place(
         }
         let slope = s.gradient[axis] * grid.cell_size;
         let newton = t - r / slope;
-        t = if slope != 0.0 && newton > lo && newton < hi {
+        let guess = if evaluations == 1 {
+            // The first sample's value and slope with the two node values fix a cubic
+            // along the edge whose root is far closer than Newton's tangent: most
+            // vertices then converge at the second sample instead of the third.
+            cubic_root(f0 - iso, f1 - iso, t, r, slope, lo, hi).unwrap_or(newton)
+        } else {
             newton
+        };
+        t = if slope != 0.0 && guess > lo && guess < hi {
+            guess
         } else {
             0.5 * (lo + hi)
         };
@@ -99,5 +108,54 @@ pub fn place(
         correction: (t - t_lin).abs() * grid.cell_size,
         evaluations,
         converged: r.abs() <= tolerance,
+    }
+}
+
+/// The root in (lo, hi) of the cubic p with p(0) = g0, p(1) = g1, p(s) = r and
+/// p'(s) = slope, if the fit is well posed and its Newton iteration stays in the bracket.
+fn cubic_root(g0: f64, g1: f64, s: f64, r: f64, slope: f64, lo: f64, hi: f64) -> Option<f64> {
+    // p(t) = g0 + (g1 − g0) t + t (t − 1) (α + β t): the ends hold by construction.
+    let q = s * (s - 1.0);
+    if q.abs() < 1e-6 {
+        return None;
+    }
+    let m = (r - g0 - (g1 - g0) * s) / q;
+    let beta = (slope - (g1 - g0) - (2.0 * s - 1.0) * m) / q;
+    let alpha = m - beta * s;
+    let p = |t: f64| g0 + (g1 - g0) * t + t * (t - 1.0) * (alpha + beta * t);
+    let dp = |t: f64| (g1 - g0) + (2.0 * t - 1.0) * (alpha + beta * t) + t * (t - 1.0) * beta;
+    let mut t = s;
+    for _ in 0..8 {
+        let d = dp(t);
+        if d == 0.0 || !d.is_finite() {
+            return None;
+        }
+        let next = t - p(t) / d;
+        if !(next > lo && next < hi) {
+            return None;
+        }
+        if (next - t).abs() <= 1e-12 {
+            return Some(next);
+        }
+        t = next;
+    }
+    Some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cubic_root;
+
+    #[test]
+    fn cubic_root_is_exact_for_a_cubic() {
+        // p(t) = (t − 0.3)(t + 0.5)(t − 2): one root in (0, 1).
+        let p = |t: f64| (t - 0.3) * (t + 0.5) * (t - 2.0);
+        let dp = |t: f64| (t + 0.5) * (t - 2.0) + (t - 0.3) * (t - 2.0) + (t - 0.3) * (t + 0.5);
+        for s in [0.1, 0.25, 0.6, 0.9] {
+            let root = cubic_root(p(0.0), p(1.0), s, p(s), dp(s), 0.0, 1.0).unwrap();
+            assert!((root - 0.3).abs() < 1e-12, "s = {s}: {root}");
+        }
+        // Too close to an end to fit: refused, the caller takes Newton's step.
+        assert!(cubic_root(p(0.0), p(1.0), 1e-9, p(1e-9), dp(1e-9), 0.0, 1.0).is_none());
     }
 }

@@ -148,6 +148,30 @@ impl<T: Copy + Default> BrickMap<T> {
     }
 }
 
+impl<T: Copy + Default> BrickMap<T> {
+    /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
+    /// does not straddle a brick boundary.
+    #[inline]
+    pub fn present_corners(&self, cell: u64) -> u8 {
+        let [x, y, z] = VirtualGrid::coords(cell);
+        if (x & LOCAL) != LOCAL && (y & LOCAL) != LOCAL && (z & LOCAL) != LOCAL {
+            let (brick, local) = split(cell);
+            let Some(i) = self.brick_index(brick) else {
+                return 0;
+            };
+            let present = &self.bricks[i as usize].present;
+            return (0..8).fold(0u8, |mask, k| {
+                let [dx, dy, dz] = super::corner_offset(k);
+                let at = local + (dx | dy << SHIFT | dz << (2 * SHIFT)) as usize;
+                mask | ((present[at / 64] >> (at % 64) & 1) as u8) << k
+            });
+        }
+        (0..8).fold(0u8, |mask, k| {
+            mask | u8::from(self.contains(VirtualGrid::corner(cell, k))) << k
+        })
+    }
+}
+
 /// A set of grid keys, stored brick by brick.
 #[derive(Default)]
 pub struct BrickSet {
@@ -238,6 +262,32 @@ mod tests {
                 "cell {:?}",
                 VirtualGrid::coords(cell)
             );
+        }
+    }
+
+    #[test]
+    fn present_corners_match_contains_inside_and_across_bricks() {
+        // Every third key of a 20³ box, so corners are a mix of present and absent.
+        let mut map = BrickMap::<u8>::default();
+        for x in 0..20 {
+            for y in 0..20 {
+                for z in 0..20 {
+                    if (x + 2 * y + 5 * z) % 3 == 0 {
+                        map.insert(VirtualGrid::key(x, y, z), 1);
+                    }
+                }
+            }
+        }
+        for x in 0..21 {
+            for y in 0..21 {
+                for z in 0..21 {
+                    let cell = VirtualGrid::key(x, y, z);
+                    let expected = (0..8).fold(0u8, |m, k| {
+                        m | u8::from(map.contains(VirtualGrid::corner(cell, k))) << k
+                    });
+                    assert_eq!(map.present_corners(cell), expected, "cell {x} {y} {z}");
+                }
+            }
         }
     }
 }
