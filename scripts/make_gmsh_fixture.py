@@ -6,6 +6,9 @@ reader's tests (rust-core/data/fe/gmsh/):
   ball_tet3.vtu          the same cells through VTK's own Lagrange node order
   cylinder_hex2.msh/.vtu cylinder (radius 1, height 1.2), second-order hexahedra (type 12;
                          cubic ones of this coarse disk come out inverted, gmsh agrees)
+  cylinder_hex3.msh/.vtu the cylinder in third-order hexahedra (type 92): a finer disk
+                         (size 0.4) and 3 layers, so that curving the boundary keeps every
+                         cell valid
   cylinder_prism2.msh/.vtu the cylinder in second-order prisms (type 13)
   *_probes.txt           gmsh's own evaluation (first 24 elements): `cell r s t x y z p` per line, cell = index
                          among the volume elements in file order, (r, s, t) in VTK's
@@ -35,7 +38,8 @@ PROBES = {
 }
 
 
-SIZE = {"hex": 0.7, "prism": 0.7}
+# Disk mesh size and layers along the axis of each cylinder.
+CYLINDER = {("hex", 2): (0.7, 2), ("hex", 3): (0.4, 3), ("prism", 2): (0.7, 2)}
 
 
 def field(x, y, z):
@@ -64,9 +68,10 @@ def build(kind, order):
         gmsh.model.occ.synchronize()
         if kind == "hex":
             gmsh.model.mesh.setRecombine(2, disk)
-        gmsh.model.mesh.setSize(gmsh.model.getEntities(0), SIZE[kind])
+        size, layers = CYLINDER[(kind, order)]
+        gmsh.model.mesh.setSize(gmsh.model.getEntities(0), size)
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.4)
-        gmsh.model.occ.extrude([(2, disk)], 0, 0, 1.2, numElements=[2], recombine=True)
+        gmsh.model.occ.extrude([(2, disk)], 0, 0, 1.2, numElements=[layers], recombine=True)
         gmsh.model.occ.synchronize()
         if kind == "hex":
             gmsh.model.mesh.setRecombine(2, disk)
@@ -190,7 +195,9 @@ def main(out):
     os.makedirs(out, exist_ok=True)
     gmsh.initialize()
     gmsh.option.setNumber("General.Terminal", 0)
-    for kind, order, stem in [("ball", 3, "ball_tet3"), ("hex", 2, "cylinder_hex2"), ("prism", 2, "cylinder_prism2")]:
+    stems = [("ball", 3, "ball_tet3"), ("hex", 2, "cylinder_hex2"), ("hex", 3, "cylinder_hex3"),
+             ("prism", 2, "cylinder_prism2")]
+    for kind, order, stem in stems:
         build(kind, order)
         write(out, stem)
     gmsh.finalize()

@@ -8,14 +8,16 @@ VTK's node order (`field::fe::Shape`) to get the permutation, so no order is tra
     python -m venv /tmp/fe2venv && /tmp/fe2venv/bin/pip install gmsh
     /tmp/fe2venv/bin/python scripts/make_gmsh_order.py > rust-core/src/io/gmsh/order.rs
 
-gmsh 4.15 describes prisms up to order 2 only ("FaceClosureFull not implemented for
-prisms of order 3"), so higher-order prisms are not in the table.
+gmsh 4.15 describes tetrahedra up to order 10, hexahedra up to order 9 and prisms up to
+order 2 only ("FaceClosureFull not implemented for prisms of order 3"); MAX_ORDER asks for
+every order up to 10 and keeps what gmsh knows. The lattices are written 8 points to a line
+under #[rustfmt::skip] (one point a line would make the order-9 hexahedron 1,000 lines).
 """
 
 import gmsh
 
 FAMILIES = [("Tetrahedron", "Tetrahedron"), ("Hexahedron", "Hexahedron"), ("Prism", "Wedge")]
-MAX_ORDER = 6
+MAX_ORDER = 10
 
 
 def lattice(kind, order, coords):
@@ -63,6 +65,7 @@ def main():
     print("}")
     print()
     print("/// The Lagrange tetrahedra, hexahedra and prisms gmsh describes.")
+    print("#[rustfmt::skip]")
     print("pub(super) const VOLUME_TYPES: &[VolumeType] = &[")
     for fam, kind in FAMILIES:
         for order in range(1, MAX_ORDER + 1):
@@ -74,12 +77,14 @@ def main():
             assert o == order
             pts = lattice(kind, order, coords)
             assert len(pts) == n
-            body = ", ".join(f"[{a}, {b}, {c}]" for a, b, c in pts)
             print("    VolumeType {")
             print(f"        ty: {t},")
             print(f"        kind: Kind::{kind},")
             print(f"        order: {order},")
-            print(f"        lattice: &[{body}],")
+            print("        lattice: &[")
+            for k in range(0, len(pts), 8):
+                print("            " + " ".join(f"[{a}, {b}, {c}]," for a, b, c in pts[k : k + 8]))
+            print("        ],")
             print("    },")
     print("];")
     gmsh.finalize()

@@ -121,11 +121,12 @@ def main():
     args = ap.parse_args()
     os.makedirs(args.data, exist_ok=True)
     work = tempfile.mkdtemp(prefix="bench_fe_")
+    load_start = os.getloadavg()
     lines = [
         f"# isobar fe vs VTK contouring of Lagrange cells",
         "",
         f"{platform.node()}: {os.cpu_count()} cores, load average "
-        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())} at start, VTK {vtk.vtkVersion.GetVTKVersion()}",
+        f"{' '.join(f'{x:.2f}' for x in load_start)} at start, VTK {vtk.vtkVersion.GetVTKVersion()}",
         "",
         "| problem | method | points | forward evals | wall s | CPU s | peak RSS MB "
         "| max abs(F-C) by VTK probe (located) | max abs(F-C) by isobar probe (located) "
@@ -168,7 +169,21 @@ def main():
             f"| {title} | VTK vtkContourFilter (in-process) | {contour.GetNumberOfPoints():,} | - | "
             f"{wall:.2f} | - | - | {graded} | - |")
         print(lines[-1], flush=True)
-    lines += ["", f"Command: `{' '.join([os.path.relpath(sys.executable, ROOT)] + sys.argv)}`", ""]
+    start, end = load_start[0], os.getloadavg()[0]
+    lines += ["", f"Load average (1 min) {start:.2f} at start, {end:.2f} at the end, on "
+              f"{os.cpu_count()} cores."]
+    if max(start, end) > 0.5 * (os.cpu_count() or 1):
+        # Other jobs shared the CPUs: the counts and accuracies hold, the times do not.
+        lines += ["The machine was loaded (shared with other jobs): wall and CPU times are "
+                  "inflated; points, forward evaluations and residuals do not depend on load."]
+    # The command as run: niceness and a library other than target/release's change what ran.
+    prefix = []
+    if os.environ.get("ISOBAR_LIBRARY"):
+        prefix.append(f"ISOBAR_LIBRARY={os.environ['ISOBAR_LIBRARY']}")
+    if os.nice(0):
+        prefix.append(f"nice -n {os.nice(0)}")
+    cmd = prefix + [os.path.relpath(sys.executable, ROOT)] + sys.argv
+    lines += ["", f"Command: `{' '.join(cmd)}`", ""]
     with open(args.out + ".part", "w") as f:
         f.write("\n".join(lines))
     os.replace(args.out + ".part", args.out)

@@ -221,6 +221,70 @@ int main(void) {
         isobar_fe_mesh_free(fe);
     }
 
+    /* isobar_fe_probe on a distorted trilinear hexahedron: the unit cube with corner 6 pulled
+     * out to (1.4, 1.3, 1.5), so T is not affine and locating a point takes Newton. The
+     * field "x" holds each node's x coordinate; an isoparametric cell reproduces it exactly,
+     * so the probed value at any inside point is that point's x. The returned reference
+     * coordinates are checked by mapping them back with T written out here. */
+    {
+        const double pts[24] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 1.4, 1.3, 1.5, 0, 1, 1};
+        const uint8_t type = 72;
+        const int64_t offsets[2] = {0, 8};
+        const int64_t conn[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+        double fx[8];
+        for (int i = 0; i < 8; i++) fx[i] = pts[3 * i];
+        IsobarFeMesh *fe = NULL;
+        CHECK(isobar_fe_mesh_create(pts, 8, &type, 1, offsets, conn, 8, NULL, &fe) == ISOBAR_STATUS_OK, "probe mesh");
+        CHECK(isobar_fe_mesh_add_array(fe, "x", fx, 8, 1) == ISOBAR_STATUS_OK, "probe array");
+        /* Four points inside (one near corner 6, where the cell is most distorted), one
+         * outside. */
+        enum { N = 5 };
+        const double at[3 * N] = {0.5, 0.5, 0.5, 0.1, 0.8, 0.3, 0.95, 0.9, 0.97, 1.2, 1.1, 1.25, 3.0, -1.0, 0.5};
+        double values[N], reference[3 * N];
+        int64_t cells[N];
+        CHECK(isobar_fe_probe(fe, "x", at, N, values, cells, reference) == ISOBAR_STATUS_OK, "probe");
+        for (int i = 0; i < N - 1; i++) {
+            CHECK(cells[i] == 0, "probe point %d: cell %lld", i, (long long)cells[i]);
+            CHECK(fabs(values[i] - at[3 * i]) <= 1e-10, "probe point %d: x = %.17g, want %.17g", i, values[i],
+                  at[3 * i]);
+            const double *u = &reference[3 * i];
+            double x[3] = {0, 0, 0};
+            for (int c = 0; c < 8; c++) {
+                /* VTK corner c sits at (c&1 ^ c>>1&1, c>>1&1, c>>2) on the reference cube. */
+                int a = (c & 1) ^ ((c >> 1) & 1), b = (c >> 1) & 1, d = c >> 2;
+                double w = (a ? u[0] : 1 - u[0]) * (b ? u[1] : 1 - u[1]) * (d ? u[2] : 1 - u[2]);
+                for (int k = 0; k < 3; k++) x[k] += w * pts[3 * c + k];
+            }
+            for (int k = 0; k < 3; k++)
+                CHECK(fabs(x[k] - at[3 * i + k]) <= 1e-10, "probe point %d: T(reference)[%d] = %.17g, want %.17g",
+                      i, k, x[k], at[3 * i + k]);
+        }
+        CHECK(cells[N - 1] == -1 && isnan(values[N - 1]), "outside point: cell %lld, value %g",
+              (long long)cells[N - 1], values[N - 1]);
+        for (int k = 0; k < 3; k++) CHECK(isnan(reference[3 * (N - 1) + k]), "outside point: reference %d", k);
+        /* Cell and reference outputs are optional. */
+        double only[N];
+        CHECK(isobar_fe_probe(fe, "x", at, N, only, NULL, NULL) == ISOBAR_STATUS_OK, "probe without cells");
+        CHECK(memcmp(only, values, sizeof only) == 0, "probe without cells gives other values");
+        /* A NaN coordinate is refused, naming its index, before anything is written. */
+        double bad[6] = {0.5, 0.5, 0.5, 0.5, NAN, 0.5};
+        double untouched[2] = {42.0, 42.0};
+        int64_t untouched_cells[2] = {7, 7};
+        CHECK(isobar_fe_probe(fe, "x", bad, 2, untouched, untouched_cells, NULL) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT,
+              "NaN probe point");
+        CHECK(strstr(isobar_last_error_message(), "point 1 ") != NULL, "message names point 1: %s",
+              isobar_last_error_message());
+        CHECK(untouched[0] == 42.0 && untouched[1] == 42.0 && untouched_cells[0] == 7 && untouched_cells[1] == 7,
+              "a refused probe wrote its outputs");
+        CHECK(isobar_fe_probe(fe, "nope", at, N, values, NULL, NULL) == ISOBAR_STATUS_ERR_INVALID_INPUT,
+              "probe of a missing field");
+        CHECK(strstr(isobar_last_error_message(), "nope") != NULL, "message names the field: %s",
+              isobar_last_error_message());
+        CHECK(isobar_fe_probe(NULL, "x", at, N, values, NULL, NULL) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT,
+              "probe of a NULL mesh");
+        isobar_fe_mesh_free(fe);
+    }
+
     isobar_particles_free(particles);
     isobar_particles_free(NULL);
     isobar_surface_free(NULL);

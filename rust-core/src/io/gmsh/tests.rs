@@ -28,8 +28,8 @@ fn permutations_are_bijections_that_keep_the_corners() {
     }
     // The families and orders gmsh 4.15 describes.
     let count = |k: Kind| VOLUME_TYPES.iter().filter(|v| v.kind == k).count();
-    assert_eq!(count(Kind::Tetrahedron), 6);
-    assert_eq!(count(Kind::Hexahedron), 6);
+    assert_eq!(count(Kind::Tetrahedron), 10);
+    assert_eq!(count(Kind::Hexahedron), 9);
     assert_eq!(count(Kind::Wedge), 2);
 }
 
@@ -38,8 +38,18 @@ fn permutations_are_bijections_that_keep_the_corners() {
 /// permutation is right exactly when our mapping and field agree on curved cells.
 #[test]
 fn evaluations_match_gmsh_at_probe_points() {
-    for stem in ["ball_tet3", "cylinder_hex2", "cylinder_prism2"] {
+    for stem in [
+        "ball_tet3",
+        "cylinder_hex2",
+        "cylinder_hex3",
+        "cylinder_prism2",
+    ] {
         let mesh = read(&format!("{stem}.msh"));
+        if stem == "cylinder_hex3" {
+            // gmsh type 92: the file must hold cubic hexahedra for this case to test them.
+            let s = mesh.shape(0);
+            assert_eq!((s.kind, s.order), (Kind::Hexahedron, [3; 3]));
+        }
         let (probes, _) = fixture(&format!("{stem}_probes.txt"));
         let values = &mesh.point_data.iter().find(|a| a.name == "p").unwrap().data;
         let mut scratch = Scratch::default();
@@ -108,7 +118,12 @@ fn binary_and_ascii_files_give_the_same_mesh() {
 /// coordinates) and by gmsh: identical cells node by node, identical samples.
 #[test]
 fn msh_and_vtu_of_the_same_cells_agree() {
-    for stem in ["ball_tet3", "cylinder_hex2", "cylinder_prism2"] {
+    for stem in [
+        "ball_tet3",
+        "cylinder_hex2",
+        "cylinder_hex3",
+        "cylinder_prism2",
+    ] {
         let m = read(&format!("{stem}.msh"));
         let (bytes, path) = fixture(&format!("{stem}.vtu"));
         let v = crate::io::vtk_xml::read_fe_mesh(&bytes, &path).unwrap();
@@ -211,4 +226,103 @@ fn bad_files_name_the_problem() {
     // Serendipity elements are refused by name.
     let e = read_err(text.replacen("\n3 1 29 ", "\n3 1 17 ", 1).as_bytes());
     assert!(e.contains("Hexahedron 20") || e.contains("type 17"), "{e}");
+}
+
+/// gmsh orders a hexahedron's nodes recursively: the 8 vertices, the nodes inside each of
+/// its 12 edges (from the edge's first vertex), the inside of each of its 6 faces as a
+/// quadrilateral of order p − 2 (itself vertices, edges, inside) and the inside as a
+/// hexahedron of order p − 2. Derived here from that rule alone, the lattices equal the
+/// ones `order.rs` holds from gmsh's getElementProperties, for every order gmsh has (the
+/// mesh fixtures only reach order 3).
+#[test]
+fn hexahedron_lattices_follow_gmsh_recursive_order() {
+    type P = [i32; 3];
+    const CORNERS: [P; 8] = [
+        [0, 0, 0],
+        [1, 0, 0],
+        [1, 1, 0],
+        [0, 1, 0],
+        [0, 0, 1],
+        [1, 0, 1],
+        [1, 1, 1],
+        [0, 1, 1],
+    ];
+    const EDGES: [[usize; 2]; 12] = [
+        [0, 1],
+        [0, 3],
+        [0, 4],
+        [1, 2],
+        [1, 5],
+        [2, 3],
+        [2, 6],
+        [3, 7],
+        [4, 5],
+        [4, 7],
+        [5, 6],
+        [6, 7],
+    ];
+    const FACES: [[usize; 4]; 6] = [
+        [0, 3, 2, 1],
+        [0, 1, 5, 4],
+        [0, 4, 7, 3],
+        [1, 2, 6, 5],
+        [2, 3, 7, 6],
+        [4, 5, 6, 7],
+    ];
+    /// The nodes strictly inside the segment a→b of order p, from a.
+    fn edge(out: &mut Vec<P>, a: P, b: P, p: i32) {
+        out.extend((1..p).map(|i| -> P { std::array::from_fn(|k| a[k] + (b[k] - a[k]) * i / p) }));
+    }
+    /// The corners of the loop `c` (order p) one lattice step inwards.
+    fn inset(c: [P; 4], p: i32) -> [P; 4] {
+        let step = |to: usize, k: usize| (c[to][k] - c[0][k]) / p;
+        let at = |q: P, s1: i32, s3: i32| -> P {
+            std::array::from_fn(|k| q[k] + s1 * step(1, k) + s3 * step(3, k))
+        };
+        [
+            at(c[0], 1, 1),
+            at(c[1], -1, 1),
+            at(c[2], -1, -1),
+            at(c[3], 1, -1),
+        ]
+    }
+    fn quad(out: &mut Vec<P>, c: [P; 4], p: i32) {
+        if p == 0 {
+            out.push(c[0]);
+            return;
+        }
+        out.extend(c);
+        for (a, b) in [(0, 1), (1, 2), (2, 3), (3, 0)] {
+            edge(out, c[a], c[b], p);
+        }
+        if p >= 2 {
+            quad(out, inset(c, p), p - 2);
+        }
+    }
+    fn hex(out: &mut Vec<P>, o: P, p: i32) {
+        if p == 0 {
+            out.push(o);
+            return;
+        }
+        let c: [P; 8] = std::array::from_fn(|v| std::array::from_fn(|k| o[k] + CORNERS[v][k] * p));
+        out.extend(c);
+        for [a, b] in EDGES {
+            edge(out, c[a], c[b], p);
+        }
+        if p >= 2 {
+            for f in FACES {
+                quad(out, inset(f.map(|v| c[v]), p), p - 2);
+            }
+            hex(out, o.map(|x| x + 1), p - 2);
+        }
+    }
+    let mut orders = Vec::new();
+    for v in VOLUME_TYPES.iter().filter(|v| v.kind == Kind::Hexahedron) {
+        let mut derived = Vec::new();
+        hex(&mut derived, [0; 3], v.order as i32);
+        let table: Vec<P> = v.lattice.iter().map(|l| l.map(i32::from)).collect();
+        assert_eq!(derived, table, "gmsh type {} (order {})", v.ty, v.order);
+        orders.push(v.order);
+    }
+    assert_eq!(orders, (1..=9).collect::<Vec<_>>());
 }
