@@ -128,7 +128,8 @@ pub struct LodMesh {
     pub cells_per_level: Vec<u64>,
     /// Cells fanned because a finer cell meets them across a crossed face.
     pub transition_cells: u64,
-    /// Transition cells split back because they could not be fanned.
+    /// Merged cells split back: transition cells that could not be fanned, and cells
+    /// that would have drawn more triangles than the exact cells they cover.
     pub splits: u64,
     /// Wall time, seconds.
     pub seconds: f64,
@@ -198,20 +199,47 @@ pub fn extract(store: &Store, iso: f64, active: &[u32], params: &LodParams) -> R
     } else {
         vec![FxHashSet::default(); 1]
     };
+    // Triangles of the exact mesh in each active cell. A merged leaf may draw no more
+    // than the exact cells it covers, so the LOD mesh never has more triangles than the
+    // exact one: a transition cell's fan has one triangle per segment of the finer faces
+    // around it, and where a merged cell sits among unmerged ones (small bounds merge
+    // only a few) that is as many segments as its cells' exact triangles have, or more.
+    let exact: Vec<usize> = if params.error_bound > 0.0 {
+        let table = case_table();
+        active
+            .par_iter()
+            .map(|&c| Ok(table.triangles[lod.case(lod.lattice.coords(c as usize), 1)?].len()))
+            .collect::<Result<_>>()?
+    } else {
+        Vec::new()
+    };
     let mut splits = 0u64;
     let (cells, outs) = loop {
-        let mut cells: Vec<LodCell> = active.iter().map(|&c| lod.leaf_of(&merged, c)).collect();
+        let leaves: Vec<LodCell> = active.iter().map(|&c| lod.leaf_of(&merged, c)).collect();
+        let mut cells = leaves.clone();
         cells.par_sort_unstable();
         cells.dedup();
         let outs = cells
             .par_iter()
             .map(|&cell| lod.triangulate(&merged, cell))
             .collect::<Result<Vec<_>>>()?;
+        let mut budget = vec![0usize; cells.len()];
+        for (leaf, &n) in leaves.iter().zip(&exact) {
+            if let Ok(k) = cells.binary_search(leaf) {
+                budget[k] += n;
+            }
+        }
+        // Split back: leaves that could not be fanned, and merged leaves drawing more
+        // triangles than their exact cells (their children draw those, or fewer).
         let split: Vec<LodCell> = cells
             .iter()
             .zip(&outs)
-            .filter(|(_, o)| o.is_none())
-            .map(|(c, _)| *c)
+            .zip(&budget)
+            .filter(|((c, o), &b)| match o {
+                None => true,
+                Some((tris, _)) => c.level > 0 && tris.len() > b,
+            })
+            .map(|((c, _), _)| *c)
             .collect();
         if split.is_empty() {
             break (cells, outs.into_iter().flatten().collect::<Vec<_>>());
