@@ -3,6 +3,7 @@
 
 use super::no_adapter;
 use crate::error::{Error, Result};
+use std::cell::Cell;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 use wgpu::util::DeviceExt;
@@ -20,6 +21,47 @@ pub struct Gpu {
     /// path, so `Backend::Auto` does not pick it.
     pub software: bool,
     pipelines: Mutex<HashMap<(&'static str, &'static str), wgpu::ComputePipeline>>,
+    /// Read-only tables (case table, crack patterns) uploaded once per device.
+    constants: Mutex<HashMap<&'static str, wgpu::Buffer>>,
+}
+
+/// Host-to-device traffic and kernel launches of the calling thread: counts of work,
+/// independent of the machine's load, for the benchmarks and the tests that check what a
+/// step uploads. Per thread, so that tests running side by side do not see each other's
+/// traffic (every upload, dispatch and read-back happens on the thread that asked).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Transfers {
+    /// Buffers created with contents (storage and uniform).
+    pub uploads: u64,
+    /// Their bytes.
+    pub upload_bytes: u64,
+    /// Kernel dispatches.
+    pub dispatches: u64,
+    /// Read-backs (one map each).
+    pub readbacks: u64,
+}
+
+impl std::ops::Sub for Transfers {
+    type Output = Transfers;
+    fn sub(self, o: Transfers) -> Transfers {
+        Transfers {
+            uploads: self.uploads - o.uploads,
+            upload_bytes: self.upload_bytes - o.upload_bytes,
+            dispatches: self.dispatches - o.dispatches,
+            readbacks: self.readbacks - o.readbacks,
+        }
+    }
+}
+
+thread_local! {
+    static TRANSFERS: Cell<Transfers> = const {
+        Cell::new(Transfers {
+            uploads: 0,
+            upload_bytes: 0,
+            dispatches: 0,
+            readbacks: 0,
+        })
+    };
 }
 
 /// The device, created on first call; the error (no adapter, no device) is remembered.
@@ -60,6 +102,7 @@ fn create() -> std::result::Result<Gpu, String> {
         name,
         software,
         pipelines: Mutex::new(HashMap::new()),
+        constants: Mutex::new(HashMap::new()),
     })
 }
 
@@ -69,10 +112,40 @@ pub fn gpu_error(what: impl std::fmt::Display) -> Error {
 }
 
 impl Gpu {
+    /// The calling thread's traffic so far.
+    pub fn transfers(&self) -> Transfers {
+        TRANSFERS.get()
+    }
+
+    fn count(&self, add: impl FnOnce(&mut Transfers)) {
+        let mut t = TRANSFERS.get();
+        add(&mut t);
+        TRANSFERS.set(t);
+    }
+
+    fn count_upload(&self, bytes: usize) {
+        self.count(|t| {
+            t.uploads += 1;
+            t.upload_bytes += bytes as u64;
+        });
+    }
+
+    /// The storage buffer `label`, uploaded from `make()` on the first call for this
+    /// device and shared by every later one: for tables that never change (`label` names
+    /// the table, so it must be unique to it).
+    pub fn constant(&self, label: &'static str, make: impl FnOnce() -> Vec<u32>) -> wgpu::Buffer {
+        let mut cache = self.constants.lock().unwrap_or_else(|e| e.into_inner());
+        cache
+            .entry(label)
+            .or_insert_with(|| self.upload(label, &make()))
+            .clone()
+    }
+
     /// A storage buffer holding `data` (at least 16 bytes: empty bindings are invalid).
     pub fn upload<T: bytemuck::Pod>(&self, label: &str, data: &[T]) -> wgpu::Buffer {
         let mut bytes = bytemuck::cast_slice::<T, u8>(data).to_vec();
         bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
+        self.count_upload(bytes.len());
         self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -85,6 +158,7 @@ impl Gpu {
 
     /// A uniform buffer holding `value`.
     pub fn uniform<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        self.count_upload(std::mem::size_of::<T>());
         self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -169,6 +243,7 @@ impl Gpu {
             pass.dispatch_workgroups(x as u32, y as u32, 1);
         }
         self.queue.submit([encoder.finish()]);
+        self.count(|t| t.dispatches += 1);
         Ok(())
     }
 
@@ -219,6 +294,7 @@ impl Gpu {
             return Ok(Vec::new());
         }
         let size = bytes.next_multiple_of(4);
+        self.count(|t| t.readbacks += 1);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size,

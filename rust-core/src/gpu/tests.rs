@@ -612,3 +612,56 @@ fn figures() {
         }
     }
 }
+
+/// Host-to-device traffic of crack filling (counts, not times): run with
+/// `cargo test --release --lib gpu::tests::crack_fill_traffic -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn crack_fill_traffic() {
+    use crate::adaptive::cracks;
+    let Some(g) = gpu() else { return };
+    for name in FRAMES {
+        let field = frame(name);
+        let p = Params {
+            isovalue: 0.6,
+            grid_factor: 0.375,
+            ..Params::default()
+        };
+        let grid = grid_for(&field, &p).unwrap();
+        let levels = adaptive::levels_for(&field, &grid, &p).unwrap();
+        let on_device = GpuField::new(g, &field, grid.origin).unwrap();
+        let iso = p.isovalue as f32;
+        let before = g.transfers();
+        let built: Vec<_> = (1..=3u8)
+            .map(|level| {
+                build_level(
+                    g,
+                    &on_device,
+                    &grid,
+                    &levels,
+                    level,
+                    iso,
+                    p.bisection_iterations,
+                    false,
+                    &mut Progress::none(),
+                )
+                .unwrap()
+            })
+            .collect();
+        let after_levels = g.transfers();
+        let fine = [built[1].buffers.as_ref(), built[2].buffers.as_ref()];
+        for call in 0..2 {
+            let t = g.transfers();
+            let faces = cracks::transition_faces(&grid, &levels);
+            let fills = super::cracks::fill(g, &grid, &levels, fine, &faces, iso).unwrap();
+            println!(
+                "{name}: {} cells, {} faces, {} fills; crack fill call {call}: {:?}",
+                levels.len(),
+                faces.len(),
+                fills.len(),
+                g.transfers() - t
+            );
+        }
+        println!("{name}: levels 1-3: {:?}", after_levels - before);
+    }
+}
