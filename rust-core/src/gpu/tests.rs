@@ -421,6 +421,64 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
     }
 }
 
+/// Particle registration is not a GPU step: the coarse-grid counts (hence the cell
+/// levels) and the neighbour grid's buckets are computed once on the CPU, in f64, and
+/// both back ends use them, so no f32 rounding can put a particle in another cell on the
+/// GPU. (The GPU's only f32 cell index is the neighbour-search window of a sample point,
+/// `search_lo` in sph.wgsl: shifted by one cell it drops or adds only particles within
+/// f32 rounding of their support radius, whose weight is zero to f32 precision.) This
+/// guards that: splash particles exactly on coarse-cell faces, edges and corners, and one
+/// ulp either side, give the same levels and the same surface on both back ends.
+#[test]
+fn particles_on_coarse_cell_boundaries_give_the_same_levels_and_surface() {
+    if gpu().is_none() {
+        return;
+    }
+    let p = params(0.5);
+    let mut positions = body_positions();
+    let grid = grid_for(&field_of(positions.clone(), Kernel::CubicSpline), &p).unwrap();
+    let coarse = grid.fine * 4.0;
+    // Lone particles in the empty corners of the body's bounds (so the grid stays), each
+    // snapped to the coarse lattice on the first `on` axes (face, edge, corner), the other
+    // axes at a cell centre, then nudged by `ulps` along the snapped axes.
+    let lone = [
+        ([-0.6, 0.6, -0.5], 1, 0),
+        ([0.4, 0.6, -0.5], 1, -1),
+        ([-0.6, -0.6, -0.5], 2, 0),
+        ([0.4, -0.6, -0.5], 2, 1),
+        ([-0.6, 0.6, 0.2], 3, 0),
+        ([0.4, 0.6, 0.2], 3, -1),
+    ];
+    let mut placed = Vec::new();
+    for (target, on, ulps) in lone {
+        let q: [f64; 3] = std::array::from_fn(|a| {
+            let k = ((target[a] - grid.origin[a]) / coarse).round();
+            let boundary = grid.origin[a] + k * coarse;
+            match (a < on, ulps) {
+                (false, _) => boundary + 0.5 * coarse,
+                (true, 0) => boundary,
+                (true, -1) => boundary.next_down(),
+                (true, _) => boundary.next_up(),
+            }
+        });
+        placed.push(DVec3::from(q));
+    }
+    positions.extend(&placed);
+    let field = field_of(positions, Kernel::CubicSpline);
+    assert_eq!(
+        grid_for(&field, &p).unwrap(),
+        grid,
+        "the lone particles moved the grid"
+    );
+    // Each lone particle alone in its cell makes it level 3 (threshold 1).
+    let levels = adaptive::levels_for(&field, &grid, &p).unwrap();
+    for q in &placed {
+        let cell = grid.cell_of(*q).unwrap();
+        assert_eq!(levels[cell], 3, "particle at {q} in cell {cell}");
+    }
+    assert!(assert_same_surface(&field, &p, "boundary particles") > 0);
+}
+
 /// Whole extractions with the striped levels: GPU levels and cracks against the CPU's.
 #[test]
 fn gpu_surface_equals_cpu_surface_with_striped_levels() {
