@@ -79,7 +79,46 @@ def test_cli_gpu_backend_writes_the_cpu_surface_within_f32(cli, tmp_path):
     assert np.abs(np.sort(got["points"], axis=0) - np.sort(cpu.points.astype(np.float32), axis=0)).max() <= 1e-4
 
 
-def test_cli_backend_needs_the_adaptive_method(cli, tmp_path):
+def _correctors_via_cli(cli, tmp_path, backend):
     frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
-    proc = run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--backend", "gpu", "-o", tmp_path / "x.usd", check=False)
-    assert proc.returncode == 1 and "--method adaptive" in proc.stderr
+    out = tmp_path / f"correctors-{backend}.usd"
+    proc = run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--no-velocities", "--backend", backend,
+                   "-o", out, "-q", check=False)
+    return proc, out
+
+
+def test_cli_backend_cpu_applies_to_marching_correctors(cli, tmp_path):
+    """--backend reaches isobar.extract for the default method: cpu writes exactly the
+    core's Marching Correctors surface (and no longer asks for --method adaptive)."""
+    proc, out = _correctors_via_cli(cli, tmp_path, "cpu")
+    assert proc.returncode == 0, proc.stderr
+    with isobar.Particles.read(str(FRAME_26)) as particles:
+        surface = isobar.extract(particles, ISO, backend="cpu", **DAM)
+    assert surface.stats["backend"] == "cpu"
+    assert_same_mesh(mesh_at(open_stage(out), 26), surface, velocity=False)
+    surface.release()
+
+
+def test_cli_backend_gpu_applies_to_marching_correctors(cli, tmp_path):
+    """--backend gpu with Marching Correctors: what isobar.extract(backend="gpu") does. With
+    an adapter (lavapipe in CI) the GPU seed search gives exactly the CPU's seeds, so the
+    stage holds exactly the CPU surface; without one the exporter fails with the core's
+    "no GPU adapter" error and writes nothing."""
+    with isobar.Particles.read(str(need(FRAME_26))) as particles:
+        cpu = isobar.extract(particles, ISO, backend="cpu", **DAM)
+        try:
+            gpu = isobar.extract(particles, ISO, backend="gpu", **DAM)
+        except isobar.Error as e:
+            assert "no GPU adapter" in str(e), e
+            gpu = None
+    proc, out = _correctors_via_cli(cli, tmp_path, "gpu")
+    if gpu is None:
+        assert proc.returncode == 1, proc.stderr
+        assert "no GPU adapter" in proc.stderr, proc.stderr
+        assert not out.exists()
+    else:
+        assert proc.returncode == 0, proc.stderr
+        assert gpu.stats["backend"] == "gpu"
+        assert_same_mesh(mesh_at(open_stage(out), 26), cpu, velocity=False)
+        gpu.release()
+    cpu.release()

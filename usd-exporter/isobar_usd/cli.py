@@ -73,8 +73,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="correctors (default): Marching Correctors, vertices on the level set; adaptive: crack-free "
                    "3-level grid, far fewer triangles, one isovalue, no attributes")
     g.add_argument("--backend", choices=["cpu", "gpu", "auto"],
-                   help="adaptive: where the grids run: cpu (default), gpu (wgpu; an error without an adapter) or auto "
-                   "(a hardware GPU when there is one)")
+                   help="where the GPU-capable steps run (correctors: the seed cells' neighbour search; adaptive: the "
+                   "grids): cpu, gpu (wgpu; an error without an adapter) or auto (a hardware GPU when there is one); "
+                   "default: the core's (correctors cpu, adaptive auto)")
     g.add_argument("--splash-threshold", type=int, help="adaptive: coarse cells holding 1..N particles are refined to the finest level (core default 1)")
 
     u = sph.add_argument_group("USD")
@@ -153,10 +154,7 @@ def _extract_options(args) -> dict:
     if args.splash_threshold is not None:
         options["splash_threshold"] = args.splash_threshold
     if args.backend is not None:
-        if args.method != "adaptive":
-            from .errors import InputError
-
-            raise InputError("--backend applies to --method adaptive")
+        # Both methods take it: isobar.extract(backend=) and isobar.extract_adaptive(backend=).
         options["backend"] = args.backend
     return options
 
