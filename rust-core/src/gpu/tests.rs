@@ -49,6 +49,11 @@ fn lcg(seed: &mut u64) -> f64 {
 /// A ball of fluid on a jittered lattice, a thin slab, and a few lone splash particles
 /// and pairs: every level appears, with transition faces of both kinds.
 fn body(kernel: Kernel) -> SphField {
+    field_of(body_positions(), kernel)
+}
+
+/// [`body`]'s particles, spacing 0.05 (h = 0.1).
+fn body_positions() -> Vec<DVec3> {
     let r = 0.05;
     let mut seed = 7u64;
     let mut positions = Vec::new();
@@ -76,13 +81,18 @@ fn body(kernel: Kernel) -> SphField {
     ] {
         positions.push(p);
     }
+    positions
+}
+
+/// The field of `positions` with [`body`]'s settings.
+fn field_of(positions: Vec<DVec3>, kernel: Kernel) -> SphField {
     let data = ParticleData {
         positions,
         ..ParticleData::default()
     };
     let settings = SphSettings {
         kernel,
-        smoothing_length: SmoothingLength::Constant(2.0 * r),
+        smoothing_length: SmoothingLength::Constant(0.1),
         ..SphSettings::default()
     };
     SphField::new(&data, &settings).unwrap()
