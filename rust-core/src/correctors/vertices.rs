@@ -124,8 +124,11 @@ fn cubic_root(g0: f64, g1: f64, s: f64, r: f64, slope: f64, lo: f64, hi: f64) ->
     let alpha = m - beta * s;
     let p = |t: f64| g0 + (g1 - g0) * t + t * (t - 1.0) * (alpha + beta * t);
     let dp = |t: f64| (g1 - g0) + (2.0 * t - 1.0) * (alpha + beta * t) + t * (t - 1.0) * beta;
+    // Newton on the polynomial, run to the last bits: a guess cut short at a looser
+    // threshold would be a discontinuous function of the data, and two lattices equal
+    // to rounding would then place the same vertex visibly apart.
     let mut t = s;
-    for _ in 0..8 {
+    for _ in 0..16 {
         let d = dp(t);
         if d == 0.0 || !d.is_finite() {
             return None;
@@ -134,7 +137,7 @@ fn cubic_root(g0: f64, g1: f64, s: f64, r: f64, slope: f64, lo: f64, hi: f64) ->
         if !(next > lo && next < hi) {
             return None;
         }
-        if (next - t).abs() <= 1e-12 {
+        if (next - t).abs() <= 4.0 * f64::EPSILON {
             return Some(next);
         }
         t = next;

@@ -130,15 +130,10 @@ impl<T: Copy + Default> BrickMap<T> {
     /// does not straddle a brick boundary. Every corner must be present.
     #[inline]
     pub fn corners(&self, cell: u64) -> [T; 8] {
-        let [x, y, z] = VirtualGrid::coords(cell);
-        if (x & LOCAL) != LOCAL && (y & LOCAL) != LOCAL && (z & LOCAL) != LOCAL {
-            let (brick, local) = split(cell);
+        if let Some((brick, at)) = corners_in_one_brick(cell) {
             if let Some(i) = self.brick_index(brick) {
                 let values = &self.bricks[i as usize].values;
-                return std::array::from_fn(|k| {
-                    let [dx, dy, dz] = super::corner_offset(k);
-                    values[local + (dx | dy << SHIFT | dz << (2 * SHIFT)) as usize]
-                });
+                return at.map(|a| values[a]);
             }
         }
         std::array::from_fn(|k| {
@@ -146,30 +141,42 @@ impl<T: Copy + Default> BrickMap<T> {
                 .expect("corner evaluated before it is read")
         })
     }
-}
 
-impl<T: Copy + Default> BrickMap<T> {
     /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
     /// does not straddle a brick boundary.
     #[inline]
     pub fn present_corners(&self, cell: u64) -> u8 {
-        let [x, y, z] = VirtualGrid::coords(cell);
-        if (x & LOCAL) != LOCAL && (y & LOCAL) != LOCAL && (z & LOCAL) != LOCAL {
-            let (brick, local) = split(cell);
+        if let Some((brick, at)) = corners_in_one_brick(cell) {
             let Some(i) = self.brick_index(brick) else {
                 return 0;
             };
             let present = &self.bricks[i as usize].present;
             return (0..8).fold(0u8, |mask, k| {
-                let [dx, dy, dz] = super::corner_offset(k);
-                let at = local + (dx | dy << SHIFT | dz << (2 * SHIFT)) as usize;
-                mask | ((present[at / 64] >> (at % 64) & 1) as u8) << k
+                mask | ((present[at[k] / 64] >> (at[k] % 64) & 1) as u8) << k
             });
         }
         (0..8).fold(0u8, |mask, k| {
             mask | u8::from(self.contains(VirtualGrid::corner(cell, k))) << k
         })
     }
+}
+
+/// The brick holding all eight corners of `cell` and their indices in it, unless the
+/// cell straddles a brick boundary (one cell in eight along each axis).
+#[inline]
+fn corners_in_one_brick(cell: u64) -> Option<(u64, [usize; 8])> {
+    let [x, y, z] = VirtualGrid::coords(cell);
+    if (x & LOCAL) == LOCAL || (y & LOCAL) == LOCAL || (z & LOCAL) == LOCAL {
+        return None;
+    }
+    let (brick, local) = split(cell);
+    Some((
+        brick,
+        std::array::from_fn(|k| {
+            let [dx, dy, dz] = super::corner_offset(k);
+            local + (dx | dy << SHIFT | dz << (2 * SHIFT)) as usize
+        }),
+    ))
 }
 
 /// A set of grid keys, stored brick by brick.
