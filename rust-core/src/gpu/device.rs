@@ -21,8 +21,6 @@ pub struct Gpu {
     /// path, so `Backend::Auto` does not pick it.
     pub software: bool,
     pipelines: Mutex<HashMap<(&'static str, &'static str), wgpu::ComputePipeline>>,
-    /// Read-only tables (case table, crack patterns) uploaded once per device.
-    constants: Mutex<HashMap<&'static str, wgpu::Buffer>>,
 }
 
 /// Host-to-device traffic and kernel launches of the calling thread: counts of work,
@@ -102,7 +100,6 @@ fn create() -> std::result::Result<Gpu, String> {
         name,
         software,
         pipelines: Mutex::new(HashMap::new()),
-        constants: Mutex::new(HashMap::new()),
     })
 }
 
@@ -128,17 +125,6 @@ impl Gpu {
             t.uploads += 1;
             t.upload_bytes += bytes as u64;
         });
-    }
-
-    /// The storage buffer `label`, uploaded from `make()` on the first call for this
-    /// device and shared by every later one: for tables that never change (`label` names
-    /// the table, so it must be unique to it).
-    pub fn constant(&self, label: &'static str, make: impl FnOnce() -> Vec<u32>) -> wgpu::Buffer {
-        let mut cache = self.constants.lock().unwrap_or_else(|e| e.into_inner());
-        cache
-            .entry(label)
-            .or_insert_with(|| self.upload(label, &make()))
-            .clone()
     }
 
     /// A storage buffer holding `data` (at least 16 bytes: empty bindings are invalid).
