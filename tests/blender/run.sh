@@ -20,20 +20,9 @@ bpy_req="${ISOBAR_BLENDER_BPY:-bpy==5.0.1}"
 log() { printf '\n== %s\n' "$*"; }
 
 # X client libraries bpy links against even headless (Debian package names).
-packages=(libgl1 libx11-6 libxext6 libxfixes3 libxi6 libxrender1 libxkbcommon0 libsm6 libice6 libxxf86vm1)
-missing=()
-if command -v dpkg-query >/dev/null 2>&1; then
-    for p in "${packages[@]}"; do
-        dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-    done
-fi
-if [ "${#missing[@]}" -gt 0 ] && [ "${ISOBAR_SKIP_APT:-0}" != 1 ]; then
-    log "apt-get install ${missing[*]}"
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
-fi
+. "$root/scripts/debian-packages.sh"
+ensure_debian_packages libgl1 libx11-6 libxext6 libxfixes3 libxi6 libxrender1 libxkbcommon0 libsm6 \
+    libice6 libxxf86vm1
 
 if [ ! -x "$venv/bin/python" ]; then
     log "venv $venv ($("$python" --version 2>&1))"

@@ -200,3 +200,20 @@ def test_probe_names_a_nan_point_and_an_unknown_field():
     mesh.add_array("g", np.zeros(mesh.n_points))
     with pytest.raises(isobar.InvalidArgumentError, match="name the field"):
         mesh.probe(points[:2])
+
+
+def test_a_component_of_a_vector_array_is_sampled_and_probed_like_a_scalar_array():
+    grid = teardrop_grid(blocks=1)
+    f = np.asarray(grid.point_data["f"], dtype=np.float64)
+    mesh = isobar.pyvista.fe_mesh_from_dataset(grid, arrays=["f"])
+    mesh.add_array("v", np.stack([-f, f, np.zeros_like(f)], axis=1))
+    scalar = isobar.sample_fe(mesh, "f", R * R, spacing=0.15)
+    component = isobar.sample_fe(mesh, "v:1", R * R, spacing=0.15)
+    assert len(scalar) > 20
+    np.testing.assert_array_equal(component.points, scalar.points)
+    x = scalar.points[:10]
+    np.testing.assert_array_equal(mesh.probe(x, "v:0")[0], -mesh.probe(x, "f")[0])
+    with pytest.raises(isobar.InvalidInputError, match="component 3"):
+        isobar.sample_fe(mesh, "v:3", R * R)
+    with pytest.raises(isobar.InvalidInputError, match="magnitude"):
+        isobar.sample_fe(mesh, "v:mag", R * R)

@@ -259,7 +259,8 @@ def sample_fe(
     set by Newton steps, spread by a curvature-scaled repulsion.
 
     Args:
-        field: a scalar point array of the mesh.
+        field: a scalar point array of the mesh, or ``"NAME:K"`` for component K (from
+            0) of a vector point array.
         spacing: distance between samples on flat parts (world units); 0 picks 1/40 of
             the bounding-box diagonal.
         rho: extra density on curved parts (0: uniform).

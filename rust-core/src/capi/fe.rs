@@ -349,7 +349,7 @@ pub extern "C" fn isobar_fe_probe(
         let cell_out = slice_out(cell_out, n, "cell_out")?;
         let reference_out = slice_out(reference_out, len, "reference_out")?;
         let index = m.index.get_or_init(|| CellIndex::new(&m.mesh));
-        let hits = crate::field::fe::probe(&m.mesh, index, values, &world);
+        let hits = crate::field::fe::probe(&m.mesh, index, &values, &world);
         for (i, hit) in hits.iter().enumerate() {
             values_out[i] = hit.map_or(f64::NAN, |h| h.value);
         }

@@ -17,7 +17,8 @@ pub struct FeArgs {
     /// A .vtu with Lagrange hexahedra, tetrahedra or wedges (VTK types 72, 71, 73), or a
     /// Gmsh .msh 4.1 with Lagrange tetrahedra, hexahedra or prisms and $NodeData.
     pub input: PathBuf,
-    /// The scalar point array to contour.
+    /// The scalar point array to contour, or NAME:K for component K (from 0) of a vector
+    /// point array.
     #[arg(long)]
     pub field: String,
     /// The isovalue C.

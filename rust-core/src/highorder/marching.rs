@@ -91,6 +91,7 @@ pub fn extract(
     progress: &mut Progress,
 ) -> Result<(Mesh, McStats)> {
     let values = field_values(mesh, field)?;
+    let values = &*values;
     if !params.iso.is_finite() {
         return Err(bad("iso", "must be finite"));
     }

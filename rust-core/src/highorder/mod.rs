@@ -28,10 +28,12 @@ pub use energy::{alpha, energy, energy_derivative, ideal_energy};
 use crate::error::{Error, Result};
 use crate::field::fe::{FeMesh, Scratch};
 use crate::field::particles::Attribute;
+use crate::field::sph::Quantity;
 use crate::progress::Progress;
 use crate::samples::PointSamples;
 use particle::Surface;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::sync::atomic::AtomicU64;
 
 /// Parameters of [`sample`].
@@ -121,7 +123,7 @@ pub fn sample(
     };
     let surface = Surface {
         mesh,
-        values,
+        values: &values,
         iso: params.iso,
         tolerance: params.tolerance,
         curvature_in_projection: params.rho > 0.0,
@@ -173,9 +175,13 @@ fn check(p: &Params) -> Result<()> {
     Ok(())
 }
 
-/// The scalar point array `name` ("NAME:K" for component K of a vector array).
-pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]> {
-    let missing = || {
+/// The field named `name`: a scalar point array, or "NAME:K", component K (from 0) of a
+/// point array with several components, parsed as `isobar sph --field` parses it
+/// ([`Quantity::parse`]); an array whose whole name is `name` wins. A magnitude
+/// ("NAME:mag") is refused: |v| of the element's vector polynomial is not a polynomial of
+/// the element, and interpolating the nodes' magnitudes would be another field.
+pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<Cow<'m, [f64]>> {
+    let missing = |wanted: &str| {
         let available = mesh
             .point_data
             .iter()
@@ -185,7 +191,7 @@ pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]
             })
             .collect::<Vec<_>>();
         Error::InvalidInput(format!(
-            "{}: no point array named '{name}' in the finite elements (point arrays: {})",
+            "{}: no point array named '{wanted}' in the finite elements (point arrays: {})",
             mesh.name(),
             if available.is_empty() {
                 "none".to_string()
@@ -194,25 +200,46 @@ pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<&'m [f64]
             }
         ))
     };
-    let a = mesh
-        .point_data
-        .iter()
-        .find(|a| a.name == name)
-        .ok_or_else(missing)?;
-    if a.components != 1 {
+    let find = |wanted: &str| mesh.point_data.iter().find(|a| a.name == wanted);
+    let (a, component) = match find(name) {
+        Some(a) => (a, None),
+        None => match Quantity::parse(name) {
+            Quantity::Component(array, k) => (find(&array).ok_or_else(|| missing(&array))?, Some(k)),
+            Quantity::Magnitude(array) if find(&array).is_some() => {
+                return Err(Error::InvalidInput(format!(
+                    "{}: field '{name}': the magnitude of a vector array is not a finite-element field; choose a component '{array}:K'",
+                    mesh.name()
+                )))
+            }
+            _ => return Err(missing(name)),
+        },
+    };
+    let values: Cow<'m, [f64]> = match component {
+        None if a.components == 1 => Cow::Borrowed(&a.data),
+        None => {
+            return Err(Error::InvalidInput(format!(
+                "{}: point array '{name}' has {} components; the field must be a scalar array or a component '{name}:K'",
+                mesh.name(),
+                a.components
+            )))
+        }
+        Some(k) if k >= a.components => {
+            return Err(Error::InvalidInput(format!(
+                "{}: field '{name}': point array '{}' has {} components, component {k} does not exist",
+                mesh.name(),
+                a.name,
+                a.components
+            )))
+        }
+        Some(k) => a.data.iter().skip(k).step_by(a.components).copied().collect(),
+    };
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
         return Err(Error::InvalidInput(format!(
-            "{}: point array '{name}' has {} components; the field must be a scalar array",
-            mesh.name(),
-            a.components
-        )));
-    }
-    if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
-        return Err(Error::InvalidInput(format!(
-            "{}: point array '{name}' has a non-finite value at point {i}",
+            "{}: field '{name}' has a non-finite value at point {i}",
             mesh.name()
         )));
     }
-    Ok(&a.data)
+    Ok(values)
 }
 
 fn to_samples(particles: &[particle::Particle], params: &Params, s: f64) -> PointSamples {

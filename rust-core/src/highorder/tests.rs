@@ -255,6 +255,57 @@ fn missing_field_and_bad_parameters_are_errors() {
     assert!(s.is_empty());
 }
 
+/// "NAME:K" picks component K of a vector point array, as `isobar sph --field` does: the
+/// same samples as a scalar array holding that component. Magnitudes, missing components
+/// and vector arrays named without a component are refused, naming the array.
+#[test]
+fn a_component_of_a_vector_array_is_a_field() {
+    let mut mesh = grid_mesh(2, 2, |y| y, |y| y.length_squared());
+    // The identity map: each point is its y. Component 1 of "v" is f.
+    let v: Vec<f64> = mesh
+        .points
+        .iter()
+        .flat_map(|y| [y.x, y.length_squared(), -y.z])
+        .collect();
+    let named = |name: &str, components, data| Attribute {
+        name: name.into(),
+        components,
+        data,
+    };
+    mesh.point_data.push(named("v", 3, v));
+    // An array whose whole name looks like a component wins over the component.
+    let zeros = vec![0.0; mesh.points.len()];
+    mesh.point_data.push(named("v:0", 1, zeros));
+    let z: Vec<f64> = mesh.points.iter().map(|y| -y.z).collect();
+    assert_eq!(&*field_values(&mesh, "v:2").unwrap(), &z[..]);
+    assert!(field_values(&mesh, "v:0")
+        .unwrap()
+        .iter()
+        .all(|&x| x == 0.0));
+    let params = Params {
+        iso: 0.49,
+        spacing: 0.15,
+        levels: 1,
+        ..Params::default()
+    };
+    let (f, _) = run(&mesh, &params);
+    let (v1, _) = sample(&mesh, "v:1", &params, &mut Progress::none()).unwrap();
+    assert!(!f.is_empty());
+    assert_eq!(f, v1);
+    let err = |name: &str| field_values(&mesh, name).unwrap_err().to_string();
+    let e = err("v:3");
+    assert!(e.contains("'v'") && e.contains("component 3"), "{e}");
+    let e = err("v:mag");
+    assert!(e.contains("magnitude") && e.contains("'v:K'"), "{e}");
+    let e = err("v");
+    assert!(e.contains("3 components") && e.contains("'v:K'"), "{e}");
+    let e = err("nope:1");
+    assert!(
+        e.contains("'nope'") && e.contains("v (3 components)"),
+        "{e}"
+    );
+}
+
 #[test]
 fn a_small_sphere_inside_one_cell_is_found() {
     // One quadratic cell over [-1, 1]³ with f = |y|²: the spheres of radius 0.3 and 0.5
