@@ -264,6 +264,68 @@ fn sliding_up_and_back_returns_the_identical_state_and_changes_add_up() {
     assert_eq!(s.stats().updates, 10);
 }
 
+/// What a host reads, as it reads it: each vertex's edge, V and I, in order.
+type Raw = (Vec<u32>, Vec<[f32; 3]>, Vec<[u32; 3]>);
+
+fn raw(s: &Slider) -> Raw {
+    (
+        s.vertex_edges().to_vec(),
+        s.positions().to_vec(),
+        s.triangles(),
+    )
+}
+
+/// The volume of the Blender add-on's slider test (`tests/blender/test_volume_slider.py`,
+/// `_volume`): two overlapping Gaussians on an n³ lattice over [-1, 1]³, f32, stored
+/// as an `.npy` is read (unit spacing, origin 0, x fastest).
+fn blender_blobs(n: usize) -> Volume {
+    let x: Vec<f32> = (0..n)
+        .map(|i| (-1.0 + 2.0 * i as f64 / (n - 1) as f64) as f32)
+        .collect();
+    let mut v = Vec::with_capacity(n * n * n);
+    for &z in &x {
+        for &y in &x {
+            for &xx in &x {
+                let blob = |c: f32| (-6.0 * ((xx - c).powi(2) + y * y + z * z)).exp();
+                v.push(blob(0.35) + blob(-0.35));
+            }
+        }
+    }
+    let lattice = Lattice::new([n; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+    Volume::new(lattice, Values::F32(v)).unwrap()
+}
+
+/// Hosts compare what they show raw: the Blender test slides its object away and back
+/// and wants the very arrays it showed before, triangle order included (a re-emission
+/// order that depends on the path, e.g. first occurrence instead of ascending cell id,
+/// keeps the canonical surface but fails there). The same volume, store parameters and
+/// path (from the middle of the value range, isovalues in f32 as Blender keeps them).
+#[test]
+fn sliding_away_and_back_gives_a_host_the_identical_arrays_in_order() {
+    let volume = blender_blobs(28);
+    let path = store_of(
+        &volume,
+        "blender-path.isoslider",
+        BuildParams::default().threshold,
+    );
+    let mut s = Slider::open(&path).unwrap();
+    let (lo, hi) = s.store().value_range();
+    let mid = (0.5 * (lo as f64 + hi as f64)) as f32;
+    s.set_isovalue(mid as f64).unwrap();
+    let mut shown: Vec<(f32, Raw)> = Vec::new();
+    for iso in [0.3f32, 0.31, 0.5, 0.9, 0.2, 0.3] {
+        s.set_isovalue(iso as f64).unwrap();
+        let now = raw(&s);
+        assert!(!now.2.is_empty(), "{iso}: a surface");
+        if let Some((_, before)) = shown.iter().find(|(v, _)| *v == iso) {
+            assert_eq!(now.0, before.0, "back at {iso}: vertex edges in order");
+            assert_eq!(now.1, before.1, "back at {iso}: positions in order");
+            assert!(now.2 == before.2, "back at {iso}: triangles in order");
+        }
+        shown.push((iso, now));
+    }
+}
+
 #[test]
 fn closed_surfaces_are_watertight() {
     let volume = blobs([24, 24, 24], 0.0);
