@@ -210,6 +210,7 @@ fn sliding_up_and_back_returns_the_identical_state_and_changes_add_up() {
     let mut s = Slider::open(&path).unwrap();
     s.set_isovalue(0.4).unwrap();
     let before = slider_canon(&s);
+    let before_raw = raw(&s);
     let cells = s.cells();
     // Small steps up, a jump below everything and back, a big step up and back down.
     for iso in [0.401, 0.405, 0.425, 0.525, 0.4, -4.6, 0.525, 0.825, 0.4] {
@@ -261,6 +262,11 @@ fn sliding_up_and_back_returns_the_identical_state_and_changes_add_up() {
     assert_eq!(s.cells(), cells);
     assert_same(&after, &before, "back at 0.4");
     assert_eq!(after.0, before.0);
+    // Not only the same surface: the same arrays in the same order, as hosts read them.
+    assert!(
+        raw(&s) == before_raw,
+        "back at 0.4: arrays in another order"
+    );
     assert_eq!(s.stats().updates, 10);
 }
 
