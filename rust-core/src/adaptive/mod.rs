@@ -264,8 +264,9 @@ pub fn extract<F: ScalarField + ?Sized>(
 }
 
 /// [`extract_sph`]'s per-level work (`gpu::level`) and crack filling (`gpu::cracks`) on
-/// the GPU; the levels and the assembly as on the CPU.
-#[cfg(feature = "gpu")]
+/// the GPU with given levels (the tests force levels this way); the assembly as on the
+/// CPU. `extract_sph` itself goes through `extract_sph_gpu`, which registers on the device.
+#[cfg(all(test, feature = "gpu"))]
 pub(crate) fn extract_gpu(
     field: &SphField,
     grid: &CoarseGrid,
@@ -320,17 +321,6 @@ fn extract_gpu_on(
     )?;
     out.stats.backend = Backend::Gpu;
     Ok(out)
-}
-
-#[cfg(not(feature = "gpu"))]
-pub(crate) fn extract_gpu(
-    _: &SphField,
-    _: &CoarseGrid,
-    _: &[u8],
-    _: &Params,
-    _: &mut Progress,
-) -> Result<Extraction> {
-    Err(crate::gpu::adapter_name().expect_err("no GPU without the feature"))
 }
 
 /// Fill triangles of the transition faces from the three levels' arrays, as
