@@ -93,16 +93,54 @@ impl CoarseGrid {
 
     /// The coarse cell holding `p`, if inside the grid.
     pub fn cell_of(&self, p: DVec3) -> Option<usize> {
-        let g = (p - self.origin) / (self.fine * FINE_PER_COARSE as f64);
         let mut c = [0u32; 3];
         for a in 0..3 {
-            let f = g[a].floor();
+            let f = self.coarse_floor(p[a] - self.origin[a]);
             if !(f >= 0.0 && f < self.cells[a] as f64) {
                 return None;
             }
             c[a] = f as u32;
         }
         Some(self.index(c))
+    }
+
+    /// The coarse coordinate (not yet range-checked) of a point `d` from the origin along
+    /// an axis: the one rounding of the division, then floor. [`cell_of`](Self::cell_of)
+    /// and [`registration_thresholds`](Self::registration_thresholds) both call this, so
+    /// the thresholds describe exactly the cells `cell_of` gives.
+    #[inline]
+    fn coarse_floor(&self, d: f64) -> f64 {
+        (d / (self.fine * FINE_PER_COARSE as f64)).floor()
+    }
+
+    /// Per axis `a`, `t[k]` for k in 0..=cells[a]: the smallest f64 offset `d` from the
+    /// origin (`p[a] - origin[a]`, as [`cell_of`](Self::cell_of) computes it) whose coarse
+    /// coordinate is at least k. The coordinate is a monotone function of `d` (a rounded
+    /// division and a floor), so a point lies in cell k along `a` exactly when
+    /// `t[k] <= d < t[k + 1]`, and outside the grid when `d < t[0]` or `d >= t[cells]`.
+    /// Found by bisection over the ordered f64 values themselves (not by arithmetic that
+    /// could round differently), so they are exact by construction; they let the GPU
+    /// register particles by comparisons alone (`gpu::register`).
+    pub fn registration_thresholds(&self) -> [Vec<f64>; 3] {
+        std::array::from_fn(|a| {
+            (0..=self.cells[a])
+                .map(|k| {
+                    let at_least = |d: f64| self.coarse_floor(d) >= k as f64;
+                    // Ordered keys of -inf and +inf: every non-NaN f64 lies between them,
+                    // and +inf's coordinate is +inf >= k, so the search always ends.
+                    let (mut lo, mut hi) = (order_key(f64::NEG_INFINITY), order_key(f64::INFINITY));
+                    while lo < hi {
+                        let mid = lo + (hi - lo) / 2;
+                        if at_least(from_order_key(mid)) {
+                            hi = mid;
+                        } else {
+                            lo = mid + 1;
+                        }
+                    }
+                    from_order_key(lo)
+                })
+                .collect()
+        })
     }
 
     /// Position of the point at `sub` in units of `fine / 2^shift`. A finest node
@@ -130,6 +168,22 @@ impl CoarseGrid {
         n[axis] = x as u32;
         Some(self.index(n))
     }
+}
+
+/// A u64 whose unsigned order is the numeric order of non-NaN f64 values (-0 just below
+/// +0): positive values keep their bits with the sign bit set, negative ones are inverted.
+fn order_key(x: f64) -> u64 {
+    let b = x.to_bits();
+    if b >> 63 == 1 {
+        !b
+    } else {
+        b | 1 << 63
+    }
+}
+
+/// The inverse of [`order_key`].
+fn from_order_key(k: u64) -> f64 {
+    f64::from_bits(if k >> 63 == 1 { k & !(1 << 63) } else { !k })
 }
 
 /// Step 1: particles per coarse cell, counted with atomics as on the GPU (counts do not
@@ -294,6 +348,64 @@ mod tests {
         assert_eq!(counts[g.index([3, 0, 2])], 1);
         let err = register(&g, &[DVec3::new(9.0, 0.0, 0.0)]).unwrap_err();
         assert!(err.to_string().contains("particle 0"), "{err}");
+    }
+
+    /// The thresholds are the exact boundaries of `cell_of`: each is the first f64 of
+    /// its coordinate, and classifying points by them (as the GPU does, with exact
+    /// comparisons) gives `cell_of`'s cell for points on, next to and between faces.
+    #[test]
+    fn registration_thresholds_are_the_exact_cell_boundaries() {
+        let mut seed = 3u64;
+        let mut rand = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for g in [
+            grid(4),
+            CoarseGrid {
+                origin: DVec3::new(-0.3, 1.0 / 3.0, -1e-9),
+                fine: 0.1 / 3.0,
+                cells: [7, 3, 5],
+            },
+        ] {
+            let t = g.registration_thresholds();
+            for a in 0..3 {
+                assert_eq!(t[a].len(), g.cells[a] as usize + 1);
+                for (k, &x) in t[a].iter().enumerate() {
+                    assert!(g.coarse_floor(x) >= k as f64, "axis {a} k {k}");
+                    assert!(g.coarse_floor(x.next_down()) < k as f64, "axis {a} k {k}");
+                }
+            }
+            let by_thresholds = |p: DVec3| -> Option<usize> {
+                let mut c = [0u32; 3];
+                for a in 0..3 {
+                    let d = p[a] - g.origin[a];
+                    let below = t[a].iter().filter(|&&x| x <= d).count();
+                    if below == 0 || below > g.cells[a] as usize {
+                        return None;
+                    }
+                    c[a] = below as u32 - 1;
+                }
+                Some(g.index(c))
+            };
+            let mut points = Vec::new();
+            for k in 0..=g.cells[0] {
+                let on = g.origin.x + t[0][k as usize];
+                for x in [on, on.next_up(), on.next_down(), on.next_up().next_up()] {
+                    points.push(DVec3::new(x, g.origin.y + t[1][1], g.origin.z + t[2][2]));
+                }
+            }
+            for _ in 0..2000 {
+                let u = DVec3::new(rand(), rand(), rand()) * 1.2 - 0.1;
+                let size = DVec3::from(g.cells.map(|c| c as f64)) * g.fine * 4.0;
+                points.push(g.origin + u * size);
+            }
+            for p in points {
+                assert_eq!(by_thresholds(p), g.cell_of(p), "{p}");
+            }
+        }
     }
 
     #[test]

@@ -145,7 +145,14 @@ pub fn grid_for(field: &SphField, params: &Params) -> Result<CoarseGrid> {
 
 /// Steps 1–3 on `field`'s particles: registration, splitting, level adjustment.
 pub fn levels_for(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Vec<u8>> {
+    check_grid_budget(grid, params)?;
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
+    let counts = grid::register(grid, &positions)?;
+    Ok(levels_from_counts(grid, &counts, params))
+}
+
+/// Refuses a coarse grid whose counts and levels (5 bytes a cell) exceed the budget.
+fn check_grid_budget(grid: &CoarseGrid, params: &Params) -> Result<()> {
     if grid.cell_count() as u64 * 5 > params.memory_budget {
         return Err(Error::OverBudget {
             what: format!(
@@ -156,11 +163,15 @@ pub fn levels_for(field: &SphField, grid: &CoarseGrid, params: &Params) -> Resul
             budget_bytes: params.memory_budget,
         });
     }
-    let counts = grid::register(grid, &positions)?;
-    let mut levels = grid::split(&counts, params.splash_threshold);
+    Ok(())
+}
+
+/// Steps 2–3 from step 1's particle counts per coarse cell.
+fn levels_from_counts(grid: &CoarseGrid, counts: &[u32], params: &Params) -> Vec<u8> {
+    let mut levels = grid::split(counts, params.splash_threshold);
     grid::dilate(grid, &mut levels, params.splash_dilation);
     grid::balance(grid, &mut levels);
-    Ok(levels)
+    levels
 }
 
 /// The adaptive surface of an SPH field.
@@ -173,15 +184,52 @@ pub fn extract_sph(
     let start = Instant::now();
     progress.phase("cell levels", 0.0, 0.05)?;
     let grid = grid_for(field, params)?;
-    let levels = levels_for(field, &grid, params)?;
-    let elapsed = start.elapsed().as_secs_f64();
     let mut out = match params.backend.resolve()? {
-        Backend::Gpu => extract_gpu(field, &grid, &levels, params, progress)?,
-        _ => extract(field, &grid, &levels, params, progress)?,
+        Backend::Gpu => extract_sph_gpu(field, &grid, params, progress, start)?,
+        _ => {
+            let levels = levels_for(field, &grid, params)?;
+            let elapsed = start.elapsed().as_secs_f64();
+            let mut out = extract(field, &grid, &levels, params, progress)?;
+            out.stats.timings.levels = elapsed;
+            out
+        }
     };
-    out.stats.timings.levels = elapsed;
-    out.stats.timings.total += elapsed;
+    out.stats.timings.total += out.stats.timings.levels;
     Ok(out)
+}
+
+/// [`extract_sph`] on the GPU: the field uploaded once, registration on the device
+/// (`gpu::register`, counts equal to the CPU's), splitting and balancing on the CPU, then
+/// [`extract_gpu`]'s per-level work on the same upload. `timings.levels` includes the
+/// field upload, which the per-level work would otherwise pay.
+#[cfg(feature = "gpu")]
+fn extract_sph_gpu(
+    field: &SphField,
+    grid: &CoarseGrid,
+    params: &Params,
+    progress: &mut Progress,
+    start: Instant,
+) -> Result<Extraction> {
+    check_grid_budget(grid, params)?;
+    let gpu = crate::gpu::device::get()?;
+    let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
+    let registered = crate::gpu::register::register(gpu, &on_device, field, grid)?;
+    let levels = levels_from_counts(grid, &registered.counts, params);
+    let elapsed = start.elapsed().as_secs_f64();
+    let mut out = extract_gpu_on(gpu, &on_device, grid, &levels, params, progress)?;
+    out.stats.timings.levels = elapsed;
+    Ok(out)
+}
+
+#[cfg(not(feature = "gpu"))]
+fn extract_sph_gpu(
+    _: &SphField,
+    _: &CoarseGrid,
+    _: &Params,
+    _: &mut Progress,
+    _: Instant,
+) -> Result<Extraction> {
+    Err(crate::gpu::adapter_name().expect_err("no GPU without the feature"))
 }
 
 /// The adaptive surface of any field on `grid` with the given cell levels (checked:
@@ -216,8 +264,9 @@ pub fn extract<F: ScalarField + ?Sized>(
 }
 
 /// [`extract_sph`]'s per-level work (`gpu::level`) and crack filling (`gpu::cracks`) on
-/// the GPU; the levels and the assembly as on the CPU.
-#[cfg(feature = "gpu")]
+/// the GPU with given levels (the tests force levels this way); the assembly as on the
+/// CPU. `extract_sph` itself goes through `extract_sph_gpu`, which registers on the device.
+#[cfg(all(test, feature = "gpu"))]
 pub(crate) fn extract_gpu(
     field: &SphField,
     grid: &CoarseGrid,
@@ -227,6 +276,19 @@ pub(crate) fn extract_gpu(
 ) -> Result<Extraction> {
     let gpu = crate::gpu::device::get()?;
     let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
+    extract_gpu_on(gpu, &on_device, grid, levels, params, progress)
+}
+
+/// [`extract_gpu`] with the field already on the device (relative to `grid.origin`).
+#[cfg(feature = "gpu")]
+fn extract_gpu_on(
+    gpu: &crate::gpu::device::Gpu,
+    on_device: &crate::gpu::sph::GpuField,
+    grid: &CoarseGrid,
+    levels: &[u8],
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Extraction> {
     // The kernels compare with the f32 isovalue; cracks see the same signs.
     let iso = params.isovalue as f32;
     // Each level's device buffers, kept for crack filling to bind as they are.
@@ -239,7 +301,7 @@ pub(crate) fn extract_gpu(
         |level, progress| {
             let built = crate::gpu::level::build_level(
                 gpu,
-                &on_device,
+                on_device,
                 grid,
                 levels,
                 level,
@@ -259,17 +321,6 @@ pub(crate) fn extract_gpu(
     )?;
     out.stats.backend = Backend::Gpu;
     Ok(out)
-}
-
-#[cfg(not(feature = "gpu"))]
-pub(crate) fn extract_gpu(
-    _: &SphField,
-    _: &CoarseGrid,
-    _: &[u8],
-    _: &Params,
-    _: &mut Progress,
-) -> Result<Extraction> {
-    Err(crate::gpu::adapter_name().expect_err("no GPU without the feature"))
 }
 
 /// Fill triangles of the transition faces from the three levels' arrays, as

@@ -16,6 +16,8 @@ pub mod device;
 #[cfg(feature = "gpu")]
 pub mod level;
 #[cfg(feature = "gpu")]
+pub mod register;
+#[cfg(feature = "gpu")]
 pub mod seeds;
 #[cfg(feature = "gpu")]
 pub mod sph;

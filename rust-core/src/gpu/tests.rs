@@ -431,14 +431,14 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
     }
 }
 
-/// Particle registration is not a GPU step: the coarse-grid counts (hence the cell
-/// levels) and the neighbour grid's buckets are computed once on the CPU, in f64, and
-/// both back ends use them, so no f32 rounding can put a particle in another cell on the
-/// GPU. (The GPU's only f32 cell index is the neighbour-search window of a sample point,
-/// `search_lo` in sph.wgsl: shifted by one cell it drops or adds only particles within
-/// f32 rounding of their support radius, whose weight is zero to f32 precision.) This
-/// guards that: splash particles exactly on coarse-cell faces, edges and corners, and one
-/// ulp either side, give the same levels and the same surface on both back ends.
+/// The GPU back end registers particles on the device (`gpu::register`), whose counts
+/// must equal the CPU's f64 ones even for particles on a face, or a splash cell would
+/// change level. (The neighbour grid's buckets stay CPU-made; the GPU's only f32 cell
+/// index is the neighbour-search window of a sample point, `search_lo` in sph.wgsl:
+/// shifted by one cell it drops or adds only particles within f32 rounding of their
+/// support radius, whose weight is zero to f32 precision.) This guards that through the
+/// whole extraction: splash particles exactly on coarse-cell faces, edges and corners,
+/// and one ulp either side, give the same levels and the same surface on both back ends.
 #[test]
 fn particles_on_coarse_cell_boundaries_give_the_same_levels_and_surface() {
     if gpu().is_none() {
@@ -650,6 +650,202 @@ fn correctors_gpu_backend_mesh_equals_cpu_mesh_on_real_frames() {
     }
 }
 
+/// `gpu::register` on `grid` against `grid::register` (the CPU reference): equal counts
+/// or the same error. Returns the GPU's registration (None on an error).
+fn assert_same_registration(
+    g: &device::Gpu,
+    field: &SphField,
+    grid: &CoarseGrid,
+    what: &str,
+) -> Option<super::register::Registration> {
+    let positions: Vec<DVec3> = (0..field.len()).map(|i| field.position(i)).collect();
+    let cpu = grid::register(grid, &positions);
+    let on_device = GpuField::new(g, field, grid.origin).unwrap();
+    let gpu = super::register::register(g, &on_device, field, grid);
+    match (cpu, gpu) {
+        (Ok(cpu), Ok(gpu)) => {
+            assert_eq!(cpu.len(), grid.cell_count(), "{what}");
+            assert_eq!(
+                cpu.iter().map(|&c| c as usize).sum::<usize>(),
+                field.len(),
+                "{what}"
+            );
+            assert!(
+                cpu == gpu.counts,
+                "{what}: GPU counts differ from the CPU's"
+            );
+            Some(gpu)
+        }
+        (Err(cpu), Err(gpu)) => {
+            assert_eq!(cpu.to_string(), gpu.to_string(), "{what}");
+            None
+        }
+        (cpu, gpu) => panic!("{what}: CPU {:?}, GPU {:?}", cpu.err(), gpu.err()),
+    }
+}
+
+/// Registration counts on real data (both shared frames, the embedded demo frame) at
+/// several grid factors, and the levels and surface they lead to.
+#[test]
+fn gpu_registration_equals_cpu_registration_on_real_frames() {
+    let Some(g) = gpu() else { return };
+    let demo = {
+        let path =
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/demo_dam_break.npz");
+        let data = crate::io::read_particles(&path).unwrap();
+        let s = SphSettings {
+            kernel: Kernel::CubicSpline,
+            smoothing_length: SmoothingLength::Constant(0.027),
+            ..SphSettings::default()
+        };
+        SphField::new(&data, &s).unwrap()
+    };
+    let fields = [
+        (FRAMES[0], frame(FRAMES[0])),
+        (FRAMES[1], frame(FRAMES[1])),
+        ("demo", demo),
+    ];
+    for (name, field) in &fields {
+        for factor in [0.25, 0.375, 0.5, 1.0] {
+            let p = Params {
+                grid_factor: factor,
+                ..params(0.6)
+            };
+            let grid = grid_for(field, &p).unwrap();
+            let what = format!("{name} factor {factor}");
+            let r = assert_same_registration(g, field, &grid, &what).unwrap();
+            eprintln!("{what}: {} particles, {} deferred", field.len(), r.deferred);
+        }
+    }
+}
+
+/// Adversarial positions: every coarse face of a grid at the origin (so d = p exactly),
+/// at its exact f64 threshold and 1, 2 and 2^29 f64 ulps either side (the last straddles
+/// the f32 rounding: not a tie), on faces, edges and corners; then the same positions on
+/// a grid whose origin makes p - origin round, a lattice whose particles all lie on
+/// faces, particles outside (same error as the CPU), and the whole extraction of such a
+/// set on both back ends.
+#[test]
+fn gpu_registration_equals_cpu_registration_on_cell_boundaries() {
+    let Some(g) = gpu() else { return };
+    let base = CoarseGrid {
+        origin: DVec3::ZERO,
+        fine: 0.1 / 3.0,
+        cells: [5, 4, 3],
+    };
+    let t = base.registration_thresholds();
+    // Every threshold of every axis and its neighbours, as one coordinate each.
+    let near = |a: usize| -> Vec<f64> {
+        let mut v = Vec::new();
+        for &x in &t[a] {
+            v.extend([x, x.next_up(), x.next_down()]);
+            v.extend([x.next_up().next_up(), x.next_down().next_down()]);
+            let far = f64::EPSILON * x.abs().max(f64::MIN_POSITIVE) * (1u64 << 29) as f64;
+            v.push(x + far);
+            v.push(x - far);
+        }
+        v.retain(|&x| x > 0.0 && x < t[a][t[a].len() - 1]);
+        v
+    };
+    let centre = |a: usize, k: usize| (t[a][k] + t[a][k + 1]) / 2.0;
+    let mut positions = Vec::new();
+    // Faces (one axis on a boundary), edges (two), corners (three).
+    for &x in &near(0) {
+        positions.push(DVec3::new(x, centre(1, 1), centre(2, 1)));
+        for &y in &near(1) {
+            positions.push(DVec3::new(x, y, centre(2, 0)));
+        }
+    }
+    for &x in near(0).iter().step_by(3) {
+        for &y in near(1).iter().step_by(2) {
+            for &z in &near(2) {
+                positions.push(DVec3::new(x, y, z));
+            }
+        }
+    }
+    let field = field_of(positions.clone(), Kernel::CubicSpline);
+    let r = assert_same_registration(g, &field, &base, "origin 0").unwrap();
+    // Each threshold itself rounds to its own f32: those particles must take the
+    // deferred path, and the 2^29-ulp ones must not (the kernel decided most).
+    assert!(r.deferred > 0, "no tie exercised");
+    assert!(
+        r.deferred < field.len(),
+        "{} of {} deferred",
+        r.deferred,
+        field.len()
+    );
+    eprintln!(
+        "boundaries: {} particles, {} deferred",
+        field.len(),
+        r.deferred
+    );
+
+    // The same positions on grids whose origin is not 0: p - origin rounds in f64.
+    for origin in [
+        DVec3::new(-0.3, -1e-3, 0.7),
+        DVec3::new(-1.0 / 3.0, 0.1, -7.0),
+    ] {
+        let shifted = CoarseGrid {
+            origin: origin.min(DVec3::ZERO) - 1.0,
+            cells: [60, 60, 250],
+            ..base
+        };
+        assert_same_registration(g, &field, &shifted, &format!("origin {origin}")).unwrap();
+    }
+
+    // A lattice of spacing = a quarter coarse cell from the origin: a quarter of the
+    // particles lie on a face along each axis.
+    let coarse = base.fine * 4.0;
+    let lattice: Vec<DVec3> = (0..20 * 16 * 12)
+        .map(|i| {
+            DVec3::new((i % 20) as f64, (i / 20 % 16) as f64, (i / 320) as f64) * (coarse / 4.0)
+        })
+        .collect();
+    let field = field_of(lattice, Kernel::CubicSpline);
+    let r = assert_same_registration(g, &field, &base, "lattice").unwrap();
+    eprintln!(
+        "lattice: {} particles, {} deferred",
+        field.len(),
+        r.deferred
+    );
+
+    // Outside the grid below, above and exactly at the far face: the CPU's error.
+    for bad in [
+        DVec3::new(t[0][0].next_down(), 0.05, 0.05),
+        DVec3::new(0.05, t[1][4], 0.05),
+        DVec3::new(0.05, 0.05, 50.0),
+    ] {
+        let mut p = positions.clone();
+        p.insert(17, bad);
+        let field = field_of(p, Kernel::CubicSpline);
+        assert!(assert_same_registration(g, &field, &base, &format!("outside {bad}")).is_none());
+    }
+}
+
+/// The GPU back end's registration costs one small upload (the thresholds and a uniform,
+/// O(cells)) and no per-particle upload: the field upload it reads is the one the
+/// per-level work needs anyway.
+#[test]
+fn gpu_registration_uploads_only_the_thresholds() {
+    let Some(g) = gpu() else { return };
+    let field = frame(FRAMES[1]);
+    let p = params(0.6);
+    let grid = grid_for(&field, &p).unwrap();
+    let on_device = GpuField::new(g, &field, grid.origin).unwrap();
+    let before = g.transfers();
+    super::register::register(g, &on_device, &field, &grid).unwrap();
+    let used = g.transfers() - before;
+    let thresholds = grid.cells.iter().map(|&c| c as u64 + 1).sum::<u64>() * 4;
+    assert_eq!(used.uploads, 2, "{used:?}");
+    assert_eq!(
+        used.upload_bytes,
+        thresholds.max(16).next_multiple_of(4) + 32,
+        "{used:?}"
+    );
+    assert_eq!(used.dispatches, 1, "{used:?}");
+    assert!(used.readbacks <= 2, "{used:?}");
+}
+
 /// Figures, not a check (lavapipe times say nothing about a GPU): run with
 /// `cargo test --release --lib gpu::tests::figures -- --ignored --nocapture`.
 #[test]
@@ -678,6 +874,71 @@ fn figures() {
                 out.stats.field_evaluations
             );
         }
+    }
+}
+
+/// Registration figures, not a check: best of 7 wall times of the CPU registration
+/// (`grid::register`, rayon) and the GPU one (`gpu::register`: thresholds, upload,
+/// dispatch, read-back, deferred particles; the field upload it reads is shared with the
+/// per-level work and not timed), and the GPU extraction's whole traffic. On lavapipe the
+/// times are a CPU emulating a GPU. Run with
+/// `cargo test --release --lib gpu::tests::registration_figures -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn registration_figures() {
+    let Some(g) = gpu() else { return };
+    println!("adapter: {}", g.name);
+    for name in FRAMES {
+        let field = frame(name);
+        let p = Params {
+            isovalue: 0.6,
+            grid_factor: 0.375,
+            ..Params::default()
+        };
+        let grid = grid_for(&field, &p).unwrap();
+        let positions: Vec<DVec3> = (0..field.len()).map(|i| field.position(i)).collect();
+        let on_device = GpuField::new(g, &field, grid.origin).unwrap();
+        let best = |f: &mut dyn FnMut()| {
+            (0..7)
+                .map(|_| {
+                    let t = std::time::Instant::now();
+                    f();
+                    t.elapsed().as_secs_f64()
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        let cpu = best(&mut || {
+            grid::register(&grid, &positions).unwrap();
+        });
+        let before = g.transfers();
+        let mut deferred = 0;
+        let gpu_t = best(&mut || {
+            deferred = super::register::register(g, &on_device, &field, &grid)
+                .unwrap()
+                .deferred;
+        });
+        let per_call = g.transfers() - before;
+        let before = g.transfers();
+        let gp = Params {
+            backend: Backend::Gpu,
+            ..p.clone()
+        };
+        adaptive::extract_sph(&field, &gp, &mut Progress::none()).unwrap();
+        let whole = g.transfers() - before;
+        println!(
+            "{name}: {} particles, {} coarse cells, {deferred} deferred; registration best of 7: \
+             CPU {:.3} ms, GPU (lavapipe) {:.3} ms; GPU registration traffic per call: {} uploads, \
+             {} bytes, {} dispatches, {} read-backs; whole GPU extraction: {:?}",
+            field.len(),
+            grid.cell_count(),
+            cpu * 1e3,
+            gpu_t * 1e3,
+            per_call.uploads / 7,
+            per_call.upload_bytes / 7,
+            per_call.dispatches / 7,
+            per_call.readbacks / 7,
+            whole
+        );
     }
 }
 
