@@ -371,9 +371,9 @@ mod tests {
             },
         ] {
             let t = g.registration_thresholds();
-            for a in 0..3 {
-                assert_eq!(t[a].len(), g.cells[a] as usize + 1);
-                for (k, &x) in t[a].iter().enumerate() {
+            for (a, ta) in t.iter().enumerate() {
+                assert_eq!(ta.len(), g.cells[a] as usize + 1);
+                for (k, &x) in ta.iter().enumerate() {
                     assert!(g.coarse_floor(x) >= k as f64, "axis {a} k {k}");
                     assert!(g.coarse_floor(x.next_down()) < k as f64, "axis {a} k {k}");
                 }
