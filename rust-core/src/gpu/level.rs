@@ -28,21 +28,11 @@ use crate::mc::case_table;
 use crate::progress::Progress;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::sync::OnceLock;
 
 /// The SPH kernels, the level kernels and crack filling (`gpu::cracks`): one module, one
 /// binding layout.
 pub(super) fn level_source() -> (&'static str, &'static str) {
-    static SOURCE: OnceLock<String> = OnceLock::new();
-    let s = SOURCE.get_or_init(|| {
-        format!(
-            "{}\n{}\n{}",
-            include_str!("shaders/sph.wgsl"),
-            include_str!("shaders/level.wgsl"),
-            include_str!("shaders/cracks.wgsl")
-        )
-    });
-    ("level.wgsl", s.as_str())
+    kernel_source!("level.wgsl", "level.wgsl", "cracks.wgsl")
 }
 
 const SCAN: (&str, &str) = ("scan.wgsl", include_str!("shaders/scan.wgsl"));

@@ -9,6 +9,21 @@
 
 use crate::error::{Error, Result};
 
+/// A kernel module's WGSL source as `(name, text)`: `shaders/sph.wgsl` (the particle
+/// layout and neighbour loop every kernel uses) followed by the module's own files, joined
+/// once per process.
+#[cfg(feature = "gpu")]
+macro_rules! kernel_source {
+    ($name:literal, $($file:literal),+) => {{
+        static SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+        let text = SOURCE.get_or_init(|| {
+            [include_str!("shaders/sph.wgsl"), $(include_str!(concat!("shaders/", $file))),+]
+                .join("\n")
+        });
+        ($name, text.as_str())
+    }};
+}
+
 #[cfg(feature = "gpu")]
 pub mod cracks;
 #[cfg(feature = "gpu")]

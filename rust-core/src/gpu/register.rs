@@ -33,7 +33,6 @@ use super::sph::GpuField;
 use crate::adaptive::grid::{self, CoarseGrid};
 use crate::error::Result;
 use crate::field::sph::SphField;
-use std::sync::OnceLock;
 
 /// `Register` of register.wgsl.
 #[repr(C)]
@@ -46,15 +45,7 @@ struct RegisterUniform {
 }
 
 fn source() -> (&'static str, &'static str) {
-    static SOURCE: OnceLock<String> = OnceLock::new();
-    let s = SOURCE.get_or_init(|| {
-        format!(
-            "{}\n{}",
-            include_str!("shaders/sph.wgsl"),
-            include_str!("shaders/register.wgsl")
-        )
-    });
-    ("register.wgsl", s.as_str())
+    kernel_source!("register.wgsl", "register.wgsl")
 }
 
 /// Counts per coarse cell and how they were found.

@@ -12,7 +12,6 @@ use crate::correctors::seeds::{seed_cells_with, side_radius, SeedSearch};
 use crate::error::Result;
 use crate::field::sph::SphField;
 use crate::mc::VirtualGrid;
-use std::sync::OnceLock;
 
 /// Relative enlargement of the squared search radius: f32 distances of particles at
 /// 1e3 smoothing lengths from the origin err by ~1e-4 of h².
@@ -26,15 +25,7 @@ struct SeedsUniform {
 }
 
 fn source() -> (&'static str, &'static str) {
-    static SOURCE: OnceLock<String> = OnceLock::new();
-    let s = SOURCE.get_or_init(|| {
-        format!(
-            "{}\n{}",
-            include_str!("shaders/sph.wgsl"),
-            include_str!("shaders/seeds.wgsl")
-        )
-    });
-    ("seeds.wgsl", s.as_str())
+    kernel_source!("seeds.wgsl", "seeds.wgsl")
 }
 
 /// Every particle's neighbour candidates (grid slots), found on the GPU once per field.
