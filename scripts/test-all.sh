@@ -15,13 +15,11 @@ if ! command -v cargo >/dev/null; then
 fi
 
 # Debian packages: a C compiler for the C ABI test; EGL/Mesa for pyvista's offscreen
-# screenshots; lavapipe (mesa-vulkan-drivers) so the wgpu kernels run without a GPU; the X
-# and OpenGL client libraries PyPI's gmsh links (the Python FE tests make meshes with it;
-# tests/python/run.sh checks the same list).
+# screenshots; lavapipe (mesa-vulkan-drivers) so the wgpu kernels run without a GPU. Each
+# host suite's script installs its own libraries (gmsh's: tests/python/run.sh; bpy's:
+# tests/blender/run.sh), through scripts/debian-packages.sh.
 need=()
-for pkg in gcc libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 mesa-vulkan-drivers \
-    libgl1 libglu1-mesa libx11-6 libxext6 libxrender1 libxcursor1 libxfixes3 libxft2 \
-    libxinerama1 libfontconfig1 libgomp1; do
+for pkg in gcc libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 mesa-vulkan-drivers; do
     dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then
