@@ -4,6 +4,7 @@
 
 use crate::field::sph::SphField;
 use crate::mc::bricks::BrickMap;
+use crate::mc::radix;
 use crate::mc::VirtualGrid;
 use rayon::prelude::*;
 
@@ -42,8 +43,7 @@ impl NodeCache {
             .collect();
         // Sorted, neighbouring nodes are evaluated together (their particles are in
         // cache) and stored brick by brick.
-        missing.par_sort_unstable();
-        missing.dedup();
+        radix::sort_unique(&mut missing);
         let samples: Vec<NodeSample> = missing
             .par_iter()
             .map(|&n| field.value_and_weight(grid.node_position(n)))

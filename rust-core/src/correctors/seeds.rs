@@ -27,7 +27,7 @@ use crate::error::Result;
 use crate::field::neighbours::NeighbourGrid;
 use crate::field::sph::SphField;
 use crate::field::DEFAULT_MEMORY_BUDGET;
-use crate::mc::VirtualGrid;
+use crate::mc::{radix, VirtualGrid};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -181,8 +181,7 @@ pub fn seed_cells_with(
         })
         .flatten_iter()
         .collect();
-    seeds.par_sort_unstable();
-    seeds.dedup();
+    radix::sort_unique(&mut seeds);
     Ok(seeds)
 }
 

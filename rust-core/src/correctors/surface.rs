@@ -195,18 +195,25 @@ pub fn build(
 /// Unit normals pointing down the field gradient (out of the region above the isovalue);
 /// vertices where the gradient vanishes take their face normal.
 fn gradient_normals(s: &Untrimmed) -> Vec<[f32; 3]> {
-    let faces = face_normals(s);
-    s.gradients
-        .iter()
-        .zip(faces)
-        .map(|(g, f)| {
+    let from_gradient: Vec<Option<[f32; 3]>> = s
+        .gradients
+        .par_iter()
+        .map(|g| {
             let n = -*g;
-            if n.length_squared() > 0.0 && n.is_finite() {
-                n.normalize().as_vec3().to_array()
-            } else {
-                f
-            }
+            (n.length_squared() > 0.0 && n.is_finite()).then(|| n.normalize().as_vec3().to_array())
         })
+        .collect();
+    // Face normals are a pass over every triangle, on one thread: only for the rare
+    // vertex where the gradient vanishes.
+    let faces = if from_gradient.iter().any(Option::is_none) {
+        face_normals(s)
+    } else {
+        Vec::new()
+    };
+    from_gradient
+        .into_iter()
+        .enumerate()
+        .map(|(i, n)| n.unwrap_or_else(|| faces[i]))
         .collect()
 }
 
@@ -223,4 +230,43 @@ fn face_normals(s: &Untrimmed) -> Vec<[f32; 3]> {
     acc.into_iter()
         .map(|n| n.try_normalize().unwrap_or(DVec3::Z).as_vec3().to_array())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gradient_normals_point_down_the_gradient_and_fall_back_to_faces_where_it_vanishes() {
+        // Two triangles in the z = 0 plane, both facing +z.
+        let positions = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+        ];
+        let gradients = vec![
+            DVec3::new(0.0, 0.0, -2.0),
+            DVec3::ZERO,
+            DVec3::new(f64::NAN, 0.0, 0.0),
+            DVec3::new(3.0, 0.0, 4.0),
+        ];
+        let s = Untrimmed {
+            positions,
+            gradients,
+            weights: vec![1.0; 4],
+            triangles: vec![[0, 1, 2], [1, 3, 2]],
+        };
+        let n = gradient_normals(&s);
+        assert_eq!(n[0], [0.0, 0.0, 1.0]);
+        assert_eq!(n[1], [0.0, 0.0, 1.0], "zero gradient: the face normal");
+        assert_eq!(n[2], [0.0, 0.0, 1.0], "NaN gradient: the face normal");
+        assert_eq!(n[3], [-0.6, 0.0, -0.8]);
+        // Where every gradient is usable no face normal is needed, and none leaks in.
+        let all = Untrimmed {
+            gradients: vec![DVec3::new(0.0, -1.0, 0.0); 4],
+            ..s
+        };
+        assert!(gradient_normals(&all).iter().all(|n| *n == [0.0, 1.0, 0.0]));
+    }
 }

@@ -12,6 +12,7 @@ use super::Params;
 use crate::error::{Error, Result};
 use crate::field::sph::SphField;
 use crate::mc::bricks::BrickSet;
+use crate::mc::radix;
 use crate::mc::{case_index, case_table, ActiveCell, VirtualGrid};
 use crate::progress::Progress;
 use rayon::prelude::*;
@@ -82,28 +83,41 @@ pub fn track(
             })
             .collect();
         out.visited += frontier.len() as u64;
-        let mut next = Vec::new();
+        // The next wavefront: every face neighbour the surface crosses into, once, unless
+        // visited. Listed and sorted in parallel; only the new cells are then marked
+        // visited, in key order, which keeps the brick set's last-brick shortcut hot.
+        let mut next: Vec<u64> = visits
+            .par_iter()
+            .flat_map_iter(|v| {
+                let cell = match v {
+                    Visit::Active(cell) => Some(*cell),
+                    _ => None,
+                };
+                cell.into_iter().flat_map(|cell| {
+                    let faces = table.faces_crossed[cell.case as usize];
+                    (0..6)
+                        .filter(move |f| faces >> f & 1 == 1)
+                        .filter_map(move |f| grid.face_neighbour(cell.key, f / 2, f % 2))
+                })
+            })
+            .collect();
+        radix::sort_unique(&mut next);
+        let seen = &visited;
+        next = next
+            .into_par_iter()
+            .filter(|&n| !seen.contains(n))
+            .collect();
+        for &n in &next {
+            visited.insert(n);
+        }
         for v in visits {
             match v {
-                Visit::Active(cell) => {
-                    let faces = table.faces_crossed[cell.case as usize];
-                    for f in 0..6 {
-                        if faces >> f & 1 == 1 {
-                            if let Some(n) = grid.face_neighbour(cell.key, f / 2, f % 2) {
-                                if visited.insert(n) {
-                                    next.push(n);
-                                }
-                            }
-                        }
-                    }
-                    out.active.push(cell);
-                }
+                Visit::Active(cell) => out.active.push(cell),
                 Visit::Empty if is_seed_wave => out.non_intersected_seeds += 1,
                 Visit::Empty => {}
                 Visit::Discarded => out.discarded += 1,
             }
         }
-        next.par_sort_unstable();
         let needed = estimated_bytes(cache, &visited, out.active.len());
         if needed > memory_budget {
             return Err(Error::OverBudget {
@@ -118,9 +132,9 @@ pub fn track(
         }
         frontier = next;
         is_seed_wave = false;
-        let seen = out.visited as f64;
-        progress.report(seen / (seen + frontier.len() as f64 * 4.0))?;
+        let done = out.visited as f64;
+        progress.report(done / (done + frontier.len() as f64 * 4.0))?;
     }
-    out.active.par_sort_unstable();
+    radix::sort_by_key(&mut out.active, |c| c.key);
     Ok(out)
 }

@@ -199,6 +199,9 @@ pub struct SphField {
     max_support: f64,
     /// Bounds of the particle positions.
     bounds: (DVec3, DVec3),
+    /// Every particle's value is exactly 1 (the sum-of-weights field): Σ w·1 is Σ w to
+    /// the bit, so the loops sum only the weights and copy them.
+    unit_values: bool,
 }
 
 impl SphField {
@@ -301,6 +304,7 @@ impl SphField {
                     h_scale: settings.h_scale,
                     max_support,
                     bounds: (DVec3::ZERO, DVec3::ZERO),
+                    unit_values: false,
                 };
                 let slots: Vec<usize> = (0..n).collect();
                 chunked(&slots, progress, |part| {
@@ -325,11 +329,12 @@ impl SphField {
             kernel,
             shepard: settings.shepard,
             grid,
-            particles,
             h_unscaled,
             h_scale: settings.h_scale,
             max_support,
             bounds: super::neighbours::bounds(&data.positions),
+            unit_values: particles.iter().all(|p| p.value == 1.0),
+            particles,
         })
     }
 
@@ -354,24 +359,33 @@ impl SphField {
     /// (A(x), S(x)): value and sum of weights, no gradients.
     #[inline]
     pub fn value_and_weight(&self, x: DVec3) -> (f64, f64) {
-        with_kernel!(self.kernel, K => self.value_and_weight_with(K, x))
+        if self.unit_values {
+            with_kernel!(self.kernel, K => self.value_and_weight_with::<true>(K, x))
+        } else {
+            with_kernel!(self.kernel, K => self.value_and_weight_with::<false>(K, x))
+        }
     }
 
     /// [`SphField::value_and_weight`] with the kernel known at compile time. The sums are
     /// plain locals in plain loops: behind a closure they lived in memory, stored back for
     /// every neighbour.
     #[inline(always)]
-    fn value_and_weight_with(&self, kernel: Kernel, x: DVec3) -> (f64, f64) {
+    fn value_and_weight_with<const UNIT: bool>(&self, kernel: Kernel, x: DVec3) -> (f64, f64) {
         let (mut a, mut s) = (0.0, 0.0);
         for range in self.grid.candidate_ranges(x, REACH) {
             for p in &self.particles[range] {
                 let r2 = (x - p.pos).length_squared();
                 if r2 < p.support2 {
                     let w = p.weight_scale * kernel.shape(r2.sqrt() * p.inv_h).0;
-                    a += w * p.value;
+                    if !UNIT {
+                        a += w * p.value;
+                    }
                     s += w;
                 }
             }
+        }
+        if UNIT {
+            a = s;
         }
         if self.shepard {
             a = if s > 0.0 { a / s } else { 0.0 };
@@ -382,12 +396,16 @@ impl SphField {
     /// Value, gradient, sum of weights and its gradient at `x`.
     #[inline]
     pub fn sample(&self, x: DVec3) -> Sample {
-        with_kernel!(self.kernel, K => self.sample_with(K, x))
+        if self.unit_values {
+            with_kernel!(self.kernel, K => self.sample_with::<true>(K, x))
+        } else {
+            with_kernel!(self.kernel, K => self.sample_with::<false>(K, x))
+        }
     }
 
     /// [`SphField::sample`] with the kernel known at compile time.
     #[inline(always)]
-    fn sample_with(&self, kernel: Kernel, x: DVec3) -> Sample {
+    fn sample_with<const UNIT: bool>(&self, kernel: Kernel, x: DVec3) -> Sample {
         let (mut a, mut s) = (0.0, 0.0);
         let (mut ga, mut gs) = (DVec3::ZERO, DVec3::ZERO);
         for range in self.grid.candidate_ranges(x, REACH) {
@@ -397,16 +415,23 @@ impl SphField {
                     let r = r2.sqrt();
                     let (f, df) = kernel.shape(r * p.inv_h);
                     let w = p.weight_scale * f;
-                    a += w * p.value;
+                    if !UNIT {
+                        a += w * p.value;
+                    }
                     s += w;
                     if r > 0.0 {
                         // ∇W = dW/dr · (x − x_j)/r
                         let g = (x - p.pos) * (p.weight_scale * df * p.inv_h / r);
-                        ga += g * p.value;
+                        if !UNIT {
+                            ga += g * p.value;
+                        }
                         gs += g;
                     }
                 }
             }
+        }
+        if UNIT {
+            (a, ga) = (s, gs);
         }
         if self.shepard {
             if s > 0.0 {
@@ -571,5 +596,90 @@ fn check_positive(v: &[f64], role: &str) -> Result<()> {
             "{role} of particle {i} is {}; it must be positive and finite",
             v[i]
         ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::particles::Attribute;
+
+    /// A jittered block of particles and points around and inside it.
+    fn block() -> (ParticleData, Vec<DVec3>) {
+        let mut state = 11u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut positions = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                for k in 0..10 {
+                    let jitter = DVec3::new(next(), next(), next()) * 0.3;
+                    positions.push(DVec3::new(i as f64, j as f64, k as f64) * 0.1 + jitter * 0.1);
+                }
+            }
+        }
+        let points = (0..300)
+            .map(|_| DVec3::new(next(), next(), next()) * 1.3 - DVec3::splat(0.15))
+            .collect();
+        let data = ParticleData {
+            positions,
+            attributes: vec![],
+        };
+        (data, points)
+    }
+
+    #[test]
+    fn the_unit_value_loops_equal_the_general_loops_to_the_bit() {
+        let (data, points) = block();
+        for kernel in [
+            Kernel::CubicSpline,
+            Kernel::WendlandC2,
+            Kernel::QuinticSpline,
+            Kernel::Quadratic,
+        ] {
+            for shepard in [false, true] {
+                let settings = SphSettings {
+                    kernel,
+                    smoothing_length: SmoothingLength::Constant(0.11),
+                    quantity: Quantity::SumOfWeights,
+                    shepard,
+                    ..SphSettings::default()
+                };
+                let field = SphField::new(&data, &settings).unwrap();
+                assert!(field.unit_values, "the sum of weights has unit values");
+                let mut inside = 0;
+                for &x in &points {
+                    let (a, s) =
+                        with_kernel!(kernel, K => field.value_and_weight_with::<false>(K, x));
+                    assert_eq!(field.value_and_weight(x), (a, s), "{kernel:?} at {x}");
+                    let general = with_kernel!(kernel, K => field.sample_with::<false>(K, x));
+                    assert_eq!(field.sample(x), general, "{kernel:?} at {x}");
+                    inside += usize::from(s > 0.0);
+                }
+                assert!(inside > 200, "most points see particles ({inside})");
+            }
+        }
+    }
+
+    #[test]
+    fn a_field_with_other_values_takes_the_general_loops() {
+        let (mut data, _) = block();
+        let n = data.positions.len();
+        let values: Vec<f64> = (0..n).map(|i| if i == 7 { 2.0 } else { 1.0 }).collect();
+        data.attributes.push(Attribute::scalar("p", values));
+        let settings = SphSettings {
+            smoothing_length: SmoothingLength::Constant(0.11),
+            quantity: Quantity::Scalar("p".into()),
+            ..SphSettings::default()
+        };
+        let field = SphField::new(&data, &settings).unwrap();
+        assert!(!field.unit_values);
+        let x = data.positions[7];
+        let (a, s) = field.value_and_weight(x);
+        assert!(a > s, "particle 7's value 2 shows in A(x): {a} vs S(x) {s}");
     }
 }

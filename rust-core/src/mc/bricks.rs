@@ -142,6 +142,26 @@ impl<T: Copy + Default> BrickMap<T> {
         })
     }
 
+    /// The values at the eight corners of `cell`, `absent` where a corner has none, with
+    /// one brick lookup when the cell does not straddle a brick boundary.
+    #[inline]
+    pub fn corners_or(&self, cell: u64, absent: T) -> [T; 8] {
+        if let Some((brick, at)) = corners_in_one_brick(cell) {
+            let Some(i) = self.brick_index(brick) else {
+                return [absent; 8];
+            };
+            let b = &self.bricks[i as usize];
+            return at.map(|a| {
+                if b.present[a / 64] >> (a % 64) & 1 == 1 {
+                    b.values[a]
+                } else {
+                    absent
+                }
+            });
+        }
+        std::array::from_fn(|k| self.get(VirtualGrid::corner(cell, k)).unwrap_or(absent))
+    }
+
     /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
     /// does not straddle a brick boundary.
     #[inline]
@@ -190,6 +210,12 @@ impl BrickSet {
     #[inline]
     pub fn insert(&mut self, key: u64) -> bool {
         self.map.insert(key, ())
+    }
+
+    /// Whether `key` is in the set.
+    #[inline]
+    pub fn contains(&self, key: u64) -> bool {
+        self.map.contains(key)
     }
 
     /// Bytes the set holds.
@@ -273,7 +299,7 @@ mod tests {
     }
 
     #[test]
-    fn present_corners_match_contains_inside_and_across_bricks() {
+    fn present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks() {
         // Every third key of a 20³ box, so corners are a mix of present and absent.
         let mut map = BrickMap::<u8>::default();
         for x in 0..20 {
@@ -293,6 +319,9 @@ mod tests {
                         m | u8::from(map.contains(VirtualGrid::corner(cell, k))) << k
                     });
                     assert_eq!(map.present_corners(cell), expected, "cell {x} {y} {z}");
+                    let values: [u8; 8] =
+                        std::array::from_fn(|k| map.get(VirtualGrid::corner(cell, k)).unwrap_or(9));
+                    assert_eq!(map.corners_or(cell, 9), values, "cell {x} {y} {z}");
                 }
             }
         }

@@ -3,11 +3,13 @@
 //! decides which cells are active and where on each cut edge its vertex goes.
 
 pub mod bricks;
+pub mod radix;
 pub mod table;
 
 pub use table::{case_table, corner_offset, edge_corner_axis, face_segments, CaseTable};
 
 use crate::error::{Error, Result};
+use bricks::BrickMap;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -224,25 +226,34 @@ pub fn cut_edges(cells: &[ActiveCell]) -> Vec<u64> {
             })
         })
         .collect();
-    edges.par_sort_unstable();
-    edges.dedup();
+    radix::sort_unique(&mut edges);
     edges
 }
 
 /// Triangles of the active cells, in cell order, indexing `edges` (from [`cut_edges`]).
 pub fn triangulate(cells: &[ActiveCell], edges: &[u64]) -> Vec<[u32; 3]> {
+    const NONE: u32 = u32::MAX;
     let table = case_table();
+    // Each cut edge's vertex index, filed under the edge's lower node by axis: a cell
+    // then reads all twelve of its edges with one brick lookup, where a binary search per
+    // triangle corner cost about as much as evaluating the cell's corners.
+    let mut at_node: BrickMap<[u32; 3]> = BrickMap::default();
+    for (i, &e) in edges.iter().enumerate() {
+        let (node, axis) = edge_node_axis(e);
+        let mut ids = at_node.get(node).unwrap_or([NONE; 3]);
+        ids[axis] = i as u32;
+        at_node.insert(node, ids);
+    }
     cells
         .par_iter()
         .flat_map_iter(|cell| {
+            let ids = at_node.corners_or(cell.key, [NONE; 3]);
             table.triangles[cell.case as usize].iter().map(move |tri| {
                 tri.map(|e| {
                     let (corner, axis) = edge_corner_axis(e as usize);
-                    let key = edge_key(VirtualGrid::corner(cell.key, corner), axis);
-                    edges
-                        .binary_search(&key)
-                        .expect("every cut edge of an active cell is listed")
-                        as u32
+                    let i = ids[corner][axis];
+                    assert!(i != NONE, "every cut edge of an active cell is listed");
+                    i
                 })
             })
         })
