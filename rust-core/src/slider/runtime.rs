@@ -220,6 +220,34 @@ struct Scratch {
     tris: Vec<[u32; 3]>,
 }
 
+/// Index steps from a cell (its lower corner's node index) to its eight corners and, in
+/// edge ids (`node · 3 + axis`), to its twelve edges: computed once per lattice, so the
+/// per-cell work of an update (cases of dirty cells, HE lookups of their triangles) adds
+/// one offset instead of rebuilding each corner from the case table's bits and strides.
+#[derive(Clone, Copy, Debug)]
+struct CellOffsets {
+    corners: [usize; 8],
+    edges: [usize; 12],
+}
+
+impl CellOffsets {
+    fn new(lattice: &Lattice) -> CellOffsets {
+        let corner = |k: usize| {
+            let d = corner_offset(k);
+            (0..3)
+                .map(|a| d[a] as usize * lattice.stride(a))
+                .sum::<usize>()
+        };
+        CellOffsets {
+            corners: std::array::from_fn(corner),
+            edges: std::array::from_fn(|local| {
+                let (k, axis) = edge_corner_axis(local);
+                3 * corner(k) + axis
+            }),
+        }
+    }
+}
+
 /// An isosurface that slides: open a store, set isovalues, read the arrays.
 ///
 /// Not `Sync`: the full arrays are filled lazily behind `&self`.
@@ -241,6 +269,8 @@ pub struct Slider {
     all_triangles: OnceCell<Vec<[u32; 3]>>,
     spare_triangles: RefCell<Vec<[u32; 3]>>,
     scratch: Scratch,
+    /// Index steps from a cell to its corners and edges, fixed by the lattice.
+    offsets: CellOffsets,
     stats: SliderStats,
     /// Level of detail asked for (error bound 0: off, the LOD mesh is the exact one).
     lod: LodParams,
@@ -259,6 +289,7 @@ impl Slider {
                 ..Bucket::default()
             })
             .collect();
+        let offsets = CellOffsets::new(store.lattice());
         let mut slider = Slider {
             store,
             rank: 0,
@@ -273,6 +304,7 @@ impl Slider {
             all_triangles: OnceCell::new(),
             spare_triangles: RefCell::default(),
             scratch: Scratch::default(),
+            offsets,
             stats: SliderStats::default(),
             lod: LodParams {
                 error_bound: 0.0,
@@ -747,14 +779,9 @@ impl Slider {
 
     /// Case of `cell` at the current isovalue (bit c: corner c above it).
     fn case_of(&self, cell: u32) -> Result<u8> {
-        let lattice = self.store.lattice();
-        let stride = [0, 1, 2].map(|a| lattice.stride(a));
         let mut case = 0u8;
-        for k in 0..8 {
-            let [dx, dy, dz] = corner_offset(k).map(|v| v as usize);
-            let v = self
-                .store
-                .checked_value(cell as usize + dx * stride[0] + dy * stride[1] + dz * stride[2])?;
+        for (k, &offset) in self.offsets.corners.iter().enumerate() {
+            let v = self.store.checked_value(cell as usize + offset)?;
             if v as f64 > self.iso {
                 case |= 1 << k;
             }
@@ -765,8 +792,6 @@ impl Slider {
     /// Triangles of `cell` in `case`, as vertex indices through HE, into `out` (cleared).
     /// Each of the cell's edges is looked up in HE once, however many triangles share it.
     fn cell_triangles(&self, cell: u32, case: u8, out: &mut Vec<[u32; 3]>) -> Result<()> {
-        let lattice = self.store.lattice();
-        let stride = [0, 1, 2].map(|a| lattice.stride(a));
         let mut vertex = [u32::MAX; 12];
         out.clear();
         for tri in &case_table().triangles[case as usize] {
@@ -774,10 +799,7 @@ impl Slider {
             for (k, &local) in tri.iter().enumerate() {
                 let local = local as usize;
                 if vertex[local] == u32::MAX {
-                    let (corner, axis) = edge_corner_axis(local);
-                    let [dx, dy, dz] = corner_offset(corner).map(|v| v as usize);
-                    let node = cell as usize + dx * stride[0] + dy * stride[1] + dz * stride[2];
-                    let e = (node * 3 + axis) as u32;
+                    let e = (3 * cell as usize + self.offsets.edges[local]) as u32;
                     vertex[local] = *self.he.get(&e).ok_or_else(|| {
                         self.corrupt(format!("cell {cell} in case {case} needs edge {e}, not on"))
                     })?;
@@ -823,6 +845,20 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     let c = lattice.coords(node);
     let mut up = c;
     up[axis] += 1;
+    // Once the neighbourhood's chunks have been verified (every edge after the first few
+    // in a region), each read is a bit test and a load: no error plumbing per value.
+    let unverified = Cell::new(false);
+    let fast = |i: usize| {
+        store.verified_value(i).unwrap_or_else(|| {
+            unverified.set(true);
+            0.0
+        })
+    };
+    let data = edge_data_from(lattice, fast, c, axis, up);
+    if !unverified.get() {
+        return Ok(data);
+    }
+    // Some chunk is read for the first time: check it (the first failure is the error).
     let failed: Cell<Option<Error>> = Cell::new(None);
     let value = |i: usize| {
         store.checked_value(i).unwrap_or_else(|err| {

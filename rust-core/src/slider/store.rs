@@ -432,6 +432,14 @@ impl Store {
         Ok(self.value(i))
     }
 
+    /// Value of node `i` if its chunk has already been checked, else `None` (nothing is
+    /// checked here): the hot path of reads that mostly hit verified chunks.
+    #[inline(always)]
+    pub(crate) fn verified_value(&self, i: usize) -> Option<f32> {
+        let at = self.values + self.value_type.size() * i;
+        self.chunk_checked(at).then(|| self.value(i))
+    }
+
     /// Whether the chunk holding byte `at` has been checked (the hot path of every
     /// checked read: one bit test).
     #[inline(always)]
