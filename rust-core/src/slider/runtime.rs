@@ -14,12 +14,12 @@
 //! when the isovalue does, so V and N are O(surface); I is gathered from the buckets)
 //! are computed when first read after an update ([`Slider::positions`],
 //! [`Slider::normals`], [`Slider::triangle_array`]), into the previous arrays' memory.
-//! Scratch lists and the walk's edge map live in the slider and keep their capacity, so
+//! Scratch lists and the walk's edge pairs live in the slider and keep their capacity, so
 //! a steady slide allocates nothing but the returned [`Change`].
 
 use super::build::node_edges;
 use super::lod::{self, LodMesh, LodParams};
-use super::store::{neighbour, Store};
+use super::store::Store;
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice};
 use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing};
@@ -27,7 +27,7 @@ use crate::progress::Progress;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
-use std::cell::{OnceCell, RefCell};
+use std::cell::{Cell, OnceCell, RefCell};
 use std::time::Instant;
 
 /// What one interpolated vertex is computed from: its edge's lower node and axis, the two
@@ -114,17 +114,138 @@ struct Vertices {
     normals: Vec<[f32; 3]>,
 }
 
+/// Net change per edge of a walk (+1 on, −1 off), as (edge, change) pairs netted by
+/// sorting rather than through a hash map: a radix sort costs a few instructions per
+/// bump where hashing cost about a hundred, and it leaves the edges in order.
+#[derive(Default)]
+struct Delta {
+    pairs: Vec<(u32, i32)>,
+    /// Length after the last netting: pairs are netted again once as many have been
+    /// added, so a long walk holds at most about twice its distinct edges.
+    netted: usize,
+    /// Bits of the largest edge id (the radix sort's key width).
+    bits: u32,
+    /// The radix sort's second buffer and digit counts, kept for their capacity.
+    spare: Vec<(u32, i32)>,
+    counts: Vec<usize>,
+}
+
+/// Below this many pairs a comparison sort beats the radix sort's passes over its counts.
+const RADIX_FROM: usize = 1024;
+
+impl Delta {
+    /// Empties the pairs for a walk over edge ids below `limit`.
+    fn clear(&mut self, limit: u32) {
+        self.pairs.clear();
+        self.netted = 0;
+        self.bits = 32 - limit.leading_zeros();
+    }
+
+    #[inline]
+    fn bump(&mut self, e: u32, d: i32) {
+        self.pairs.push((e, d));
+        if self.pairs.len() >= 2 * self.netted.max(4096) {
+            self.net();
+        }
+    }
+
+    /// Sorts by edge and sums each edge's changes, dropping those that cancel.
+    fn net(&mut self) {
+        self.sort();
+        let p = &mut self.pairs;
+        let mut out = 0;
+        let mut i = 0;
+        while i < p.len() {
+            let e = p[i].0;
+            let mut sum = 0i32;
+            while i < p.len() && p[i].0 == e {
+                sum = sum.saturating_add(p[i].1);
+                i += 1;
+            }
+            if sum != 0 {
+                p[out] = (e, sum);
+                out += 1;
+            }
+        }
+        p.truncate(out);
+        self.netted = out;
+    }
+
+    /// Sorts the pairs by edge: least significant digit first, digits of at most 11 bits.
+    fn sort(&mut self) {
+        if self.pairs.len() < RADIX_FROM {
+            self.pairs.sort_unstable_by_key(|&(e, _)| e);
+            return;
+        }
+        let passes = self.bits.div_ceil(11).max(1);
+        let width = self.bits.div_ceil(passes).max(1);
+        let mask = (1u32 << width) - 1;
+        self.spare.resize(self.pairs.len(), (0, 0));
+        self.counts.resize(1 << width, 0);
+        for pass in 0..passes {
+            let shift = pass * width;
+            let counts = &mut self.counts[..1 << width];
+            counts.fill(0);
+            for &(e, _) in &self.pairs {
+                counts[((e >> shift) & mask) as usize] += 1;
+            }
+            let mut at = 0;
+            for c in counts.iter_mut() {
+                (*c, at) = (at, at + *c);
+            }
+            for &pair in &self.pairs {
+                let k = ((pair.0 >> shift) & mask) as usize;
+                self.spare[counts[k]] = pair;
+                counts[k] += 1;
+            }
+            std::mem::swap(&mut self.pairs, &mut self.spare);
+        }
+    }
+}
+
 /// Lists an update needs, kept between updates so they keep their capacity.
 #[derive(Default)]
 struct Scratch {
-    /// Net change per edge of the current walk (+1 on, −1 off).
-    delta: FxHashMap<u32, i8>,
+    delta: Delta,
+    /// One bit per cell, set while the cell is in `dirty` (or `reindex`): removes
+    /// repeats and, read in order, gives the cells ascending without sorting (see
+    /// [`ascending_unique`]); cleared after each use. Cells/8 bytes, 1/32 of an f32
+    /// volume.
+    marks: Vec<u64>,
     removed: Vec<u32>,
     added: Vec<u32>,
     dirty: Vec<u32>,
     holes: Vec<u32>,
     reindex: Vec<u32>,
     tris: Vec<[u32; 3]>,
+}
+
+/// Index steps from a cell (its lower corner's node index) to its eight corners and, in
+/// edge ids (`node · 3 + axis`), to its twelve edges: computed once per lattice, so the
+/// per-cell work of an update (cases of dirty cells, HE lookups of their triangles) adds
+/// one offset instead of rebuilding each corner from the case table's bits and strides.
+#[derive(Clone, Copy, Debug)]
+struct CellOffsets {
+    corners: [usize; 8],
+    edges: [usize; 12],
+}
+
+impl CellOffsets {
+    fn new(lattice: &Lattice) -> CellOffsets {
+        let corner = |k: usize| {
+            let d = corner_offset(k);
+            (0..3)
+                .map(|a| d[a] as usize * lattice.stride(a))
+                .sum::<usize>()
+        };
+        CellOffsets {
+            corners: std::array::from_fn(corner),
+            edges: std::array::from_fn(|local| {
+                let (k, axis) = edge_corner_axis(local);
+                3 * corner(k) + axis
+            }),
+        }
+    }
 }
 
 /// An isosurface that slides: open a store, set isovalues, read the arrays.
@@ -148,6 +269,8 @@ pub struct Slider {
     all_triangles: OnceCell<Vec<[u32; 3]>>,
     spare_triangles: RefCell<Vec<[u32; 3]>>,
     scratch: Scratch,
+    /// Index steps from a cell to its corners and edges, fixed by the lattice.
+    offsets: CellOffsets,
     stats: SliderStats,
     /// Level of detail asked for (error bound 0: off, the LOD mesh is the exact one).
     lod: LodParams,
@@ -166,6 +289,7 @@ impl Slider {
                 ..Bucket::default()
             })
             .collect();
+        let offsets = CellOffsets::new(store.lattice());
         let mut slider = Slider {
             store,
             rank: 0,
@@ -180,6 +304,7 @@ impl Slider {
             all_triangles: OnceCell::new(),
             spare_triangles: RefCell::default(),
             scratch: Scratch::default(),
+            offsets,
             stats: SliderStats::default(),
             lod: LodParams {
                 error_bound: 0.0,
@@ -354,8 +479,10 @@ impl Slider {
         }
         self.lod_mesh.take();
         let mut delta = std::mem::take(&mut self.scratch.delta);
-        delta.clear();
-        let walked = self.walk(target, &mut delta, &mut change, progress);
+        delta.clear(3 * self.store.nodes as u32);
+        let walked = self
+            .walk(target, &mut delta, &mut change, progress)
+            .map(|()| delta.net());
         let applied = walked.and_then(|()| {
             self.rank = target;
             self.iso = iso;
@@ -382,22 +509,18 @@ impl Slider {
     fn walk(
         &self,
         target: usize,
-        delta: &mut FxHashMap<u32, i8>,
+        delta: &mut Delta,
         change: &mut Change,
         progress: &mut Progress,
     ) -> Result<()> {
         let store = &self.store;
         let lattice = *store.lattice();
         let limit = 3 * store.nodes as u32;
-        let mut bump = |e: u32, d: i8| -> Result<()> {
+        let mut bump = |e: u32, d: i32| -> Result<()> {
             if e >= limit {
                 return Err(self.corrupt(format!("edge {e} is out of range")));
             }
-            let entry = delta.entry(e).or_insert(0);
-            *entry += d;
-            if *entry == 0 {
-                delta.remove(&e);
-            }
+            delta.bump(e, d);
             Ok(())
         };
         let mut r = self.rank;
@@ -492,7 +615,7 @@ impl Slider {
 
     /// Applies the net edge changes: cells first out, edges out (holes), edges in (filling
     /// holes), compaction, cells in.
-    fn apply(&mut self, delta: &FxHashMap<u32, i8>, change: &mut Change) -> Result<()> {
+    fn apply(&mut self, delta: &Delta, change: &mut Change) -> Result<()> {
         let mut scratch = std::mem::take(&mut self.scratch);
         let result = self.apply_with(delta, change, &mut scratch);
         self.scratch = scratch;
@@ -502,12 +625,13 @@ impl Slider {
     /// [`Slider::apply`] with the scratch lists taken out of `self`.
     fn apply_with(
         &mut self,
-        delta: &FxHashMap<u32, i8>,
+        delta: &Delta,
         change: &mut Change,
         scratch: &mut Scratch,
     ) -> Result<()> {
         let lattice = *self.store.lattice();
         let Scratch {
+            marks,
             removed,
             added,
             dirty,
@@ -525,22 +649,21 @@ impl Slider {
         ] {
             v.clear();
         }
-        for (&e, &d) in delta {
+        // Netted pairs come sorted by edge, so `added` and `removed` are sorted.
+        for &(e, d) in &delta.pairs {
             match d {
                 1 => added.push(e),
                 -1 => removed.push(e),
                 _ => return Err(self.corrupt(format!("edge {e} changes {d} times"))),
             }
         }
-        removed.sort_unstable();
-        added.sort_unstable();
         change.edges_added = added.len() as u64;
         change.edges_removed = removed.len() as u64;
+        marks.resize(self.store.nodes.div_ceil(64), 0);
         for &e in removed.iter().chain(added.iter()) {
             Self::edge_cells(&lattice, e, dirty);
         }
-        dirty.sort_unstable();
-        dirty.dedup();
+        ascending_unique(dirty, marks);
 
         // Cells around changed edges change case: their triangles go.
         for &cell in dirty.iter() {
@@ -605,8 +728,7 @@ impl Slider {
             change.moved_vertices.push(((last - 1) as u32, h));
             Self::edge_cells(&lattice, e, reindex);
         }
-        reindex.sort_unstable();
-        reindex.dedup();
+        ascending_unique(reindex, marks);
         // One scratch list for every cell's triangles, not an allocation per cell.
         for &cell in reindex.iter() {
             if let Some(&entry) = self.hc.get(&cell) {
@@ -657,14 +779,9 @@ impl Slider {
 
     /// Case of `cell` at the current isovalue (bit c: corner c above it).
     fn case_of(&self, cell: u32) -> Result<u8> {
-        let lattice = self.store.lattice();
-        let c = lattice.coords(cell as usize);
         let mut case = 0u8;
-        for k in 0..8 {
-            let [dx, dy, dz] = corner_offset(k).map(|v| v as usize);
-            let v = self
-                .store
-                .checked_value(lattice.index(c[0] + dx, c[1] + dy, c[2] + dz))?;
+        for (k, &offset) in self.offsets.corners.iter().enumerate() {
+            let v = self.store.checked_value(cell as usize + offset)?;
             if v as f64 > self.iso {
                 case |= 1 << k;
             }
@@ -673,20 +790,21 @@ impl Slider {
     }
 
     /// Triangles of `cell` in `case`, as vertex indices through HE, into `out` (cleared).
+    /// Each of the cell's edges is looked up in HE once, however many triangles share it.
     fn cell_triangles(&self, cell: u32, case: u8, out: &mut Vec<[u32; 3]>) -> Result<()> {
-        let lattice = self.store.lattice();
-        let c = lattice.coords(cell as usize);
+        let mut vertex = [u32::MAX; 12];
         out.clear();
         for tri in &case_table().triangles[case as usize] {
             let mut t = [0u32; 3];
             for (k, &local) in tri.iter().enumerate() {
-                let (corner, axis) = edge_corner_axis(local as usize);
-                let [dx, dy, dz] = corner_offset(corner).map(|v| v as usize);
-                let node = lattice.index(c[0] + dx, c[1] + dy, c[2] + dz);
-                let e = (node * 3 + axis) as u32;
-                t[k] = *self.he.get(&e).ok_or_else(|| {
-                    self.corrupt(format!("cell {cell} in case {case} needs edge {e}, not on"))
-                })?;
+                let local = local as usize;
+                if vertex[local] == u32::MAX {
+                    let e = (3 * cell as usize + self.offsets.edges[local]) as u32;
+                    vertex[local] = *self.he.get(&e).ok_or_else(|| {
+                        self.corrupt(format!("cell {cell} in case {case} needs edge {e}, not on"))
+                    })?;
+                }
+                t[k] = vertex[local];
             }
             out.push(t);
         }
@@ -718,23 +836,86 @@ impl Slider {
     }
 }
 
-/// Interpolation data of edge `e` (`node · 3 + axis`) from `store`'s mapped values (the
-/// chunks of every value it reads checked first).
+/// Interpolation data of edge `e` (`node · 3 + axis`) from `store`'s mapped values, each
+/// value read through its chunk's check (one bit test once the chunk has been verified):
+/// the first failure is the error.
 pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     let lattice = store.lattice();
     let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
     let c = lattice.coords(node);
     let mut up = c;
     up[axis] += 1;
-    for end in [c, up] {
-        let i = lattice.index(end[0], end[1], end[2]);
-        store.checked_value(i)?;
-        for (d, _) in node_edges(lattice, i) {
-            store.checked_value(neighbour(lattice, i, d))?;
-        }
+    // Once the neighbourhood's chunks have been verified (every edge after the first few
+    // in a region), each read is a bit test and a load: no error plumbing per value.
+    let unverified = Cell::new(false);
+    let fast = |i: usize| {
+        store.verified_value(i).unwrap_or_else(|| {
+            unverified.set(true);
+            0.0
+        })
+    };
+    let data = edge_data_from(lattice, fast, c, axis, up);
+    if !unverified.get() {
+        return Ok(data);
     }
-    let value = |i: usize| store.value(i);
-    Ok(edge_data_from(lattice, value, c, axis, up))
+    // Some chunk is read for the first time: check it (the first failure is the error).
+    let failed: Cell<Option<Error>> = Cell::new(None);
+    let value = |i: usize| {
+        store.checked_value(i).unwrap_or_else(|err| {
+            let first = failed.take().unwrap_or(err);
+            failed.set(Some(first));
+            0.0
+        })
+    };
+    let data = edge_data_from(lattice, value, c, axis, up);
+    match failed.into_inner() {
+        Some(err) => Err(err),
+        None => Ok(data),
+    }
+}
+
+/// Scanning a word of `marks` costs about what sorting costs per cell; the scan is taken
+/// while the marked words' span is at most this many words per cell.
+const SCAN_WORDS_PER_CELL: usize = 8;
+
+/// Removes repeated cells from `cells` and leaves the rest in ascending order, using
+/// `marks` (one bit per cell, all clear on entry and on return).
+///
+/// The order is part of the output: dirty cells leave and re-enter their buckets in this
+/// order, so it decides the order of I. Ascending cell id (as the sort it replaces gave)
+/// makes I the same however the walk reached the isovalue, which hosts rely on when they
+/// slide away and back; the order cells first occur in would depend on the path. Where
+/// the changed cells are dense, the marked words are read in order (no sort); where they
+/// are sparse in a large volume, the unique cells are sorted instead, so the cost stays
+/// with the change and not the volume.
+fn ascending_unique(cells: &mut Vec<u32>, marks: &mut [u64]) {
+    let (mut first, mut last) = (usize::MAX, 0);
+    cells.retain(|&c| {
+        let (w, bit) = (c as usize / 64, 1u64 << (c % 64));
+        let new = marks[w] & bit == 0;
+        marks[w] |= bit;
+        first = first.min(w);
+        last = last.max(w);
+        new
+    });
+    if cells.is_empty() {
+        return;
+    }
+    if last - first < SCAN_WORDS_PER_CELL * cells.len() {
+        cells.clear();
+        for (w, word) in marks[first..=last].iter_mut().enumerate() {
+            let mut bits = std::mem::take(word);
+            while bits != 0 {
+                cells.push(((first + w) * 64) as u32 + bits.trailing_zeros());
+                bits &= bits - 1;
+            }
+        }
+    } else {
+        for &c in cells.iter() {
+            marks[c as usize / 64] &= !(1u64 << (c % 64));
+        }
+        cells.sort_unstable();
+    }
 }
 
 /// Interpolation data of the edge from node `c` to node `up` along `axis`.
@@ -754,5 +935,76 @@ pub(crate) fn edge_data_from(
         s1: value(lattice.index(up[0], up[1], up[2])),
         g0,
         g1,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    /// A small deterministic random source for the tests' inputs.
+    fn xorshift(mut state: u64) -> impl FnMut() -> u64 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        }
+    }
+
+    /// Netting by (radix) sorting gives each edge's sum, nonzero ones only, in edge order,
+    /// for walks short and long (re-netted as they grow) and any key width.
+    #[test]
+    fn delta_nets_like_a_map() {
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
+        for (limit, bumps) in [
+            (50u32, 300),
+            (5_000, 3_000),
+            (6_000_000, 40_000),
+            (u32::MAX, 9_000),
+        ] {
+            let mut delta = Delta::default();
+            delta.clear(limit);
+            let mut want: BTreeMap<u32, i32> = BTreeMap::new();
+            for _ in 0..bumps {
+                let r = next();
+                // Few distinct edges for short limits, so changes cancel and repeat.
+                let e = (r % limit as u64) as u32;
+                let d = if r >> 40 & 1 == 1 { 1 } else { -1 };
+                delta.bump(e, d);
+                *want.entry(e).or_insert(0) += d;
+            }
+            delta.net();
+            let want: Vec<(u32, i32)> = want.into_iter().filter(|&(_, d)| d != 0).collect();
+            assert_eq!(delta.pairs, want, "limit {limit}");
+        }
+    }
+
+    /// Unique cells in ascending order (what sort + dedup gives), by the bit scan when
+    /// the cells are dense and by sorting when sparse, with every mark clear afterwards.
+    #[test]
+    fn ascending_unique_is_sort_and_dedup() {
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
+        let cells = 1usize << 20;
+        let mut marks = vec![0u64; cells / 64];
+        // (first cell, cells drawn from, how many): dense with repeats at the start and at
+        // the end (the bit scan), sparse over the whole range (the sort), one cell, none.
+        let top = cells as u64 - 300;
+        for (base, span, n) in [
+            (0u64, 300u64, 2_000),
+            (top, 300, 2_000),
+            (0, cells as u64, 500),
+            (top, 1, 1),
+            (0, 1, 0),
+        ] {
+            let mut list: Vec<u32> = (0..n).map(|_| (base + next() % span) as u32).collect();
+            let mut want = list.clone();
+            want.sort_unstable();
+            want.dedup();
+            ascending_unique(&mut list, &mut marks);
+            assert_eq!(list, want, "{n} cells from {base} on");
+            assert!(marks.iter().all(|&w| w == 0), "marks left set");
+        }
     }
 }
