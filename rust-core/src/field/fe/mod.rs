@@ -11,6 +11,7 @@
 //! principal curvatures.
 
 mod basis;
+mod bernstein;
 pub mod curvature;
 mod locate;
 mod mesh;
