@@ -27,10 +27,6 @@ use std::sync::{Arc, Mutex, OnceLock};
 /// One factor of the Bernstein basis: a group of variables of the shape.
 #[derive(Debug)]
 struct Factor {
-    /// Indices of the shape's variables in this group.
-    variables: Vec<usize>,
-    /// The polynomial degree m of the group.
-    degree: usize,
     /// Number of lattice points (Bernstein functions) of the factor.
     size: usize,
     /// M_f⁻¹, `size × size`, row-major.
@@ -39,8 +35,6 @@ struct Factor {
     /// `fibres[k * size..(k + 1) * size]`; the nodes of one fibre differ only in this
     /// factor's degree indices.
     fibres: Vec<u32>,
-    /// Each node's index in the factor's lattice.
-    local: Vec<u32>,
 }
 
 /// Lagrange-to-Bernstein conversion of one shape: see the module docs.
@@ -167,12 +161,9 @@ impl ControlMap {
                     shape.order
                 );
                 Factor {
-                    variables,
-                    degree,
                     size,
                     inverse,
                     fibres,
-                    local,
                 }
             })
             .collect();
@@ -221,32 +212,6 @@ impl ControlMap {
                 for (&n, &c) in fibre.iter().zip(row.iter()) {
                     x[n as usize] = c;
                 }
-            }
-        }
-    }
-
-    /// The Bernstein functions at reference point `u`, indexed like the nodes (function b
-    /// goes with control point b).
-    pub(crate) fn values(&self, shape: &Shape, u: DVec3, out: &mut Vec<f64>) {
-        out.clear();
-        out.resize(shape.len(), 1.0);
-        for f in &self.factors {
-            let x: Vec<f64> = f
-                .variables
-                .iter()
-                .map(|&v| {
-                    let var = &shape.variables[v];
-                    var.offset + var.direction.dot(u)
-                })
-                .collect();
-            // One value per lattice point, then spread to the nodes.
-            let mut point = vec![f64::NAN; f.size];
-            for (node, &l) in f.local.iter().enumerate() {
-                if point[l as usize].is_nan() {
-                    let d: Vec<u16> = f.variables.iter().map(|&v| shape.nodes[node][v]).collect();
-                    point[l as usize] = factor_basis(f.degree, &d, &x);
-                }
-                out[node] *= point[l as usize];
             }
         }
     }
