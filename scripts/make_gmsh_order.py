@@ -10,7 +10,9 @@ VTK's node order (`field::fe::Shape`) to get the permutation, so no order is tra
 
 gmsh 4.15 describes tetrahedra up to order 10, hexahedra up to order 9 and prisms up to
 order 2 only ("FaceClosureFull not implemented for prisms of order 3"); MAX_ORDER asks for
-every order up to 10 and keeps what gmsh knows. The lattices are written 8 points to a line
+every order up to 10 and keeps what gmsh knows; the types gmsh numbers but cannot describe
+(the prisms of order 3 to 9) are listed apart, with gmsh's own error, so the reader can say
+why it refuses them. The lattices are written 8 points to a line
 under #[rustfmt::skip] (one point a line would make the order-9 hexahedron 1,000 lines).
 """
 
@@ -86,6 +88,44 @@ def main():
                 print("            " + " ".join(f"[{a}, {b}, {c}]," for a, b, c in pts[k : k + 8]))
             print("        ],")
             print("    },")
+    print("];")
+    print()
+    print("/// Volume types gmsh numbers (and may write) but cannot describe: getElementProperties")
+    print("/// fails for them, so no node order can be derived. The reader names the reason.")
+    print("pub(super) struct UndescribedType {")
+    print("    pub ty: u32,")
+    print("    pub kind: Kind,")
+    print("    pub order: usize,")
+    print("    /// gmsh's incomplete (serendipity) variant.")
+    print("    pub serendipity: bool,")
+    print("    /// What gmsh's getElementProperties says.")
+    print("    pub gmsh_error: &'static str,")
+    print("}")
+    print()
+    print("/// The gmsh release these tables come from.")
+    print(f'pub(super) const GMSH_VERSION: &str = "{gmsh.__version__}";')
+    print()
+    print("/// Every [`UndescribedType`] of the three families.")
+    print("pub(super) const UNDESCRIBED_TYPES: &[UndescribedType] = &[")
+    for fam, kind in FAMILIES:
+        for serendip in (False, True):
+            for order in range(1, MAX_ORDER + 1):
+                try:
+                    t = gmsh.model.mesh.getElementType(fam, order, serendip)
+                except Exception:
+                    continue
+                try:
+                    gmsh.model.mesh.getElementProperties(t)
+                    continue
+                except Exception as e:
+                    message = str(e).replace("\\", "\\\\").replace('"', '\\"')
+                print("    UndescribedType {")
+                print(f"        ty: {t},")
+                print(f"        kind: Kind::{kind},")
+                print(f"        order: {order},")
+                print(f"        serendipity: {str(serendip).lower()},")
+                print(f'        gmsh_error: "{message}",')
+                print("    },")
     print("];")
     gmsh.finalize()
 

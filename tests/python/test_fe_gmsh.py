@@ -312,10 +312,11 @@ def test_the_command_line_samples_binary_files_on_gmsh_isosurface(gmsh_mesh, cli
 def test_prisms_above_order_2_are_refused_by_type(gmsh_session, tmp_path):
     """gmsh 4.15 makes and writes cubic prisms (type 90, 40 nodes) but cannot describe
     them: getElementProperties(90) raises "FaceClosureFull not implemented for prisms of
-    order 3" (so may setOrder(3), after making them), and gmsh has no reference nodes, basis or Jacobians for them, so no node
-    order can be derived from gmsh (rust-core/src/io/gmsh/order.rs stops at order 2) and
-    nothing could check one. isobar refuses such a file naming the type. (Last in the
-    file: it replaces gmsh's model, which pytest has finished with by then.)"""
+    order 3" (so may setOrder(3), after making them), and gmsh has no reference nodes,
+    basis or Jacobians for them, so no node order can be derived from gmsh
+    (rust-core/src/io/gmsh/order.rs stops at order 2) and nothing could check one. isobar
+    refuses such a file naming the file, the type and that reason, with gmsh's own error.
+    (Last in the file: it replaces gmsh's model, which pytest has finished with by then.)"""
     make_gmsh_fixture.build("prism", 2)
     try:
         gmsh.model.mesh.setOrder(3)
@@ -328,5 +329,10 @@ def test_prisms_above_order_2_are_refused_by_type(gmsh_session, tmp_path):
     path = tmp_path / "prism3.msh"
     gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
     gmsh.write(str(path))
-    with pytest.raises(isobar.FormatError, match="element type 90"):
+    with pytest.raises(isobar.FormatError) as refused:
         isobar.FeMesh.read(path)
+    message = str(refused.value)
+    for part in ["prism3.msh", "element type 90 (prisms of order 3)",
+                 "no node-ordering definition for prisms above order 2",
+                 "FaceClosureFull not implemented for prisms of order 3"]:
+        assert part in message, message

@@ -3,6 +3,8 @@
 //! eqs. 19–20), element validity and face adjacency.
 
 use super::basis::{outer, BasisValues};
+use super::bernstein::control_map;
+use super::search::PROBE_SLACK;
 use super::shape::{Kind, Shape};
 use crate::error::{Error, Result};
 use crate::field::particles::Attribute;
@@ -27,6 +29,10 @@ pub struct FeMesh {
     /// Each point's representative among the cell corners at the same place (itself
     /// unless the file repeats shared nodes per cell, as MFEM's ParaView output does).
     weld: Vec<u32>,
+    /// Per cell, an axis-aligned box that contains the whole cell (see [`FeMesh::cell_box`]).
+    boxes: Vec<(DVec3, DVec3)>,
+    /// The union of `boxes`.
+    hull: (DVec3, DVec3),
     /// Arrays given per point (the candidates for the field).
     pub point_data: Vec<Attribute>,
     /// What error messages call the data (the file name).
@@ -178,10 +184,17 @@ impl FeMesh {
             connectivity,
             neighbours: Vec::new(),
             weld: Vec::new(),
+            boxes: Vec::new(),
+            hull: (DVec3::ZERO, DVec3::ZERO),
             point_data,
             name: name.to_string(),
         };
         mesh.check_elements(name)?;
+        mesh.boxes = mesh.cell_boxes();
+        mesh.hull = mesh
+            .boxes
+            .iter()
+            .fold(mesh.boxes[0], |(l, h), b| (l.min(b.0), h.max(b.1)));
         mesh.weld = mesh.weld_corners();
         mesh.neighbours = mesh.face_adjacency();
         Ok(mesh)
@@ -207,9 +220,61 @@ impl FeMesh {
         &self.connectivity[self.offsets[c]..self.offsets[c + 1]]
     }
 
-    /// Axis-aligned bounds of the points (cells exist, so there are points).
+    /// An axis-aligned box that contains every cell: the union of the [`FeMesh::cell_box`]es.
+    /// Larger than the nodes' box where curved cells bulge past their nodes (Lagrange cells
+    /// are not inside their nodes' hull), so a grid over it reaches every cell.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        crate::field::neighbours::bounds(&self.points)
+        self.hull
+    }
+
+    /// An axis-aligned box that provably contains cell `c`: the box of the control points
+    /// of its mapping in Bernstein form (the cell is in their convex hull; see
+    /// `bernstein.rs`), widened for rounding.
+    pub fn cell_box(&self, c: usize) -> (DVec3, DVec3) {
+        self.boxes[c]
+    }
+
+    /// [`FeMesh::cell_box`] of every cell.
+    fn cell_boxes(&self) -> Vec<(DVec3, DVec3)> {
+        let maps: Vec<_> = self.shapes.iter().map(control_map).collect();
+        let (mut x, mut row) = (Vec::new(), Vec::new());
+        (0..self.cell_count())
+            .map(|c| {
+                let map = &maps[self.cell_shape[c] as usize];
+                let nodes = self.nodes(c);
+                // Relative to the first node, so rounding scales with the cell's size, not
+                // with its distance from the origin (the Bernstein functions sum to one, so
+                // translating the nodes translates the control points).
+                let origin = self.points[nodes[0] as usize];
+                x.clear();
+                x.extend(nodes.iter().map(|&n| self.points[n as usize] - origin));
+                let reach = x.iter().fold(DVec3::ZERO, |r, p| r.max(p.abs()));
+                map.control_points(&mut x, &mut row);
+                let (lo, hi) = x
+                    .iter()
+                    .fold((x[0], x[0]), |(a, b), &p| (a.min(p), b.max(p)));
+                // Slack, so the box holds every point the search accepts in this cell:
+                // - the search takes points up to PROBE_SLACK (δ = 1e-8) outside the
+                //   reference domain (on the mesh boundary, surface points lie a rounding
+                //   error outside their cell). A Bézier polynomial's derivative along a
+                //   reference direction (r, s, t, or one barycentric coordinate against
+                //   another) is p times a Bézier polynomial of control point differences,
+                //   so at most p (hi − lo) per axis; such a point is within δ of the domain
+                //   along each of three directions, so within 3 p δ (hi − lo) of the box to
+                //   first order: doubled for the δ² terms (1.8e-7 of the side for cubics);
+                // - the conversion's rounding (`ControlMap::rounding`) and a few ulps for
+                //   the translations back and forth;
+                // - 1e-9 of the largest side, for the rounding of the mapping itself where a
+                //   flat cell's thin side makes the rest vanish.
+                let shape = &self.shapes[self.cell_shape[c] as usize];
+                let order = shape.order.into_iter().max().unwrap_or(1) as f64;
+                let pad = (hi - lo) * (6.0 * order * PROBE_SLACK)
+                    + reach * map.rounding()
+                    + (origin.abs() + reach) * (4.0 * f64::EPSILON)
+                    + DVec3::splat(1e-9 * (hi - lo).max_element());
+                (origin + lo - pad, origin + hi + pad)
+            })
+            .collect()
     }
 
     /// (neighbour cell, its face) across face `f` of cell `c`, if any.
@@ -380,7 +445,9 @@ impl FeMesh {
     fn weld_corners(&self) -> Vec<u32> {
         let n = self.points.len();
         let mut weld: Vec<u32> = (0..n as u32).collect();
-        let (lo, hi) = self.bounds();
+        // The nodes' box, not `bounds` (not yet known here, and the weld is about the
+        // points only).
+        let (lo, hi) = crate::field::neighbours::bounds(&self.points);
         let tol = 1e-10 * (hi - lo).length().max(1e-300);
         let key = |p: DVec3| ((p - lo) / tol).floor().as_i64vec3();
         let mut grid: FxHashMap<glam::I64Vec3, Vec<u32>> = FxHashMap::default();

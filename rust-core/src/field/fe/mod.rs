@@ -5,12 +5,15 @@
 //! `shape` numbers the nodes, `basis` evaluates basis functions with first and second
 //! derivatives, `mesh` assembles T, J, ∂J, the world-space gradient and Hessian (the
 //! paper's eqs. 19–20), checks elements and pairs faces, `locate` carries a reference
-//! point across a face into the neighbouring cell, `search` finds the cell and reference
-//! point of a world point (T⁻¹, for the marching-cubes baseline), `probe` evaluates the field at world points
+//! point across a face into the neighbouring cell, `bernstein` gives each cell a box that
+//! provably holds it (its mapping's Bézier control points), `search` finds the cell and
+//! reference point of a world point over those boxes (T⁻¹, for the marching-cubes baseline),
+//! `probe` evaluates the field at world points
 //! through it, `curvature` gives
 //! principal curvatures.
 
 mod basis;
+mod bernstein;
 pub mod curvature;
 mod locate;
 mod mesh;

@@ -8,10 +8,6 @@ use super::locate::INSIDE_SLACK;
 use super::mesh::{FeMesh, Scratch};
 use glam::DVec3;
 
-/// Bounding boxes of the cells are widened by this fraction of their extent: a curved
-/// Lagrange cell may bulge past the hull of its nodes.
-const BOX_PAD: f64 = 0.1;
-
 /// How far outside a cell's reference domain (in reference units) the second pass of
 /// [`CellIndex::locate_thorough`] still takes a point to be in it; the field there is the
 /// cell's polynomial continued by at most this much.
@@ -26,32 +22,18 @@ pub struct CellIndex {
     /// Bin b's cells are `cells[starts[b]..starts[b + 1]]`, ascending.
     starts: Vec<u32>,
     cells: Vec<u32>,
-    boxes: Vec<(DVec3, DVec3)>,
 }
 
 impl CellIndex {
     /// Bins every cell of `mesh` (about one cell per bin).
     pub fn new(mesh: &FeMesh) -> CellIndex {
-        let boxes: Vec<(DVec3, DVec3)> = (0..mesh.cell_count())
-            .map(|c| {
-                let nodes = mesh.nodes(c);
-                let first = mesh.points[nodes[0] as usize];
-                let (a, b) = nodes.iter().fold((first, first), |(a, b), &n| {
-                    let p = mesh.points[n as usize];
-                    (a.min(p), b.max(p))
-                });
-                // Padded by a fraction of the largest side on every axis: a thin cell's
-                // curved face can bulge past its nodes' box across its thin side too.
-                let pad = DVec3::splat((b - a).max_element() * BOX_PAD);
-                (a - pad, b + pad)
-            })
-            .collect();
-        let (lo, hi) = boxes.iter().fold((boxes[0].0, boxes[0].1), |(l, h), b| {
-            (l.min(b.0), h.max(b.1))
-        });
+        // Binned by boxes that provably hold their cells (`FeMesh::cell_box`), so a point
+        // in a cell is always among that cell's candidates.
+        let count = mesh.cell_count();
+        let (lo, hi) = mesh.bounds();
         let extent = (hi - lo).max(DVec3::splat(1e-300));
         // About one cell per bin, never more than a few million bins.
-        let n = (boxes.len() as f64).clamp(1.0, 4e6);
+        let n = (count as f64).clamp(1.0, 4e6);
         let bin = (extent.x * extent.y * extent.z / n)
             .cbrt()
             .max(extent.max_element() / 256.0);
@@ -68,16 +50,16 @@ impl CellIndex {
                 }
             }
         };
-        for b in &boxes {
-            each(b, &mut |k| counts[k + 1] += 1);
+        for c in 0..count {
+            each(&mesh.cell_box(c), &mut |k| counts[k + 1] += 1);
         }
         for k in 0..total {
             counts[k + 1] += counts[k];
         }
         let mut fill = counts.clone();
         let mut cells = vec![0u32; counts[total] as usize];
-        for (c, b) in boxes.iter().enumerate() {
-            each(b, &mut |k| {
+        for c in 0..count {
+            each(&mesh.cell_box(c), &mut |k| {
                 cells[fill[k] as usize] = c as u32;
                 fill[k] += 1;
             });
@@ -88,7 +70,6 @@ impl CellIndex {
             dims,
             starts: counts,
             cells,
-            boxes,
         }
     }
 
@@ -118,7 +99,7 @@ impl CellIndex {
         }
         for &c in self.candidates(x) {
             let c = c as usize;
-            if hint.is_some_and(|h| h.0 == c) || !self.in_box(c, x) {
+            if hint.is_some_and(|h| h.0 == c) || !in_box(mesh, c, x) {
                 continue;
             }
             let guess = mesh.shape(c).kind.centroid();
@@ -151,7 +132,7 @@ impl CellIndex {
         }
         self.candidates(x).iter().find_map(|&c| {
             let c = c as usize;
-            if !self.in_box(c, x) {
+            if !in_box(mesh, c, x) {
                 return None;
             }
             let kind = mesh.shape(c).kind;
@@ -174,10 +155,10 @@ impl CellIndex {
         }
         &self.cells[self.starts[k] as usize..self.starts[k + 1] as usize]
     }
+}
 
-    /// Whether `x` lies in cell `c`'s padded bounding box.
-    fn in_box(&self, c: usize, x: DVec3) -> bool {
-        let (a, b) = self.boxes[c];
-        !(x.cmplt(a).any() || x.cmpgt(b).any())
-    }
+/// Whether `x` lies in cell `c`'s bounding box.
+fn in_box(mesh: &FeMesh, c: usize, x: DVec3) -> bool {
+    let (a, b) = mesh.cell_box(c);
+    !(x.cmplt(a).any() || x.cmpgt(b).any())
 }

@@ -361,3 +361,260 @@ fn lower_order_evaluations_agree_with_the_full_one() {
         }
     }
 }
+
+/// A xorshift stream of uniform numbers in [0, 1), seeded.
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A random point of `kind`'s reference domain; half of them on its boundary (faces,
+/// edges, corners), where a cell's extremes usually are.
+fn random_reference(kind: Kind, next: &mut impl FnMut() -> f64) -> DVec3 {
+    // Barycentric weights, some zeroed (a face, edge or corner of a simplex).
+    let mut simplex = |n: usize| -> [f64; 4] {
+        let mut w = [0.0; 4];
+        for x in w.iter_mut().take(n) {
+            *x = if next() < 0.25 {
+                0.0
+            } else {
+                -(1.0 - next()).ln()
+            };
+        }
+        let sum: f64 = w.iter().sum();
+        if sum == 0.0 {
+            w[0] = 1.0;
+            return w;
+        }
+        w.map(|x| x / sum)
+    };
+    let unit = |next: &mut dyn FnMut() -> f64| match next() {
+        x if x < 0.2 => 0.0,
+        x if x < 0.4 => 1.0,
+        _ => next(),
+    };
+    match kind {
+        Kind::Hexahedron => DVec3::new(unit(next), unit(next), unit(next)),
+        Kind::Tetrahedron => {
+            let w = simplex(4);
+            DVec3::new(w[1], w[2], w[3])
+        }
+        Kind::Wedge => {
+            let w = simplex(3);
+            DVec3::new(w[1], w[2], unit(next))
+        }
+    }
+}
+
+/// A one-cell mesh of `kind` and order `p` whose nodes are a strongly bent map of the
+/// reference nodes moved by random offsets of up to a third of the node spacing (redrawn
+/// until the cell is valid, i.e. det J > 0 at its nodes).
+fn jittered_cell(kind: Kind, p: usize, seed: u64) -> FeMesh {
+    let s = shape(kind, p);
+    let bend = |u: DVec3| {
+        DVec3::new(
+            u.x + 0.4 * (2.0 * u.y).sin() * u.z,
+            u.y + 0.5 * u.x * u.x - 0.3 * u.z * u.x,
+            u.z + 0.6 * (3.0 * u.x).sin() * u.y,
+        )
+    };
+    let mut next = uniform(seed);
+    for amplitude in [1.0 / 3.0, 0.2, 0.1, 0.05, 0.0] {
+        for _try in 0..20 {
+            let points: Vec<DVec3> = (0..s.len())
+                .map(|k| {
+                    let jitter = DVec3::new(next(), next(), next()) * 2.0 - 1.0;
+                    bend(s.node_coords(k)) + jitter * (amplitude / p as f64)
+                })
+                .collect();
+            let cell = FeMesh::new(
+                "jittered",
+                points,
+                &[kind.vtk_type()],
+                &[0, s.len()],
+                (0..s.len() as u32).collect(),
+                None,
+                vec![],
+            );
+            if let Ok(cell) = cell {
+                return cell;
+            }
+        }
+    }
+    panic!("{kind:?} p{p}: no valid jittered cell");
+}
+
+/// Every element type at orders 1–4 and higher ones (the conversion's conditioning grows
+/// with the order).
+fn box_cases() -> Vec<(Kind, usize)> {
+    let mut cases: Vec<(Kind, usize)> = KINDS
+        .iter()
+        .flat_map(|&k| (1..=4).map(move |p| (k, p)))
+        .collect();
+    cases.extend([
+        (Kind::Hexahedron, 6),
+        (Kind::Hexahedron, 8),
+        (Kind::Tetrahedron, 6),
+        (Kind::Tetrahedron, 8),
+        (Kind::Wedge, 6),
+    ]);
+    cases
+}
+
+/// The Bernstein function paired with node `n` of `s` at `u`, written out per element type
+/// from the textbook definitions (independently of `bernstein.rs`'s factoring): the
+/// hexahedron's tensor product of 1-D B_i^p(r) B_j^q(s) B_k^w(t); the tetrahedron's
+/// p!/(i! j! k! l!) λ0^i r^j s^k t^l; the wedge's triangle Bernstein times a 1-D one in t.
+/// Its multi-index is the node's lattice point (degree indices).
+fn bernstein(s: &Shape, n: usize, u: DVec3) -> f64 {
+    let fact = |k: u16| (1..=k as u64).product::<u64>() as f64;
+    let one_d = |p: usize, i: u16, x: f64| {
+        fact(p as u16) / (fact(i) * fact(p as u16 - i))
+            * x.powi(i as i32)
+            * (1.0 - x).powi(p as i32 - i as i32)
+    };
+    let d = s.nodes[n];
+    match s.kind {
+        Kind::Hexahedron => {
+            one_d(s.order[0], d[0], u.x)
+                * one_d(s.order[1], d[1], u.y)
+                * one_d(s.order[2], d[2], u.z)
+        }
+        Kind::Tetrahedron => {
+            let l = [1.0 - u.x - u.y - u.z, u.x, u.y, u.z];
+            let p = s.order[0] as u16;
+            (0..4).fold(fact(p), |b, m| b * l[m].powi(d[m] as i32) / fact(d[m]))
+        }
+        Kind::Wedge => {
+            let l = [1.0 - u.x - u.y, u.x, u.y];
+            let p = s.order[0] as u16;
+            (0..3).fold(fact(p), |b, m| b * l[m].powi(d[m] as i32) / fact(d[m]))
+                * one_d(s.order[2], d[3], u.z)
+        }
+    }
+}
+
+#[test]
+fn bernstein_control_points_reproduce_the_mapping() {
+    let mut sc = Scratch::default();
+    let mut row = Vec::new();
+    for (kind, p) in box_cases() {
+        let mesh = jittered_cell(kind, p, 11 * p as u64 + kind as u64);
+        let s = mesh.shape(0);
+        let map = super::bernstein::control_map(s);
+        let x: Vec<DVec3> = mesh
+            .nodes(0)
+            .iter()
+            .map(|&n| mesh.points[n as usize])
+            .collect();
+        let mut c = x.clone();
+        map.control_points(&mut c, &mut row);
+        if p == 1 {
+            // Linear Bernstein functions are the linear Lagrange ones: C = X exactly.
+            assert_eq!(c, x, "{kind:?}: linear control points are the nodes");
+        }
+        let reach = x.iter().fold(0.0f64, |r, q| r.max(q.abs().max_element()));
+        // The conversion's own rounding bound, plus the Lagrange evaluation's.
+        let tol = (map.rounding() + 1e-12) * reach;
+        let mut next = uniform(p as u64);
+        // Random points, and the nodes themselves (the Bernstein form at the nodes is
+        // M C, which must give back X: this checks the computed M⁻¹ too).
+        let points: Vec<DVec3> = (0..200)
+            .map(|_| random_reference(kind, &mut next))
+            .chain((0..s.len()).map(|k| s.node_coords(k)))
+            .collect();
+        for u in points {
+            let b: Vec<f64> = (0..s.len()).map(|n| bernstein(s, n, u)).collect();
+            let sum: f64 = b.iter().sum();
+            assert!((sum - 1.0).abs() < 1e-12, "{kind:?} p{p}: ΣB = {sum}");
+            // ≥ 0 up to the rounding of λ0 = 1 − r − s − t on the boundary.
+            assert!(
+                b.iter().all(|&v| v >= -1e-15),
+                "{kind:?} p{p}: B < 0 at {u}"
+            );
+            let bezier = b.iter().zip(&c).fold(DVec3::ZERO, |a, (&w, &q)| a + q * w);
+            let lagrange = mesh.map(0, u, &mut sc).0;
+            assert!(
+                (bezier - lagrange).abs().max_element() <= tol,
+                "{kind:?} p{p} at {u}: Bernstein {bezier} vs Lagrange {lagrange} (tol {tol:e})"
+            );
+        }
+    }
+}
+
+#[test]
+fn cell_boxes_contain_strongly_curved_cells() {
+    let mut sc = Scratch::default();
+    let mut outside_nodes_box = 0;
+    for (kind, p) in box_cases() {
+        for seed in 0..4 {
+            let mesh = jittered_cell(kind, p, 1000 * seed + 7 * p as u64 + kind as u64);
+            let (lo, hi) = mesh.cell_box(0);
+            assert_eq!(
+                mesh.bounds(),
+                (lo, hi),
+                "one cell: the mesh box is the cell's"
+            );
+            let nodes = crate::field::neighbours::bounds(&mesh.points);
+            let mut next = uniform(seed + 99);
+            for _ in 0..2000 {
+                let u = random_reference(kind, &mut next);
+                // Also the point moved out of the domain by at most 0.5e-8 per face (the
+                // search accepts up to PROBE_SLACK, 1e-8, outside).
+                let c = kind.centroid();
+                for u in [u, c + (u - c) * (1.0 + 1e-8)] {
+                    let x = mesh.map(0, u, &mut sc).0;
+                    assert!(
+                        x.cmpge(lo).all() && x.cmple(hi).all(),
+                        "{kind:?} p{p} seed {seed}: T({u}) = {x} outside the box {lo}..{hi}"
+                    );
+                    if x.cmplt(nodes.0).any() || x.cmpgt(nodes.1).any() {
+                        outside_nodes_box += 1;
+                    }
+                }
+            }
+        }
+    }
+    // The cells do bulge past their nodes (else this test would prove nothing).
+    assert!(outside_nodes_box > 1000, "{outside_nodes_box}");
+}
+
+#[test]
+fn a_point_in_a_bulge_past_the_old_padding_is_located() {
+    // A thin quadratic hexahedron, T(r,s,t) = (r, w s + 2r² − r, w t): its edge s = t = 0
+    // has nodes at y = 0, 0, 1 but dips to y = −1/8 at r = 1/4. The nodes' box has largest
+    // side 1 + w, so the old search's 10 % padding reached down to y = −0.11 only.
+    let w = 0.1;
+    let mesh = single_cell(
+        Kind::Hexahedron,
+        2,
+        |u| DVec3::new(u.x, w * u.y + 2.0 * u.x * u.x - u.x, w * u.z),
+        |x| x.x,
+    );
+    let u = DVec3::new(0.25, 0.05, 0.5);
+    let mut sc = Scratch::default();
+    let x = mesh.map(0, u, &mut sc).0;
+    assert!((x.y + 0.12).abs() < 1e-12, "{x}");
+    let (lo, hi) = crate::field::neighbours::bounds(&mesh.points);
+    let old_pad = 0.1 * (hi - lo).max_element();
+    assert!(x.y < lo.y - old_pad, "the point is past the old padded box");
+    let index = CellIndex::new(&mesh);
+    let mut evaluations = 0;
+    for found in [
+        index.locate(&mesh, x, None, &mut sc, &mut evaluations),
+        index.locate_thorough(&mesh, x, &mut sc, &mut evaluations),
+    ] {
+        let (c, v) = found.expect("the point is located");
+        assert_eq!(c, 0);
+        assert!((v - u).length() < 1e-10, "{v} vs {u}");
+    }
+    // And the probe gives the field there (F = x, the point's own x).
+    let values = &mesh.point_data[0].data;
+    let hits = probe(&mesh, &index, values, &[x]);
+    assert!((hits[0].unwrap().value - x.x).abs() < 1e-12);
+}

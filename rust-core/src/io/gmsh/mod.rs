@@ -18,10 +18,10 @@ mod order;
 mod tests;
 
 use crate::error::{Error, Result};
-use crate::field::fe::{FeMesh, Shape};
+use crate::field::fe::{FeMesh, Kind, Shape};
 use crate::field::particles::Attribute;
 use glam::DVec3;
-use order::{ELEMENT_TYPES, VOLUME_TYPES};
+use order::{ELEMENT_TYPES, GMSH_VERSION, UNDESCRIBED_TYPES, VOLUME_TYPES};
 use rustc_hash::FxHashMap;
 
 /// Reads a `.msh` 4.1 file's volume elements and node data; see the module docs.
@@ -371,7 +371,7 @@ impl<'a> Reader<'a> {
             let &(_, type_name, type_dim, count) = u32::try_from(ty)
                 .ok()
                 .and_then(|t| ELEMENT_TYPES.iter().find(|e| e.0 == t))
-                .ok_or_else(|| self.err(format!("unknown element type {ty}")))?;
+                .ok_or_else(|| self.err(unknown_type(ty)))?;
             let count = count as usize;
             let n = self.check_count(n, min_number * (1 + count as u64), "elements in a block")?;
             seen += n as u64;
@@ -483,6 +483,35 @@ impl<'a> Reader<'a> {
             values,
         })
     }
+}
+
+/// Why element type `ty` is not in gmsh's table of types it describes: one gmsh numbers
+/// but cannot describe (prisms above order 2), or one it does not know at all.
+fn unknown_type(ty: i64) -> String {
+    let Some(u) = UNDESCRIBED_TYPES.iter().find(|u| i64::from(u.ty) == ty) else {
+        return format!("unknown element type {ty}");
+    };
+    let family = match u.kind {
+        Kind::Hexahedron => "hexahedra",
+        Kind::Tetrahedron => "tetrahedra",
+        Kind::Wedge => "prisms",
+    };
+    let described = VOLUME_TYPES
+        .iter()
+        .filter(|v| v.kind == u.kind)
+        .map(|v| v.order)
+        .max()
+        .unwrap_or(0);
+    format!(
+        "element type {ty} ({}{family} of order {}) cannot be read: gmsh itself has no \
+         node-ordering definition for {family} above order {described} (gmsh {GMSH_VERSION}'s \
+         getElementProperties({ty}) fails with \"{}\"), so their nodes cannot be matched to \
+         VTK's; mesh with {family} of order {described} or lower, or with tetrahedra or \
+         hexahedra",
+        if u.serendipity { "incomplete " } else { "" },
+        u.order,
+        u.gmsh_error
+    )
 }
 
 fn short(s: &str) -> String {

@@ -797,3 +797,120 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ],
     },
 ];
+
+/// Volume types gmsh numbers (and may write) but cannot describe: getElementProperties
+/// fails for them, so no node order can be derived. The reader names the reason.
+pub(super) struct UndescribedType {
+    pub ty: u32,
+    pub kind: Kind,
+    pub order: usize,
+    /// gmsh's incomplete (serendipity) variant.
+    pub serendipity: bool,
+    /// What gmsh's getElementProperties says.
+    pub gmsh_error: &'static str,
+}
+
+/// The gmsh release these tables come from.
+pub(super) const GMSH_VERSION: &str = "4.15.2";
+
+/// Every [`UndescribedType`] of the three families.
+pub(super) const UNDESCRIBED_TYPES: &[UndescribedType] = &[
+    UndescribedType {
+        ty: 90,
+        kind: Kind::Wedge,
+        order: 3,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 3",
+    },
+    UndescribedType {
+        ty: 91,
+        kind: Kind::Wedge,
+        order: 4,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 4",
+    },
+    UndescribedType {
+        ty: 106,
+        kind: Kind::Wedge,
+        order: 5,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 5",
+    },
+    UndescribedType {
+        ty: 107,
+        kind: Kind::Wedge,
+        order: 6,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 6",
+    },
+    UndescribedType {
+        ty: 108,
+        kind: Kind::Wedge,
+        order: 7,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 7",
+    },
+    UndescribedType {
+        ty: 109,
+        kind: Kind::Wedge,
+        order: 8,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 8",
+    },
+    UndescribedType {
+        ty: 110,
+        kind: Kind::Wedge,
+        order: 9,
+        serendipity: false,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 9",
+    },
+    UndescribedType {
+        ty: 111,
+        kind: Kind::Wedge,
+        order: 3,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 3",
+    },
+    UndescribedType {
+        ty: 112,
+        kind: Kind::Wedge,
+        order: 4,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 4",
+    },
+    UndescribedType {
+        ty: 113,
+        kind: Kind::Wedge,
+        order: 5,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 5",
+    },
+    UndescribedType {
+        ty: 114,
+        kind: Kind::Wedge,
+        order: 6,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 6",
+    },
+    UndescribedType {
+        ty: 115,
+        kind: Kind::Wedge,
+        order: 7,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 7",
+    },
+    UndescribedType {
+        ty: 116,
+        kind: Kind::Wedge,
+        order: 8,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 8",
+    },
+    UndescribedType {
+        ty: 117,
+        kind: Kind::Wedge,
+        order: 9,
+        serendipity: true,
+        gmsh_error: "FaceClosureFull not implemented for prisms of order 9",
+    },
+];

@@ -226,6 +226,26 @@ fn bad_files_name_the_problem() {
     // Serendipity elements are refused by name.
     let e = read_err(text.replacen("\n3 1 29 ", "\n3 1 17 ", 1).as_bytes());
     assert!(e.contains("Hexahedron 20") || e.contains("type 17"), "{e}");
+    // Cubic and quartic prisms, which gmsh numbers but cannot describe, are refused saying
+    // why (and naming the file, the line and the type), not as an unknown type.
+    for (ty, order) in [(90, 3), (91, 4)] {
+        let e = read_err(
+            text.replacen("\n3 1 29 ", &format!("\n3 1 {ty} "), 1)
+                .as_bytes(),
+        );
+        for part in [
+            "bad.msh".to_string(),
+            "$Elements, line ".into(),
+            format!("element type {ty} (prisms of order {order})"),
+            "no node-ordering definition for prisms above order 2".into(),
+            format!("FaceClosureFull not implemented for prisms of order {order}"),
+        ] {
+            assert!(e.contains(&part), "{part}: {e}");
+        }
+        assert!(!e.contains("unknown"), "{e}");
+    }
+    let e = read_err(text.replacen("\n3 1 29 ", "\n3 1 111 ", 1).as_bytes());
+    assert!(e.contains("(incomplete prisms of order 3)"), "{e}");
 }
 
 /// gmsh orders a hexahedron's nodes recursively: the 8 vertices, the nodes inside each of
