@@ -23,6 +23,16 @@ where
     T: Copy + Send + Sync,
     F: Fn(&T) -> u64 + Sync,
 {
+    sort_by_key_in(items, &mut Vec::new(), key);
+}
+
+/// [`sort_by_key`] with the second buffer of the passes supplied: a caller that sorts
+/// again and again (the slider, once per update) keeps its capacity.
+pub fn sort_by_key_in<T, F>(items: &mut Vec<T>, spare: &mut Vec<T>, key: F)
+where
+    T: Copy + Send + Sync,
+    F: Fn(&T) -> u64 + Sync,
+{
     if items.len() < SMALL {
         items.sort_by_key(|t| key(t));
         return;
@@ -33,7 +43,7 @@ where
         .fold(|| 0u64, |m, t| m | (key(t) ^ first))
         .reduce(|| 0, |a, b| a | b);
     let mut from = std::mem::take(items);
-    let mut to = Vec::with_capacity(from.len());
+    let mut to = std::mem::take(spare);
     let mut rest = varying;
     while rest != 0 {
         // The next digit starts at the lowest bit still varying; bits that never vary
@@ -46,6 +56,7 @@ where
         rest &= !(mask << shift);
     }
     *items = from;
+    *spare = to;
 }
 
 /// Sorts `keys` ascending and removes repeats.

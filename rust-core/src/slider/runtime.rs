@@ -15,14 +15,15 @@
 //! are computed when first read after an update ([`Slider::positions`],
 //! [`Slider::normals`], [`Slider::triangle_array`]), into the previous arrays' memory.
 //! Scratch lists and the walk's edge pairs live in the slider and keep their capacity, so
-//! a steady slide allocates nothing but the returned [`Change`].
+//! a steady slide allocates nothing that grows with the surface but the returned
+//! [`Change`] (the radix sort's passes take a 16 KiB digit table each).
 
 use super::build::node_edges;
 use super::lod::{self, LodMesh, LodParams};
 use super::store::Store;
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice};
-use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing};
+use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing, radix};
 use crate::progress::Progress;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -123,22 +124,15 @@ struct Delta {
     /// Length after the last netting: pairs are netted again once as many have been
     /// added, so a long walk holds at most about twice its distinct edges.
     netted: usize,
-    /// Bits of the largest edge id (the radix sort's key width).
-    bits: u32,
-    /// The radix sort's second buffer and digit counts, kept for their capacity.
+    /// The radix sort's second buffer, kept for its capacity.
     spare: Vec<(u32, i32)>,
-    counts: Vec<usize>,
 }
 
-/// Below this many pairs a comparison sort beats the radix sort's passes over its counts.
-const RADIX_FROM: usize = 1024;
-
 impl Delta {
-    /// Empties the pairs for a walk over edge ids below `limit`.
-    fn clear(&mut self, limit: u32) {
+    /// Empties the pairs for a new walk.
+    fn clear(&mut self) {
         self.pairs.clear();
         self.netted = 0;
-        self.bits = 32 - limit.leading_zeros();
     }
 
     #[inline]
@@ -171,35 +165,10 @@ impl Delta {
         self.netted = out;
     }
 
-    /// Sorts the pairs by edge: least significant digit first, digits of at most 11 bits.
+    /// Sorts the pairs by edge (the grid extractors' radix sort, over the bits edge ids
+    /// actually span).
     fn sort(&mut self) {
-        if self.pairs.len() < RADIX_FROM {
-            self.pairs.sort_unstable_by_key(|&(e, _)| e);
-            return;
-        }
-        let passes = self.bits.div_ceil(11).max(1);
-        let width = self.bits.div_ceil(passes).max(1);
-        let mask = (1u32 << width) - 1;
-        self.spare.resize(self.pairs.len(), (0, 0));
-        self.counts.resize(1 << width, 0);
-        for pass in 0..passes {
-            let shift = pass * width;
-            let counts = &mut self.counts[..1 << width];
-            counts.fill(0);
-            for &(e, _) in &self.pairs {
-                counts[((e >> shift) & mask) as usize] += 1;
-            }
-            let mut at = 0;
-            for c in counts.iter_mut() {
-                (*c, at) = (at, at + *c);
-            }
-            for &pair in &self.pairs {
-                let k = ((pair.0 >> shift) & mask) as usize;
-                self.spare[counts[k]] = pair;
-                counts[k] += 1;
-            }
-            std::mem::swap(&mut self.pairs, &mut self.spare);
-        }
+        radix::sort_by_key_in(&mut self.pairs, &mut self.spare, |&(e, _)| e as u64);
     }
 }
 
@@ -479,7 +448,7 @@ impl Slider {
         }
         self.lod_mesh.take();
         let mut delta = std::mem::take(&mut self.scratch.delta);
-        delta.clear(3 * self.store.nodes as u32);
+        delta.clear();
         let walked = self
             .walk(target, &mut delta, &mut change, progress)
             .map(|()| delta.net());
@@ -965,7 +934,7 @@ mod tests {
             (u32::MAX, 9_000),
         ] {
             let mut delta = Delta::default();
-            delta.clear(limit);
+            delta.clear();
             let mut want: BTreeMap<u32, i32> = BTreeMap::new();
             for _ in 0..bumps {
                 let r = next();
