@@ -17,5 +17,7 @@ pub mod mesh;
 pub mod progress;
 pub mod samples;
 pub mod slider;
+#[cfg(test)]
+mod test_rng;
 
 pub use error::{Error, Result};

@@ -355,13 +355,7 @@ mod tests {
     /// comparisons) gives `cell_of`'s cell for points on, next to and between faces.
     #[test]
     fn registration_thresholds_are_the_exact_cell_boundaries() {
-        let mut seed = 3u64;
-        let mut rand = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rand = crate::test_rng::unit(3);
         for g in [
             grid(4),
             CoarseGrid {

@@ -260,13 +260,8 @@ mod tests {
     #[test]
     fn segment_cells_are_connected_and_cover_both_ends() {
         let grid = VirtualGrid::covering(DVec3::ZERO, DVec3::splat(10.0), 1.0).unwrap();
-        let mut s = 7u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 * 10.0
-        };
+        let mut unit = crate::test_rng::unit(7);
+        let mut rnd = || unit() * 10.0;
         for _ in 0..500 {
             let p = DVec3::new(rnd(), rnd(), rnd());
             let q = DVec3::new(rnd(), rnd(), rnd());

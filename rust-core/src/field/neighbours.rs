@@ -218,13 +218,7 @@ mod tests {
 
     #[test]
     fn candidates_cover_every_point_within_one_cell() {
-        let mut s = 12345u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::test_rng::unit(12345);
         let pts: Vec<DVec3> = (0..3000)
             .map(|_| DVec3::new(rnd(), rnd() * 0.5, rnd() * 2.0))
             .collect();

@@ -606,13 +606,7 @@ mod tests {
 
     /// A jittered block of particles and points around and inside it.
     fn block() -> (ParticleData, Vec<DVec3>) {
-        let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::test_rng::unit(11);
         let mut positions = Vec::new();
         for i in 0..10 {
             for j in 0..10 {

@@ -241,13 +241,8 @@ mod tests {
 
     #[test]
     fn agrees_with_a_hash_map_across_brick_boundaries() {
-        let mut s = 7u64;
-        let mut rnd = |n: u32| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 33) % n as u64) as u32
-        };
+        let mut next = crate::test_rng::lcg(7);
+        let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
         let mut map = BrickMap::<u64>::default();
         let mut reference = HashMap::new();
         for _ in 0..20_000 {

@@ -136,20 +136,12 @@ mod tests {
     use super::*;
     use crate::mc::{edge_key, VirtualGrid};
 
-    /// A deterministic stream of pseudo-random numbers (no test depends on a seed crate).
-    fn lcg(state: &mut u64) -> u64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        *state >> 11
-    }
-
     #[test]
     fn equals_a_comparison_sort_on_grid_keys_edge_keys_and_full_width_numbers() {
-        let mut s = 7;
+        let mut next = crate::test_rng::lcg(7);
         let grid_keys: Vec<u64> = (0..20_000)
             .map(|_| {
-                let c = [0, 1, 2].map(|_| (lcg(&mut s) % 300) as u32 + 5);
+                let c = [0, 1, 2].map(|_| (next() % 300) as u32 + 5);
                 VirtualGrid::key(c[0], c[1], c[2])
             })
             .collect();
@@ -157,9 +149,7 @@ mod tests {
             .iter()
             .map(|&k| edge_key(k, (k % 3) as usize))
             .collect();
-        let wide: Vec<u64> = (0..5_000)
-            .map(|_| lcg(&mut s) << 11 ^ lcg(&mut s))
-            .collect();
+        let wide: Vec<u64> = (0..5_000).map(|_| next() << 11 ^ next()).collect();
         let top_bit: Vec<u64> = (0..3_000).map(|i| (i % 7) << 61 | i).collect();
         for keys in [grid_keys, edges, wide, top_bit] {
             let mut expected = keys.clone();
@@ -177,9 +167,9 @@ mod tests {
     #[test]
     fn is_stable_and_keeps_every_item() {
         // Items with equal keys keep their input order: the payload is the input index.
-        let mut s = 3;
+        let mut next = crate::test_rng::lcg(3);
         let mut items: Vec<(u64, u32)> = (0..10_000)
-            .map(|i| (VirtualGrid::key(0, (lcg(&mut s) % 40) as u32, 9), i))
+            .map(|i| (VirtualGrid::key(0, (next() % 40) as u32, 9), i))
             .collect();
         let mut expected = items.clone();
         expected.sort_by_key(|t| t.0);
