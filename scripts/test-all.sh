@@ -51,6 +51,9 @@ results="$root/target/test-output.txt"
 log "rust tests"
 cargo test --workspace --release --no-fail-fast 2>&1 | tee -a "$results"
 
+log "rust tests of the CPU-only build (--no-default-features: no wgpu)"
+cargo test -p isobar --release --no-default-features --lib no_gpu 2>&1 | tee -a "$results"
+
 log "python tests"
 bash tests/python/run.sh 2>&1 | tee -a "$results"
 

@@ -262,6 +262,7 @@ enum Neighbours {
 
 impl Neighbours {
     /// For a resolved back end (`Cpu` or `Gpu`).
+    #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
     fn new(field: &SphField, backend: Backend) -> Result<Neighbours> {
         match backend {
             #[cfg(feature = "gpu")]

@@ -125,3 +125,75 @@ pub(crate) fn no_adapter(why: &str) -> Error {
 
 #[cfg(all(test, feature = "gpu"))]
 mod tests;
+
+/// The CPU-only build (`--no-default-features`), run by `scripts/test-all.sh` with
+/// `cargo test --no-default-features --lib no_gpu`: a GPU request gets the same clear
+/// error from every entry point, never a panic, and `Auto` runs on the CPU.
+#[cfg(all(test, not(feature = "gpu")))]
+mod no_gpu_tests {
+    use super::Backend;
+    use crate::field::particles::ParticleData;
+    use crate::field::sph::{SmoothingLength, SphField, SphSettings};
+    use crate::progress::Progress;
+    use crate::{adaptive, correctors};
+    use glam::DVec3;
+
+    fn assert_no_gpu(e: crate::error::Error) {
+        let text = e.to_string();
+        assert!(
+            text.contains("no GPU adapter") && text.contains("feature 'gpu' is off"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn no_gpu_requests_are_refused_and_auto_runs_on_the_cpu() {
+        assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Cpu);
+        assert_no_gpu(Backend::Gpu.resolve().unwrap_err());
+        assert_no_gpu(super::adapter_name().unwrap_err());
+
+        // A 4×4×4 block of particles: a closed surface for both extractors.
+        let positions: Vec<DVec3> = (0..64)
+            .map(|i| DVec3::new((i % 4) as f64, (i / 4 % 4) as f64, (i / 16) as f64) * 0.5)
+            .collect();
+        let data = ParticleData {
+            positions,
+            ..ParticleData::default()
+        };
+        let settings = SphSettings {
+            smoothing_length: SmoothingLength::Constant(0.5),
+            ..SphSettings::default()
+        };
+        let field = SphField::new(&data, &settings).unwrap();
+
+        let mc = |backend| correctors::Params {
+            isovalues: vec![0.5],
+            backend,
+            ..correctors::Params::default()
+        };
+        let e = correctors::extract(&field, &data, &mc(Backend::Gpu), &mut Progress::none());
+        assert_no_gpu(e.err().expect("a GPU extraction without the feature"));
+        let auto =
+            correctors::extract(&field, &data, &mc(Backend::Auto), &mut Progress::none()).unwrap();
+        let cpu =
+            correctors::extract(&field, &data, &mc(Backend::Cpu), &mut Progress::none()).unwrap();
+        assert_eq!(auto.stats.backend, Backend::Cpu);
+        assert!(!cpu.mesh.triangles.is_empty());
+        assert_eq!(auto.mesh.triangles, cpu.mesh.triangles);
+        assert_eq!(auto.mesh.positions, cpu.mesh.positions);
+
+        let ad = |backend| adaptive::Params {
+            isovalue: 0.5,
+            backend,
+            ..adaptive::Params::default()
+        };
+        let e = adaptive::extract_sph(&field, &ad(Backend::Gpu), &mut Progress::none());
+        assert_no_gpu(e.err().expect("a GPU extraction without the feature"));
+        let auto =
+            adaptive::extract_sph(&field, &ad(Backend::Auto), &mut Progress::none()).unwrap();
+        let cpu = adaptive::extract_sph(&field, &ad(Backend::Cpu), &mut Progress::none()).unwrap();
+        assert!(!cpu.mesh.triangles.is_empty());
+        assert_eq!(auto.mesh.triangles, cpu.mesh.triangles);
+        assert_eq!(auto.mesh.positions, cpu.mesh.positions);
+    }
+}
