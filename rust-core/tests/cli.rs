@@ -135,6 +135,51 @@ fn sph_backend_gpu_writes_the_cpu_mesh_byte_for_byte() {
     assert!(cpu == gpu, "--backend gpu wrote another mesh");
 }
 
+/// `--backend auto` runs where the core's rule says (a hardware GPU, else the CPU), and
+/// says why when that is the CPU; with `--quiet` it says nothing.
+#[test]
+fn backend_auto_says_why_it_runs_on_the_cpu() {
+    let frame = shared("double_dam_break_frame_26_4732_particles.vtk");
+    let why = isobar::gpu::auto_fallback_reason();
+    for (command, quiet) in [("sph", false), ("adaptive", false), ("sph", true)] {
+        let json = temp(&format!("auto_{command}_{quiet}.json"));
+        let mut cmd = isobar();
+        cmd.args([
+            command,
+            &frame,
+            "--iso",
+            "0.6",
+            "--h",
+            "0.05",
+            "--backend",
+            "auto",
+        ])
+        .arg("--stats-json")
+        .arg(&json)
+        .arg("-o")
+        .arg(temp(&format!("auto_{command}.ply")));
+        if quiet {
+            cmd.arg("--quiet");
+        }
+        let run = cmd.output().unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success(), "{err}");
+        let stats = std::fs::read_to_string(&json).unwrap();
+        let said = err.contains("backend auto: running on the CPU (");
+        match &why {
+            Some(why) if !quiet => {
+                assert!(said && err.contains(why.as_str()), "{command}: {err}");
+                assert!(stats.contains("\"backend\": \"cpu\""), "{stats}");
+            }
+            Some(_) => assert!(!said, "--quiet printed: {err}"),
+            None => {
+                assert!(!said, "{err}");
+                assert!(stats.contains("\"backend\": \"gpu\""), "{stats}");
+            }
+        }
+    }
+}
+
 fn fails_with(args: &[&str], expected: &[&str]) {
     let run = isobar().args(args).output().unwrap();
     assert!(!run.status.success(), "{args:?} should fail");

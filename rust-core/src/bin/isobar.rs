@@ -142,10 +142,10 @@ struct SphArgs {
     #[arg(long, default_value_t = (DEFAULT_MEMORY_BUDGET >> 30) as f64)]
     memory_budget: f64,
     /// Where the work runs: cpu, gpu (wgpu; an error naming why when there is no GPU
-    /// adapter) or auto (a hardware GPU when there is one, else the CPU). `sph` runs the
-    /// seed cells' neighbour search there (same surface on every back end; --full-grid is
-    /// CPU only); `adaptive` the per-level grids and crack filling. The statistics say
-    /// which ran.
+    /// adapter) or auto (a hardware GPU when there is one, else the CPU, saying why).
+    /// `sph` runs the seed cells' neighbour search there (same surface on every back end;
+    /// --full-grid is CPU only); `adaptive` the per-level grids and crack filling. The
+    /// statistics say which ran.
     #[arg(long, default_value = "cpu")]
     backend: String,
     /// Write the statistics as JSON here.
@@ -287,7 +287,18 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Result<Params> {
     })
 }
 
+/// When `--backend auto` will run on the CPU, a line saying why (unless quiet).
+fn say_backend(args: &SphArgs) -> Result<()> {
+    if Backend::parse(&args.backend)? == Backend::Auto && !args.quiet {
+        if let Some(why) = isobar::gpu::auto_fallback_reason() {
+            eprintln!("backend auto: running on the CPU ({why})");
+        }
+    }
+    Ok(())
+}
+
 fn run_sph(args: &SphArgs) -> Result<()> {
+    say_backend(args)?;
     let frames = io::expand_sequence(&args.input)?;
     let sequence = frames.len() > 1;
     let out_text = args.output.to_string_lossy().to_string();
@@ -366,6 +377,7 @@ fn run_adaptive(sph: &SphArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -
         stats_json: sph.stats_json.as_deref(),
         backend: Backend::parse(&sph.backend)?,
     };
+    say_backend(sph)?;
     isobar::adaptive::cli::run(adaptive, &common, &|data| settings_from(sph, data))
 }
 

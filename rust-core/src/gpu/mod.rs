@@ -90,13 +90,30 @@ impl Backend {
 
 /// True when the adapter is a hardware GPU (not a software rasteriser).
 fn hardware_adapter() -> bool {
+    auto_fallback_reason().is_none()
+}
+
+/// Why [`Backend::Auto`] runs on the CPU on this machine, for hosts to tell their user
+/// ("no GPU adapter: ..." or a software rasteriser only); `None` when it picks a GPU.
+pub fn auto_fallback_reason() -> Option<String> {
     #[cfg(feature = "gpu")]
     {
-        device::get().is_ok_and(|g| !g.software)
+        match device::get() {
+            Err(e) => Some(e.to_string()),
+            Ok(g) if g.software => Some(format!(
+                "the only GPU adapter, {}, is a software rasteriser (slower than the CPU path)",
+                g.name
+            )),
+            Ok(_) => None,
+        }
     }
     #[cfg(not(feature = "gpu"))]
     {
-        false
+        Some(
+            adapter_name()
+                .expect_err("no adapter without the feature")
+                .to_string(),
+        )
     }
 }
 
@@ -149,6 +166,8 @@ mod no_gpu_tests {
     #[test]
     fn no_gpu_requests_are_refused_and_auto_runs_on_the_cpu() {
         assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Cpu);
+        let why = super::auto_fallback_reason().expect("Auto falls back here");
+        assert!(why.contains("feature 'gpu' is off"), "{why}");
         assert_no_gpu(Backend::Gpu.resolve().unwrap_err());
         assert_no_gpu(super::adapter_name().unwrap_err());
 

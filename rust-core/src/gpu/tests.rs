@@ -38,6 +38,26 @@ fn gpu() -> Option<&'static device::Gpu> {
     }
 }
 
+/// `Auto` picks the adapter exactly when it is hardware, and otherwise says why not.
+#[test]
+fn auto_falls_back_from_a_software_adapter_and_says_why() {
+    let Some(g) = gpu() else { return };
+    let why = super::auto_fallback_reason();
+    assert_eq!(why.is_none(), !g.software, "{why:?}");
+    let expected = if g.software {
+        Backend::Cpu
+    } else {
+        Backend::Gpu
+    };
+    assert_eq!(Backend::Auto.resolve().unwrap(), expected);
+    if let Some(why) = why {
+        assert!(
+            why.contains(&g.name) && why.contains("software rasteriser"),
+            "{why}"
+        );
+    }
+}
+
 /// A small pseudo-random generator, so the tests need no crate.
 fn lcg(seed: &mut u64) -> f64 {
     *seed = seed
