@@ -60,7 +60,7 @@ pub fn refine<F: ScalarField + ?Sized>(
         })
         .collect();
     let crossed = |i: usize| signs[i] == 3;
-    // Candidates: level-1 cells the surface crosses or touches (a corner sign change in
+    // Candidates: cells the surface crosses or touches (a corner sign change in
     // the cell or one of its 26 neighbours), and cells holding particles with no corner
     // inside (a droplet that may fall between the corners).
     let candidate = |i: usize| {

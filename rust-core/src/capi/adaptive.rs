@@ -351,8 +351,12 @@ mod tests {
         };
         assert_eq!(refused(&sph, &adaptive), IsobarStatus::ErrInvalidArgument);
         // SAFETY: the message is a NUL-terminated string valid until the next call.
-        let message = unsafe { std::ffi::CStr::from_ptr(super::super::isobar_last_error_message()) };
-        assert!(message.to_string_lossy().contains("max_error"), "{message:?}");
+        let message =
+            unsafe { std::ffi::CStr::from_ptr(super::super::isobar_last_error_message()) };
+        assert!(
+            message.to_string_lossy().contains("max_error"),
+            "{message:?}"
+        );
         adaptive.struct_size = std::mem::offset_of!(IsobarAdaptiveParams, max_error) as u32;
         let mut surface = std::ptr::null_mut();
         let status = isobar_adaptive_extract(
