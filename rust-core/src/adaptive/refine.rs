@@ -165,16 +165,16 @@ fn next_level_error<F: ScalarField + ?Sized>(
     let band = grid.fine * (2 * step) as f64;
     let mut out = vec![0.0; m * m * m];
     let mut error = 0.0f64;
-    for v in 0..m * m * m {
+    for (v, sample) in out.iter_mut().enumerate() {
         let l = [v % m, v / m % m, v / (m * m)];
         if l.iter().all(|x| x % 2 == 0) {
-            out[v] = values[l[0] / 2 + n * (l[1] / 2 + n * (l[2] / 2))];
+            *sample = values[l[0] / 2 + n * (l[1] / 2 + n * (l[2] / 2))];
             continue;
         }
         let sub: [i64; 3] =
             std::array::from_fn(|a| (c[a] * FINE_PER_COARSE + l[a] as u32 * step) as i64);
         let (f, g) = field.value_and_gradient(grid.point(sub, 0));
-        out[v] = f;
+        *sample = f;
         // Trilinear interpolation in the current sub-cell: odd local coordinates sit at
         // its middle along that axis (weight ½ each side), even ones on its nodes.
         let mut lin = 0.0;
