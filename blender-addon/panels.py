@@ -97,6 +97,7 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
         layout.prop(settings, "backend")
         if settings.method == "ADAPTIVE":
             layout.prop(settings, "splash_threshold")
+            layout.prop(settings, "max_error")
             return
         layout.prop(settings, "correct")
         layout.prop(settings, "trim")

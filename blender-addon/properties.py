@@ -196,6 +196,15 @@ class IsobarSettings(bpy.types.PropertyGroup):
         soft_max=8,
         update=_changed,
     )
+    max_error: FloatProperty(
+        name="Max Error",
+        description="Adaptive: cells at the surface are refined a level where the next level's field samples lie "
+        "more than this many finest cells from the current level's interpolant (0: off, splash criterion alone)",
+        default=0.5,
+        min=0.0,
+        soft_max=2.0,
+        update=_changed,
+    )
     backend: EnumProperty(
         name="Backend",
         description="Where the work runs: Marching Correctors' seed search (same surface on every back end) or the adaptive grids",

@@ -58,3 +58,55 @@ fn real_frames_are_watertight_at_every_setting() {
         }
     }
 }
+
+/// Issue #9's quality target on the splashing frames with the default parameters: the
+/// adaptive surface within half a finest cell (Hausdorff) of the uniform finest-level
+/// one, with fewer triangles; the splash criterion alone (max_error 0) misses it (1.57 /
+/// 1.97 and 0.72 / 0.69 fine cells).
+/// Measured at the default (max_error 0.5, 2026-12-02): Hausdorff 0.42 / 0.44
+/// (dam break, grid factor 0.375 / 0.5) and 0.46 / 0.12 fine cells (double dam break),
+/// triangles 1.25 / 1.27 / 1.24 / 2.28 times fewer: the 3x target is not met on these
+/// frames (the splash cells and their dilation alone hold most of it).
+#[test]
+fn default_refinement_stays_within_half_a_fine_cell_of_uniform_finest() {
+    for name in [
+        "dam_break_frame_23_24389_particles.bgeo",
+        "double_dam_break_frame_01_4732_particles.vtk",
+    ] {
+        let field = field(name);
+        for grid_factor in [0.375, 0.5] {
+            let params = Params {
+                isovalue: 0.6,
+                grid_factor,
+                ..Params::default()
+            };
+            let grid = adaptive::grid_for(&field, &params).unwrap();
+            let uniform = adaptive::extract(
+                &field,
+                &grid,
+                &vec![3u8; grid.cell_count()],
+                &params,
+                &mut Progress::none(),
+            )
+            .unwrap();
+            for max_error in [params.max_error, 0.0] {
+                let p = Params {
+                    max_error,
+                    ..params.clone()
+                };
+                let out = adaptive::extract_sph(&field, &p, &mut Progress::none()).unwrap();
+                let d =
+                    isobar::mesh::hausdorff::hausdorff(&out.mesh, &uniform.mesh, 8.0 * grid.fine)
+                        / grid.fine;
+                let ratio = uniform.stats.triangles as f64 / out.stats.triangles as f64;
+                let what = format!(
+                    "{name} grid factor {grid_factor} max_error {max_error}: Hausdorff {d:.3} fine cells, {ratio:.2}x fewer triangles"
+                );
+                eprintln!("{what}");
+                assert!(out.mesh.topology().is_watertight_oriented(), "{what}");
+                assert!(ratio > 1.0, "{what}");
+                assert_eq!(d < 0.5, max_error > 0.0, "{what}");
+            }
+        }
+    }
+}

@@ -254,12 +254,22 @@ def test_adaptive_method(scene, isobar, demo_sequence):
     with isobar.Particles.read(str(path)) as particles:
         coarse, _ = isobar.extract_adaptive(particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0)
     assert_mesh_equals(obj, coarse)
+    # Max Error reaches the core: the panel's default is the core's, and 0 (off) gives the
+    # splash criterion alone (no refinement at all here), a different mesh.
+    assert settings.max_error == pytest.approx(isobar.adaptive.default_params().max_error)
+    settings.max_error = 0.0
+    with isobar.Particles.read(str(path)) as particles:
+        flat, flat_stats = isobar.extract_adaptive(
+            particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0, max_error=0.0
+        )
+    assert_mesh_equals(obj, flat)
+    assert flat_stats["cells_per_level"][1:] == [0, 0] and flat.n_triangles < coarse.n_triangles
     # Backend GPU: the core's wgpu path (lavapipe in CI, installed by the test command).
     settings.backend = "GPU"
     assert not settings.status_error, settings.status
     with isobar.Particles.read(str(path)) as particles:
         gpu, gpu_stats = isobar.extract_adaptive(
-            particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0, backend="gpu"
+            particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0, max_error=0.0, backend="gpu"
         )
     assert gpu_stats["backend"] == "gpu"
     assert_mesh_equals(obj, gpu)

@@ -5,6 +5,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stddef.h>
 #include <string.h>
 
 static int failures = 0;
@@ -135,6 +136,21 @@ int main(void) {
             if (e > off) off = e;
         }
         CHECK(off <= 1.001 * accuracy, "adaptive vertex %g off the sphere (accuracy %g)", off, accuracy);
+        isobar_surface_free(coarse);
+        /* The error criterion's tolerance (version 3 of the struct): on by default, a
+         * negative value refused by name, and a version-2 struct (fields up to `backend`)
+         * gets the default whatever lies beyond it: the same surface as the defaults. */
+        CHECK(adaptive.max_error > 0.0, "max_error default %g", adaptive.max_error);
+        IsobarAdaptiveParams v2 = adaptive;
+        v2.max_error = -1.0;
+        coarse = NULL;
+        CHECK(isobar_adaptive_extract(particles, &params, &v2, NULL, NULL, &coarse, NULL) ==
+                  ISOBAR_STATUS_ERR_INVALID_ARGUMENT && coarse == NULL, "max_error < 0 refused");
+        CHECK(strstr(isobar_last_error_message(), "max_error") != NULL, "message: %s", isobar_last_error_message());
+        v2.struct_size = (uint32_t)offsetof(IsobarAdaptiveParams, max_error);
+        CHECK(isobar_adaptive_extract(particles, &params, &v2, NULL, NULL, &coarse, NULL) == ISOBAR_STATUS_OK,
+              "version-2 struct: %s", isobar_last_error_message());
+        CHECK(isobar_surface_triangle_count(coarse) == ant, "version-2 struct gives the default surface");
         isobar_surface_free(coarse);
         const double two[2] = {iso, 0.5 * iso};
         params.isovalues = two;

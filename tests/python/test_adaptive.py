@@ -59,3 +59,35 @@ def test_adaptive_backend_choice_is_reported_and_checked():
     assert auto.n_triangles == cpu.n_triangles
     with pytest.raises(ValueError, match="backend"):
         isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, backend="cuda")
+
+
+@pytest.mark.parametrize("max_error", [0.0, 0.1])
+def test_max_error_reaches_the_core_like_the_command_line(cli, dam_break_path, tmp_path, max_error):
+    """The error criterion's tolerance goes through the C ABI: the level counts and the
+    triangles equal `isobar adaptive --max-error` on the same frame."""
+    import json
+    import subprocess
+
+    stats_json = tmp_path / "stats.json"
+    run = subprocess.run(
+        [str(cli), "adaptive", str(dam_break_path), "--iso", "0.6", "--h", "0.05",
+         "--grid-factor", "0.5", "--max-error", str(max_error), "--backend", "cpu",
+         "--quiet", "--stats-json", str(stats_json), "-o", str(tmp_path / "cli.ply")],
+        capture_output=True, text=True,
+    )
+    assert run.returncode == 0, run.stderr
+    want = json.loads(stats_json.read_text())
+    particles = isobar.Particles.read(dam_break_path)
+    surface, stats = isobar.extract_adaptive(particles, 0.6, h=0.05, grid_factor=0.5,
+                                             max_error=max_error, backend="cpu")
+    assert stats["cells_per_level"] == [want[f"level_{l}_cells"] for l in (1, 2, 3)]
+    assert stats["triangles"] == want["triangles"] == surface.n_triangles
+
+
+def test_max_error_changes_the_levels_and_bad_values_are_refused():
+    off, stats_off = isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, max_error=0)
+    on, stats_on = isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, max_error=0.05)
+    assert stats_on["cells_per_level"][1] > stats_off["cells_per_level"][1]
+    assert isobar.adaptive.default_params().max_error > 0
+    with pytest.raises(isobar.InvalidArgumentError, match="max_error"):
+        isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, max_error=-1)

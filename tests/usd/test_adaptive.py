@@ -122,3 +122,19 @@ def test_cli_backend_gpu_applies_to_marching_correctors(cli, tmp_path):
         assert_same_mesh(mesh_at(open_stage(out), 26), cpu, velocity=False)
         gpu.release()
     cpu.release()
+
+
+def test_cli_passes_max_error_to_the_core(cli, tmp_path):
+    """`--max-error` reaches isobar.extract_adaptive: the stage holds the core's surface
+    with that tolerance, and 0 (the splash criterion alone) differs from the default."""
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    out = tmp_path / "adaptive.usd"
+    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", "--max-error", "0",
+            "-o", out, "-q")
+    with isobar.Particles.read(str(FRAME_26)) as particles:
+        off, _ = isobar.extract_adaptive(particles, ISO, max_error=0.0, **DAM)
+        default, _ = isobar.extract_adaptive(particles, ISO, **DAM)
+    assert_same_mesh(mesh_at(open_stage(out), 26), off, velocity=False)
+    assert off.n_triangles != default.n_triangles
+    off.release()
+    default.release()

@@ -144,6 +144,7 @@ ROUND_TRIP = {
     "GridFactor": (0.4375, "0.4375"),
     "Method": ("Adaptive", "1"),
     "SplashThreshold": (3, "3"),
+    "MaxError": (0.375, "0.375"),
     "Backend": ("Auto", "2"),
     "Correct": (0, "0"),
     "ComputeNormals": (0, "0"),

@@ -115,6 +115,29 @@ def test_adaptive_method_equals_the_cli_and_is_closed():
 
 
 @test
+def test_adaptive_max_error_equals_the_cli_option():
+    # The error criterion's tolerance reaches the core: each value gives the CLI's
+    # surface with the same --max-error, and 0 (off) differs from the default.
+    import subprocess
+
+    cells = {}
+    for max_error in (0.0, 0.1):
+        f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE,
+                                MaxError=max_error)
+        f.Update()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        ref_path = os.path.join(TMP, f"adaptive_max_error_{max_error}.vtp")
+        subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
+                        "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR),
+                        "--max-error", str(max_error)], check=True, capture_output=True)
+        h.assert_same_surface(f.GetOutput(), h.read_vtp(ref_path), 1e-12, f"max error {max_error}")
+        assert h.open_edges(f.GetOutput()) == 0
+        cells[max_error] = f.GetOutput().GetNumberOfCells()
+    assert cells[0.1] > cells[0.0], cells
+    assert vtkIsobarSPHIsosurface().GetMaxError() > 0
+
+
+@test
 def test_marching_correctors_backend_gpu_gives_the_cpu_surface():
     # Backend GPU (wgpu; lavapipe in CI) runs the seed cells' neighbour search on the
     # device; the exact tests stay on the CPU, so the surface is the CPU's, bit for bit.

@@ -77,6 +77,9 @@ def _parser() -> argparse.ArgumentParser:
                    "grids): cpu, gpu (wgpu; an error without an adapter) or auto (a hardware GPU when there is one); "
                    "default: the core's (correctors cpu, adaptive auto)")
     g.add_argument("--splash-threshold", type=int, help="adaptive: coarse cells holding 1..N particles are refined to the finest level (core default 1)")
+    g.add_argument("--max-error", type=float, help="adaptive: cells at the surface are refined a level where the next level's "
+                   "field samples lie more than this many finest cells from the current level's interpolant "
+                   "(0: off, the splash criterion alone; default: the core's)")
 
     u = sph.add_argument_group("USD")
     u.add_argument("--frames", help="write only these frame numbers: 10-20, 1-5,9, 100- (the other frames of the stage stay)")
@@ -153,6 +156,8 @@ def _extract_options(args) -> dict:
         options["method"] = args.method
     if args.splash_threshold is not None:
         options["splash_threshold"] = args.splash_threshold
+    if args.max_error is not None:
+        options["max_error"] = args.max_error
     if args.backend is not None:
         # Both methods take it: isobar.extract(backend=) and isobar.extract_adaptive(backend=).
         options["backend"] = args.backend

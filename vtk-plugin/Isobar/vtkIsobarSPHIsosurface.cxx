@@ -597,6 +597,7 @@ vtkIsobarSPHIsosurface::vtkIsobarSPHIsosurface()
   std::memset(&adaptive, 0, sizeof(adaptive));
   isobar_adaptive_params_default(&adaptive);
   this->SplashThreshold = static_cast<int>(adaptive.splash_threshold);
+  this->MaxError = adaptive.max_error;
   this->Backend = static_cast<int>(adaptive.backend);
   this->Correct = defaults.correct != 0;
   this->Tolerance = defaults.tolerance;
@@ -1013,6 +1014,7 @@ int vtkIsobarSPHIsosurface::RequestData(
         std::memset(&adaptive, 0, sizeof(adaptive));
         isobar_adaptive_params_default(&adaptive);
         adaptive.splash_threshold = static_cast<uint32_t>(this->SplashThreshold);
+        adaptive.max_error = this->MaxError;
         adaptive.backend = static_cast<uint32_t>(this->Backend);
         call = "isobar_adaptive_extract";
         status = isobar_adaptive_extract(handle.Ptr, &params, &adaptive,
@@ -1145,6 +1147,7 @@ void vtkIsobarSPHIsosurface::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "GridFactor: " << this->GridFactor << "\n";
   os << indent << "Method: " << this->Method << "\n";
   os << indent << "SplashThreshold: " << this->SplashThreshold << "\n";
+  os << indent << "MaxError: " << this->MaxError << "\n";
   os << indent << "Backend: " << this->Backend << "\n";
   os << indent << "Correct: " << this->Correct << "\n";
   os << indent << "Tolerance: " << this->Tolerance << "\n";

@@ -166,6 +166,14 @@ public:
   ///@}
 
   ///@{
+  /// Adaptive method, error criterion added to the splash one: cells at the surface are
+  /// refined a level where the next level's field samples lie more than this many finest
+  /// cells from the current level's interpolant (core default; 0 turns it off).
+  vtkSetClampMacro(MaxError, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(MaxError, double);
+  ///@}
+
+  ///@{
   /// Where the work runs, ISOBAR_BACKEND_CPU (0, default), ISOBAR_BACKEND_GPU (1, wgpu;
   /// an error when there is no adapter) or ISOBAR_BACKEND_AUTO (2, a hardware GPU when
   /// there is one): Marching Correctors' seed-cell neighbour search (same surface on
@@ -301,6 +309,7 @@ protected:
   double GridFactor;
   int Method;
   int SplashThreshold;
+  double MaxError;
   int Backend;
   vtkTypeBool Correct;
   double Tolerance;

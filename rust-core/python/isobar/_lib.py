@@ -157,6 +157,7 @@ class AdaptiveParams(Structure):
         ("splash_dilation", c_uint32),
         ("bisection_iterations", c_uint32),
         ("backend", c_uint32),
+        ("max_error", c_double),
     ]
 
 

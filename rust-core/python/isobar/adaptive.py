@@ -39,6 +39,7 @@ def extract_adaptive(
     memory_budget: Optional[int] = None,
     splash_threshold: Optional[int] = None,
     splash_dilation: Optional[int] = None,
+    max_error: Optional[float] = None,
     bisection_iterations: Optional[int] = None,
     progress: Optional[ProgressCallback] = None,
     backend: str = "auto",
@@ -53,6 +54,10 @@ def extract_adaptive(
             default 1, the paper's; 0 keeps every cell at level 1).
         splash_dilation: layers of neighbour cells raised to level 3 around each splash
             cell (core default 1; 0 is the paper's criterion alone).
+        max_error: error criterion, added to the splash one: cells at the surface rise a
+            level where the next level's field samples lie more than this many finest
+            cells from the current level's interpolant (core default in
+            ``default_params().max_error``; 0 turns it off).
         bisection_iterations: halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
         backend: "cpu", "gpu" (wgpu; raises "no GPU adapter: ..." without one) or "auto"
             (a hardware GPU when there is one, else the CPU: a software adapter such
@@ -77,6 +82,8 @@ def extract_adaptive(
         adaptive.splash_threshold = int(splash_threshold)
     if splash_dilation is not None:
         adaptive.splash_dilation = int(splash_dilation)
+    if max_error is not None:
+        adaptive.max_error = float(max_error)
     if bisection_iterations is not None:
         adaptive.bisection_iterations = int(bisection_iterations)
     adaptive.backend = BACKENDS[backend]

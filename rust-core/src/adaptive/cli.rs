@@ -24,6 +24,11 @@ pub struct AdaptiveArgs {
     /// paper's criterion alone).
     #[arg(long, default_value_t = Params::default().splash_dilation)]
     pub splash_dilation: u32,
+    /// Error criterion: cells at the surface rise a level where the next level's field
+    /// samples lie more than this many finest cells from the current level's interpolant
+    /// (0 = off, the splash criterion alone).
+    #[arg(long, default_value_t = Params::default().max_error)]
+    pub max_error: f64,
     /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
     #[arg(long, default_value_t = Params::default().bisection_iterations)]
     pub bisection_iterations: u32,
@@ -68,6 +73,7 @@ pub fn run(
         grid_factor: common.grid_factor,
         splash_threshold: args.splash_threshold,
         splash_dilation: args.splash_dilation,
+        max_error: args.max_error,
         bisection_iterations: args.bisection_iterations,
         normals: common.normals,
         memory_budget: common.memory_budget,
@@ -133,6 +139,14 @@ fn rows(data: &ParticleData, s: &Stats, build_s: f64) -> Vec<(String, String)> {
         ));
     }
     r.extend([
+        (
+            "error criterion: cells 1 -> 2".into(),
+            s.error_raised[0].to_string(),
+        ),
+        (
+            "error criterion: cells 2 -> 3".into(),
+            s.error_raised[1].to_string(),
+        ),
         ("transition faces".into(), s.transition_faces.to_string()),
         ("crack triangles".into(), s.crack_triangles.to_string()),
         ("vertices".into(), s.vertices.to_string()),

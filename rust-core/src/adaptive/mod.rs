@@ -1,6 +1,8 @@
 //! Adaptive crack-free SPH surfaces on 3-level grids, after
 //! `shared/papers/gpu-adaptive-3level-sph-surfaces.txt`: coarse cells split to level 3
-//! where they hold few particles (splashes), their face neighbours raised to level 2,
+//! where they hold few particles (splashes), cells at the surface raised where the next
+//! level's surface would lie more than `max_error` finest cells away ([`refine`]), face
+//! neighbours raised so levels differ by at most one,
 //! marching cubes per level with bisected edge points that coincide across levels, and
 //! the cracks between levels filled from a table of every transition-face pattern.
 //!
@@ -13,6 +15,7 @@ pub mod crack_table;
 pub mod cracks;
 pub mod grid;
 pub mod levels;
+pub mod refine;
 
 use crate::error::{Error, Result};
 use crate::field::sph::SphField;
@@ -23,6 +26,10 @@ use crate::progress::Progress;
 use grid::CoarseGrid;
 use levels::LevelArrays;
 use std::time::Instant;
+
+/// Default of [`Params::max_error`] in finest cells, chosen so the real dam-break frames'
+/// surfaces stay within half a finest cell of the uniform finest one.
+pub const DEFAULT_MAX_ERROR: f64 = 0.5;
 
 /// Parameters of an adaptive extraction. The field itself (kernel, h, h-scale, which
 /// quantity) is chosen with `SphSettings`, as for Marching Correctors.
@@ -38,6 +45,11 @@ pub struct Params {
     /// Layers of neighbour cells (26-neighbourhood) raised to level 3 around each splash
     /// cell, so a droplet's whole kernel support is contoured finely (0 = the paper).
     pub splash_dilation: u32,
+    /// Error criterion, added to the splash one: a cell at or next to the surface rises a
+    /// level (1 → 2, then 2 → 3) when the next level's field samples lie more than this
+    /// many finest cells from the current level's interpolant ([`refine`]). 0 = off (the
+    /// splash criterion alone).
+    pub max_error: f64,
     /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5).
     pub bisection_iterations: u32,
     /// Vertex normals from the field gradient.
@@ -55,6 +67,7 @@ impl Default for Params {
             grid_factor: 0.5,
             splash_threshold: 1,
             splash_dilation: 1,
+            max_error: DEFAULT_MAX_ERROR,
             bisection_iterations: 5,
             normals: true,
             memory_budget: crate::field::DEFAULT_MEMORY_BUDGET,
@@ -77,6 +90,15 @@ impl Params {
             return bad(
                 "grid_factor",
                 format!("must be positive, got {}", self.grid_factor),
+            );
+        }
+        if !(self.max_error >= 0.0 && self.max_error.is_finite()) {
+            return bad(
+                "max_error",
+                format!(
+                    "must be 0 (off) or a positive number of finest cells, got {}",
+                    self.max_error
+                ),
             );
         }
         if !(1..=16).contains(&self.bisection_iterations) {
@@ -110,6 +132,8 @@ pub struct Stats {
     pub cells_per_level: [u64; 3],
     /// Marching-cubes triangles from cells of level 1, 2, 3.
     pub triangles_per_level: [u64; 3],
+    /// Cells the error criterion raised 1 → 2 and 2 → 3 (before balancing).
+    pub error_raised: [u64; 2],
     pub transition_faces: u64,
     pub crack_triangles: u64,
     pub vertices: u64,
@@ -145,10 +169,19 @@ pub fn grid_for(field: &SphField, params: &Params) -> Result<CoarseGrid> {
 
 /// Steps 1–3 on `field`'s particles: registration, splitting, level adjustment.
 pub fn levels_for(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Vec<u8>> {
+    Ok(levels_and_refined(field, grid, params)?.0)
+}
+
+/// [`levels_for`] and what the error criterion did.
+fn levels_and_refined(
+    field: &SphField,
+    grid: &CoarseGrid,
+    params: &Params,
+) -> Result<(Vec<u8>, refine::Refined)> {
     check_grid_budget(grid, params)?;
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
     let counts = grid::register(grid, &positions)?;
-    Ok(levels_from_counts(grid, &counts, params))
+    Ok(levels_from_counts(field, grid, &counts, params))
 }
 
 /// Refuses a coarse grid whose counts and levels (5 bytes a cell) exceed the budget.
@@ -166,12 +199,33 @@ fn check_grid_budget(grid: &CoarseGrid, params: &Params) -> Result<()> {
     Ok(())
 }
 
-/// Steps 2–3 from step 1's particle counts per coarse cell.
-fn levels_from_counts(grid: &CoarseGrid, counts: &[u32], params: &Params) -> Vec<u8> {
+/// Steps 2–3 from step 1's particle counts per coarse cell: the splash criterion and its
+/// dilation, the error criterion on `field` ([`refine`]), then balancing. Both back ends
+/// take their levels from here, so they contour the same cells.
+pub fn levels_from_counts<F: ScalarField + ?Sized>(
+    field: &F,
+    grid: &CoarseGrid,
+    counts: &[u32],
+    params: &Params,
+) -> (Vec<u8>, refine::Refined) {
     let mut levels = grid::split(counts, params.splash_threshold);
     grid::dilate(grid, &mut levels, params.splash_dilation);
+    let refined = refine::refine(
+        field,
+        grid,
+        counts,
+        &mut levels,
+        params.isovalue,
+        params.max_error,
+    );
     grid::balance(grid, &mut levels);
-    levels
+    (levels, refined)
+}
+
+/// Adds the error criterion's work to an extraction's stats.
+fn add_refined(stats: &mut Stats, refined: refine::Refined) {
+    stats.error_raised = refined.raised;
+    stats.field_evaluations += refined.evaluations;
 }
 
 /// The adaptive surface of an SPH field.
@@ -187,10 +241,11 @@ pub fn extract_sph(
     let mut out = match params.backend.resolve()? {
         Backend::Gpu => extract_sph_gpu(field, &grid, params, progress, start)?,
         _ => {
-            let levels = levels_for(field, &grid, params)?;
+            let (levels, refined) = levels_and_refined(field, &grid, params)?;
             let elapsed = start.elapsed().as_secs_f64();
             let mut out = extract(field, &grid, &levels, params, progress)?;
             out.stats.timings.levels = elapsed;
+            add_refined(&mut out.stats, refined);
             out
         }
     };
@@ -214,10 +269,13 @@ fn extract_sph_gpu(
     let gpu = crate::gpu::device::get()?;
     let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
     let registered = crate::gpu::register::register(gpu, &on_device, field, grid)?;
-    let levels = levels_from_counts(grid, &registered.counts, params);
+    // The error criterion's samples are evaluated on the CPU (`refine`), so the GPU
+    // contours exactly the CPU's levels.
+    let (levels, refined) = levels_from_counts(field, grid, &registered.counts, params);
     let elapsed = start.elapsed().as_secs_f64();
     let mut out = extract_gpu_on(gpu, &on_device, grid, &levels, params, progress)?;
     out.stats.timings.levels = elapsed;
+    add_refined(&mut out.stats, refined);
     Ok(out)
 }
 

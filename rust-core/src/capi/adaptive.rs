@@ -32,6 +32,10 @@ pub struct IsobarAdaptiveParams {
     /// `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU adapter: ..." without one) or
     /// `ISOBAR_BACKEND_AUTO` (the GPU when an adapter exists). Added in version 2.
     pub backend: u32,
+    /// Error criterion: cells at the surface rise a level where the next level's samples
+    /// lie more than this many finest cells from the current level's interpolant (0 = off,
+    /// the splash criterion alone). Added in version 3; older structs get the default.
+    pub max_error: f64,
 }
 
 /// `IsobarAdaptiveParams::backend`: rayon on the CPU.
@@ -74,6 +78,7 @@ impl Default for IsobarAdaptiveParams {
             splash_dilation: p.splash_dilation,
             bisection_iterations: p.bisection_iterations,
             backend: ISOBAR_BACKEND_CPU,
+            max_error: p.max_error,
         }
     }
 }
@@ -155,6 +160,7 @@ pub extern "C" fn isobar_adaptive_extract(
             grid_factor: sph_params.grid_factor,
             splash_threshold: a.splash_threshold,
             splash_dilation: a.splash_dilation,
+            max_error: a.max_error,
             bisection_iterations: a.bisection_iterations,
             normals: sph_params.normals,
             memory_budget: sph_params.memory_budget,
@@ -335,6 +341,35 @@ mod tests {
         );
         assert_eq!(status, IsobarStatus::Ok);
         assert_eq!(stats.backend, ISOBAR_BACKEND_CPU);
+        isobar_surface_free(surface);
+        let v1_triangles = stats.triangles;
+        // max_error (version 3): a bad value is refused by name; a version-2 struct (up
+        // to `backend`) gets the default whatever lies beyond it, as version 1 did.
+        adaptive = IsobarAdaptiveParams {
+            max_error: -1.0,
+            ..IsobarAdaptiveParams::default()
+        };
+        assert_eq!(refused(&sph, &adaptive), IsobarStatus::ErrInvalidArgument);
+        // SAFETY: the message is a NUL-terminated string valid until the next call.
+        let message =
+            unsafe { std::ffi::CStr::from_ptr(super::super::isobar_last_error_message()) };
+        assert!(
+            message.to_string_lossy().contains("max_error"),
+            "{message:?}"
+        );
+        adaptive.struct_size = std::mem::offset_of!(IsobarAdaptiveParams, max_error) as u32;
+        let mut surface = std::ptr::null_mut();
+        let status = isobar_adaptive_extract(
+            handle,
+            &sph,
+            &adaptive,
+            None,
+            std::ptr::null_mut(),
+            &mut surface,
+            &mut stats,
+        );
+        assert_eq!(status, IsobarStatus::Ok);
+        assert_eq!(stats.triangles, v1_triangles);
         isobar_surface_free(surface);
         // A stats struct of a bad size is refused before any work: progress never runs.
         extern "C" fn count_calls(user: *mut c_void, _: f64, _: *const std::ffi::c_char) -> i32 {
