@@ -31,12 +31,31 @@ fn split(key: u64) -> (u64, usize) {
 struct Brick<T> {
     values: Box<[T; BRICK]>,
     present: [u64; WORDS],
+    /// Keys present (0: the brick is free, on the map's free list).
+    count: u32,
+    /// The brick's own key (grid key divided by the brick edge), for iteration.
+    key: u64,
 }
+
+/// Where each brick sits in `bricks`.
+enum Index {
+    /// Any keys: brick key -> brick.
+    Hashed(FxHashMap<u64, u32>),
+    /// Keys inside a known box: one slot per brick of the box ([`NO_BRICK`] where none),
+    /// found by arithmetic, no hashing; costs 4 bytes per brick of the box.
+    Dense { bricks: [u64; 3], slots: Vec<u32> },
+}
+
+const NO_BRICK: u32 = u32::MAX;
 
 /// A map from grid keys to `T`, stored brick by brick.
 pub struct BrickMap<T> {
-    index: FxHashMap<u64, u32>,
+    index: Index,
     bricks: Vec<Brick<T>>,
+    /// Bricks emptied by [`BrickMap::remove`], reused before new ones are allocated, so
+    /// a map whose keys move (a sliding surface) holds the bricks of its widest extent,
+    /// not of every key it ever held.
+    free: Vec<u32>,
     len: usize,
     /// (brick key, brick index) of the last brick found, for scans in key order.
     last: Option<(u64, u32)>,
@@ -44,16 +63,30 @@ pub struct BrickMap<T> {
 
 impl<T: Copy + Default> Default for BrickMap<T> {
     fn default() -> Self {
-        BrickMap {
-            index: FxHashMap::default(),
-            bricks: Vec::new(),
-            len: 0,
-            last: None,
-        }
+        BrickMap::with_index(Index::Hashed(FxHashMap::default()))
     }
 }
 
 impl<T: Copy + Default> BrickMap<T> {
+    fn with_index(index: Index) -> Self {
+        BrickMap {
+            index,
+            bricks: Vec::new(),
+            free: Vec::new(),
+            len: 0,
+            last: None,
+        }
+    }
+
+    /// A map for keys whose coordinates lie below `extent` (x, y, z), which finds bricks
+    /// by arithmetic instead of hashing, at 4 bytes per brick of the box (1/128 byte per
+    /// key). Inserting a key outside the box panics; looking one up finds nothing.
+    pub fn within(extent: [u32; 3]) -> Self {
+        let bricks = extent.map(|n| (n as u64).div_ceil(EDGE as u64));
+        let slots = vec![NO_BRICK; (bricks[0] * bricks[1] * bricks[2]) as usize];
+        BrickMap::with_index(Index::Dense { bricks, slots })
+    }
+
     /// Number of keys present.
     pub fn len(&self) -> usize {
         self.len
@@ -67,13 +100,43 @@ impl<T: Copy + Default> BrickMap<T> {
     /// Bytes held by the bricks (values and presence bits) and their index.
     pub fn bytes(&self) -> u64 {
         let brick = std::mem::size_of::<[T; BRICK]>() + std::mem::size_of::<Brick<T>>();
-        (self.bricks.len() * brick + self.index.capacity() * 16) as u64
+        let index = match &self.index {
+            Index::Hashed(map) => map.capacity() * 16,
+            Index::Dense { slots, .. } => slots.len() * 4,
+        };
+        (self.bricks.len() * brick + index) as u64
     }
 
+    /// Removes every key and drops the bricks (the dense index keeps its size).
+    pub fn clear(&mut self) {
+        match &mut self.index {
+            Index::Hashed(map) => *map = FxHashMap::default(),
+            Index::Dense { slots, .. } => slots.fill(NO_BRICK),
+        }
+        self.bricks = Vec::new();
+        self.free = Vec::new();
+        self.len = 0;
+        self.last = None;
+    }
+
+    /// Slot of brick key `brick` in a dense index, None outside its box.
+    #[inline]
+    fn dense_slot(bricks: &[u64; 3], brick: u64) -> Option<usize> {
+        let [x, y, z] = VirtualGrid::coords(brick).map(u64::from);
+        (x < bricks[0] && y < bricks[1] && z < bricks[2])
+            .then(|| (x + bricks[0] * (y + bricks[1] * z)) as usize)
+    }
+
+    #[inline(always)]
     fn brick_index(&self, brick: u64) -> Option<u32> {
         match self.last {
             Some((b, i)) if b == brick => Some(i),
-            _ => self.index.get(&brick).copied(),
+            _ => match &self.index {
+                Index::Hashed(map) => map.get(&brick).copied(),
+                Index::Dense { bricks, slots } => Self::dense_slot(bricks, brick)
+                    .map(|s| slots[s])
+                    .filter(|&i| i != NO_BRICK),
+            },
         }
     }
 
@@ -83,16 +146,126 @@ impl<T: Copy + Default> BrickMap<T> {
                 return i;
             }
         }
-        let next = self.bricks.len() as u32;
-        let i = *self.index.entry(brick).or_insert(next);
+        let next = match self.free.last() {
+            Some(&f) => f,
+            None => self.bricks.len() as u32,
+        };
+        let i = match &mut self.index {
+            Index::Hashed(map) => *map.entry(brick).or_insert(next),
+            Index::Dense { bricks, slots } => {
+                let s = Self::dense_slot(bricks, brick).unwrap_or_else(|| {
+                    panic!(
+                        "key {:?} outside the map's box",
+                        VirtualGrid::coords(brick).map(|c| c << SHIFT)
+                    )
+                });
+                if slots[s] == NO_BRICK {
+                    slots[s] = next;
+                }
+                slots[s]
+            }
+        };
         if i == next {
-            self.bricks.push(Brick {
-                values: Box::new([T::default(); BRICK]),
-                present: [0; WORDS],
-            });
+            if self.free.pop().is_some() {
+                self.bricks[i as usize].key = brick;
+            } else {
+                self.bricks.push(Brick {
+                    values: Box::new([T::default(); BRICK]),
+                    present: [0; WORDS],
+                    count: 0,
+                    key: brick,
+                });
+            }
         }
         self.last = Some((brick, i));
         i
+    }
+
+    /// Removes `key`, returning its value; a brick left empty goes to the free list.
+    #[inline]
+    pub fn remove(&mut self, key: u64) -> Option<T> {
+        let (brick, local) = split(key);
+        let i = self.brick_index(brick)?;
+        let b = &mut self.bricks[i as usize];
+        let word = &mut b.present[local / 64];
+        let bit = 1u64 << (local % 64);
+        if *word & bit == 0 {
+            return None;
+        }
+        *word &= !bit;
+        b.count -= 1;
+        self.len -= 1;
+        let value = b.values[local];
+        if b.count == 0 {
+            match &mut self.index {
+                Index::Hashed(map) => {
+                    map.remove(&brick);
+                }
+                Index::Dense { bricks, slots } => {
+                    let s = Self::dense_slot(bricks, brick).expect("brick was found");
+                    slots[s] = NO_BRICK;
+                }
+            }
+            self.free.push(i);
+            if self.last.is_some_and(|(b, _)| b == brick) {
+                self.last = None;
+            }
+        }
+        Some(value)
+    }
+
+    /// The value at `key`, if present, to change in place.
+    #[inline]
+    pub fn get_mut(&mut self, key: u64) -> Option<&mut T> {
+        let (brick, local) = split(key);
+        let i = self.brick_index(brick)? as usize;
+        let b = &mut self.bricks[i];
+        (b.present[local / 64] >> (local % 64) & 1 == 1).then(|| &mut b.values[local])
+    }
+
+    /// The value at `key`, to change in place, inserting `value` first when absent (one
+    /// brick lookup either way).
+    #[inline]
+    pub fn get_or_insert(&mut self, key: u64, value: T) -> &mut T {
+        let (brick, local) = split(key);
+        let i = self.brick_index_or_insert(brick) as usize;
+        let b = &mut self.bricks[i];
+        let word = &mut b.present[local / 64];
+        let bit = 1u64 << (local % 64);
+        if *word & bit == 0 {
+            *word |= bit;
+            b.count += 1;
+            self.len += 1;
+            b.values[local] = value;
+        }
+        &mut b.values[local]
+    }
+
+    /// Every (key, value) present, brick by brick (not in key order).
+    pub fn iter(&self) -> impl Iterator<Item = (u64, T)> + '_ {
+        self.bricks.iter().filter(|b| b.count > 0).flat_map(|b| {
+            let [bx, by, bz] = VirtualGrid::coords(b.key).map(|c| c << SHIFT);
+            (0..WORDS)
+                .flat_map(move |w| {
+                    let mut bits = b.present[w];
+                    std::iter::from_fn(move || {
+                        (bits != 0).then(|| {
+                            let local = w * 64 + bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            local
+                        })
+                    })
+                })
+                .map(move |local| {
+                    let l = local as u32;
+                    let key = VirtualGrid::key(
+                        bx | (l & LOCAL),
+                        by | (l >> SHIFT & LOCAL),
+                        bz | (l >> (2 * SHIFT) & LOCAL),
+                    );
+                    (key, b.values[local])
+                })
+        })
     }
 
     /// The value at `key`, if present.
@@ -122,6 +295,7 @@ impl<T: Copy + Default> BrickMap<T> {
         let new = *word & bit == 0;
         *word |= bit;
         b.values[local] = value;
+        b.count += new as u32;
         self.len += new as usize;
         new
     }
@@ -151,15 +325,39 @@ impl<T: Copy + Default> BrickMap<T> {
                 return [absent; 8];
             };
             let b = &self.bricks[i as usize];
-            return at.map(|a| {
+            // A plain loop: `at.map` compiled to a fallible-map adapter costing a third
+            // more instructions here.
+            let mut out = [absent; 8];
+            for (o, &a) in out.iter_mut().zip(&at) {
                 if b.present[a / 64] >> (a % 64) & 1 == 1 {
-                    b.values[a]
-                } else {
-                    absent
+                    *o = b.values[a];
                 }
-            });
+            }
+            return out;
         }
-        std::array::from_fn(|k| self.get(VirtualGrid::corner(cell, k)).unwrap_or(absent))
+        let mut found = None;
+        std::array::from_fn(|k| {
+            self.get_near(VirtualGrid::corner(cell, k), &mut found)
+                .unwrap_or(absent)
+        })
+    }
+
+    /// [`BrickMap::get`] for keys that mostly share a brick (a cell's corners across a
+    /// brick face): `found` remembers the last brick looked up, so the eight corners of a
+    /// cell straddling one face cost two brick lookups, not eight.
+    #[inline]
+    fn get_near(&self, key: u64, found: &mut Option<(u64, Option<u32>)>) -> Option<T> {
+        let (brick, local) = split(key);
+        let i = match *found {
+            Some((b, i)) if b == brick => i,
+            _ => {
+                let i = self.brick_index(brick);
+                *found = Some((brick, i));
+                i
+            }
+        }?;
+        let b = &self.bricks[i as usize];
+        (b.present[local / 64] >> (local % 64) & 1 == 1).then(|| b.values[local])
     }
 
     /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
@@ -262,6 +460,94 @@ mod tests {
                     assert_eq!(map.contains(key), reference.contains_key(&key));
                 }
             }
+        }
+    }
+
+    /// Inserts, removals and in-place changes against a hash map, for both indexes: the
+    /// map agrees at every key of the box, its iteration lists exactly the reference's
+    /// entries, an emptied brick is reused, and `clear` empties it.
+    #[test]
+    fn remove_get_mut_iter_and_clear_agree_with_a_hash_map() {
+        const SIDE: u32 = 27;
+        for mut map in [
+            BrickMap::<u64>::default(),
+            BrickMap::<u64>::within([SIDE, SIDE - 3, SIDE - 7]),
+        ] {
+            let mut next = crate::test_rng::lcg(11);
+            let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
+            let mut reference = HashMap::new();
+            for round in 0..6 {
+                // Keys drift along x from round to round, as a sliding surface's do.
+                for _ in 0..4_000 {
+                    let x = (rnd(12) + 3 * round).min(SIDE - 1);
+                    let key = VirtualGrid::key(x, rnd(SIDE - 3), rnd(SIDE - 7));
+                    match rnd(5) {
+                        0 => assert_eq!(map.remove(key), reference.remove(&key)),
+                        4 => {
+                            *map.get_or_insert(key, 50) += 1;
+                            *reference.entry(key).or_insert(50) += 1;
+                        }
+                        1 => {
+                            if let Some(v) = map.get_mut(key) {
+                                *v += 5;
+                            }
+                            if let Some(v) = reference.get_mut(&key) {
+                                *v += 5;
+                            }
+                        }
+                        _ => {
+                            let value = rnd(1000) as u64;
+                            assert_eq!(
+                                map.insert(key, value),
+                                reference.insert(key, value).is_none()
+                            );
+                        }
+                    }
+                }
+                // Remove the oldest keys, emptying whole bricks.
+                let old: Vec<u64> = reference
+                    .keys()
+                    .copied()
+                    .filter(|&k| VirtualGrid::coords(k)[0] < 3 * round)
+                    .collect();
+                for k in old {
+                    assert_eq!(map.remove(k), reference.remove(&k));
+                }
+                assert_eq!(map.len(), reference.len());
+                let mut listed: Vec<(u64, u64)> = map.iter().collect();
+                listed.sort_unstable();
+                let mut want: Vec<(u64, u64)> = reference.iter().map(|(&k, &v)| (k, v)).collect();
+                want.sort_unstable();
+                assert_eq!(listed, want, "round {round}");
+                for x in 0..SIDE + 2 {
+                    for y in 0..SIDE {
+                        for z in 0..SIDE {
+                            let key = VirtualGrid::key(x, y, z);
+                            assert_eq!(map.get(key), reference.get(&key).copied());
+                        }
+                    }
+                }
+            }
+            // A brick emptied is reused for the next new brick, not added to.
+            map.clear();
+            for x in 0..8 {
+                map.insert(VirtualGrid::key(x, 1, 2), x as u64);
+            }
+            for x in 0..8 {
+                assert_eq!(map.remove(VirtualGrid::key(x, 1, 2)), Some(x as u64));
+            }
+            map.insert(VirtualGrid::key(17, 9, 9), 4);
+            assert_eq!(map.bricks.len(), 1);
+            assert_eq!(
+                map.iter().collect::<Vec<_>>(),
+                [(VirtualGrid::key(17, 9, 9), 4)]
+            );
+            map.clear();
+            assert!(map.is_empty());
+            assert_eq!(map.iter().count(), 0);
+            assert_eq!(map.get(VirtualGrid::key(5, 5, 5)), None);
+            assert!(map.insert(VirtualGrid::key(5, 5, 5), 1));
+            assert_eq!(map.get(VirtualGrid::key(5, 5, 5)), Some(1));
         }
     }
 

@@ -4,10 +4,11 @@
 //! what its position and normal are interpolated from), the vertex and normal arrays V and
 //! N, triangle lists bucketed by the number of triangles their cell has (a cell's
 //! triangles are contiguous; a hole left by a removed cell is filled by the bucket's last
-//! cell), and hash maps from edge id to vertex (HE) and from cell id to its case and slot
-//! (HC). An isovalue change walks the store's skip list from the current position to the
-//! new one, collecting the net edge changes; removed edges leave holes that added edges
-//! fill, leftovers are compacted from the end; only cells around changed edges are
+//! cell), and maps from edge id to vertex (HE) and from cell id to its case and slot
+//! (HC), kept in bricks of the lattice (found by arithmetic, no hashing). An isovalue
+//! change walks the store's skip list from the current position to the new one,
+//! collecting the net edge changes; removed edges leave holes that added edges fill,
+//! leftovers are compacted from the end; only cells around changed edges are
 //! re-triangulated, cells around moved vertices get their indices rewritten in place.
 //!
 //! An update costs what changed, not the surface: the full arrays (every vertex moves
@@ -23,11 +24,11 @@ use super::lod::{self, LodMesh, LodParams};
 use super::store::Store;
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice};
-use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing, radix};
+use crate::mc::bricks::BrickMap;
+use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing, radix, VirtualGrid};
 use crate::progress::Progress;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use rustc_hash::FxHashMap;
 use std::cell::{Cell, OnceCell, RefCell};
 use std::time::Instant;
 
@@ -60,7 +61,7 @@ impl EdgeData {
 }
 
 /// The triangles of one cell: where they sit in the bucketed lists.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct CellEntry {
     case: u8,
     /// Triangles per cell of the bucket (0 never stored).
@@ -217,6 +218,107 @@ impl CellOffsets {
     }
 }
 
+/// [`BrickMap`] key of lattice node or cell `i` (a cell is keyed by its lower node).
+#[inline]
+fn grid_key(lattice: &Lattice, i: usize) -> u64 {
+    let [x, y, z] = lattice.coords(i);
+    VirtualGrid::key(x as u32, y as u32, z as u32)
+}
+
+/// Lattice index of a [`BrickMap`] key.
+fn lattice_index(lattice: &Lattice, key: u64) -> usize {
+    let [x, y, z] = VirtualGrid::coords(key).map(|c| c as usize);
+    lattice.index(x, y, z)
+}
+
+/// The [`BrickMap`] of a lattice, indexed densely (4 bytes per 512 nodes): a lookup is
+/// arithmetic and two loads, where a hash map's was a hash, a probe and a cache miss,
+/// and memory stays with the bricks the surface occupies (emptied bricks are reused).
+fn lattice_map<T: Copy + Default>(lattice: &Lattice) -> BrickMap<T> {
+    BrickMap::within(lattice.dims.map(|n| n as u32))
+}
+
+/// (corner, axis) of each local edge of a cell ([`edge_corner_axis`]), as a table for
+/// the per-triangle reads of HE.
+const EDGE_CORNER_AXIS: [(u8, u8); 12] = {
+    let mut t = [(0u8, 0u8); 12];
+    let mut e = 0;
+    while e < 12 {
+        let (k, axis) = edge_corner_axis(e);
+        t[e] = (k as u8, axis as u8);
+        e += 1;
+    }
+    t
+};
+
+/// No vertex: the edge on that axis is off.
+const NO_VERTEX: u32 = u32::MAX;
+
+/// HE: the vertex of each active edge, stored at the edge's lower node (one entry per
+/// axis, [`NO_VERTEX`] where that edge is off), so that a cell's twelve edges are read
+/// with the one brick lookup of its eight corners.
+struct EdgeVertices {
+    lattice: Lattice,
+    map: BrickMap<[u32; 3]>,
+}
+
+impl EdgeVertices {
+    fn new(lattice: &Lattice) -> EdgeVertices {
+        EdgeVertices {
+            lattice: *lattice,
+            map: lattice_map(lattice),
+        }
+    }
+
+    /// Node key and axis of edge `e` (`node · 3 + axis`).
+    #[inline]
+    fn split(&self, e: u32) -> (u64, usize) {
+        (grid_key(&self.lattice, e as usize / 3), e as usize % 3)
+    }
+
+    /// Turns edge `e` on with `vertex`; false (and nothing changed) when it was on.
+    #[inline]
+    fn turn_on(&mut self, e: u32, vertex: u32) -> bool {
+        let (key, axis) = self.split(e);
+        let v = &mut self.map.get_or_insert(key, [NO_VERTEX; 3])[axis];
+        let was_off = *v == NO_VERTEX;
+        if was_off {
+            *v = vertex;
+        }
+        was_off
+    }
+
+    /// Gives edge `e`, which is on, the vertex `vertex`.
+    #[inline]
+    fn set(&mut self, e: u32, vertex: u32) {
+        let (key, axis) = self.split(e);
+        self.map.get_or_insert(key, [NO_VERTEX; 3])[axis] = vertex;
+    }
+
+    /// Turns edge `e` off, returning its vertex if it was on.
+    #[inline]
+    fn turn_off(&mut self, e: u32) -> Option<u32> {
+        let (key, axis) = self.split(e);
+        let v = self.map.get_mut(key)?;
+        let vertex = std::mem::replace(&mut v[axis], NO_VERTEX);
+        if *v == [NO_VERTEX; 3] {
+            self.map.remove(key);
+        }
+        (vertex != NO_VERTEX).then_some(vertex)
+    }
+
+    /// Vertices of the edges from each corner of the cell keyed `cell` ([`NO_VERTEX`]
+    /// where off).
+    #[inline]
+    fn around(&self, cell: u64) -> [[u32; 3]; 8] {
+        self.map.corners_or(cell, [NO_VERTEX; 3])
+    }
+}
+
+/// HC: case and bucket slot of each active cell, keyed by the cell's lower node
+/// ([`grid_key`]).
+type CellTable = BrickMap<CellEntry>;
+
 /// An isosurface that slides: open a store, set isovalues, read the arrays.
 ///
 /// Not `Sync`: the full arrays are filled lazily behind `&self`.
@@ -227,8 +329,8 @@ pub struct Slider {
     iso: f64,
     edges: Vec<u32>,
     data: Vec<EdgeData>,
-    he: FxHashMap<u32, u32>,
-    hc: FxHashMap<u32, CellEntry>,
+    he: EdgeVertices,
+    hc: CellTable,
     buckets: Vec<Bucket>,
     /// V and N at `iso`, computed on first read after an update.
     vertices: OnceCell<Vertices>,
@@ -259,14 +361,18 @@ impl Slider {
             })
             .collect();
         let offsets = CellOffsets::new(store.lattice());
+        let (he, hc) = (
+            EdgeVertices::new(store.lattice()),
+            lattice_map(store.lattice()),
+        );
         let mut slider = Slider {
             store,
             rank: 0,
             iso: 0.0,
             edges: Vec::new(),
             data: Vec::new(),
-            he: FxHashMap::default(),
-            hc: FxHashMap::default(),
+            he,
+            hc,
             buckets,
             vertices: OnceCell::new(),
             spare_vertices: RefCell::default(),
@@ -291,7 +397,7 @@ impl Slider {
         self.iso = self.store.value_range().0 as f64 - 1.0;
         self.edges.clear();
         self.data.clear();
-        self.he.clear();
+        self.he.map.clear();
         self.hc.clear();
         for b in &mut self.buckets {
             b.triangles.clear();
@@ -380,7 +486,10 @@ impl Slider {
 
     /// Active cells and their cases, sorted by cell id.
     pub fn cells(&self) -> Vec<(u32, u8)> {
-        let mut v: Vec<(u32, u8)> = self.hc.iter().map(|(&c, e)| (c, e.case)).collect();
+        let lattice = self.store.lattice();
+        let mut v: Vec<(u32, u8)> = (self.hc.iter())
+            .map(|(key, e)| (lattice_index(lattice, key) as u32, e.case))
+            .collect();
         v.sort_unstable();
         v
     }
@@ -413,7 +522,10 @@ impl Slider {
         if let Some(m) = self.lod_mesh.get() {
             return Ok(m);
         }
-        let mut active: Vec<u32> = self.hc.keys().copied().collect();
+        let lattice = self.store.lattice();
+        let mut active: Vec<u32> = (self.hc.iter())
+            .map(|(key, _)| lattice_index(lattice, key) as u32)
+            .collect();
         active.sort_unstable();
         let mesh = lod::extract(&self.store, self.iso, &active, &self.lod)?;
         Ok(self.lod_mesh.get_or_init(|| mesh))
@@ -636,7 +748,7 @@ impl Slider {
 
         // Cells around changed edges change case: their triangles go.
         for &cell in dirty.iter() {
-            if let Some(entry) = self.hc.remove(&cell) {
+            if let Some(entry) = self.hc.remove(grid_key(&lattice, cell as usize)) {
                 let b = &self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
                 change
@@ -647,7 +759,7 @@ impl Slider {
         }
         // Edges out leave holes ...
         for &e in removed.iter() {
-            let Some(v) = self.he.remove(&e) else {
+            let Some(v) = self.he.turn_off(e) else {
                 return Err(self.corrupt(format!("edge {e} turns off but is not on")));
             };
             self.edges[v as usize] = u32::MAX;
@@ -656,27 +768,22 @@ impl Slider {
         // ... that edges in fill first.
         holes.sort_unstable_by(|a, b| b.cmp(a));
         for &e in added.iter() {
-            if self.he.contains_key(&e) {
-                return Err(self.corrupt(format!("edge {e} turns on but is already on")));
-            }
             let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
             if node >= self.store.nodes || lattice.coords(node)[axis] + 1 >= lattice.dims[axis] {
                 return Err(self.corrupt(format!("edge {e} is not a lattice edge")));
             }
             let data = self.edge_data(e)?;
-            let v = match holes.pop() {
-                Some(h) => {
-                    self.edges[h as usize] = e;
-                    self.data[h as usize] = data;
-                    h
-                }
-                None => {
-                    self.edges.push(e);
-                    self.data.push(data);
-                    (self.edges.len() - 1) as u32
-                }
-            };
-            self.he.insert(e, v);
+            let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
+            if !self.he.turn_on(e, v) {
+                return Err(self.corrupt(format!("edge {e} turns on but is already on")));
+            }
+            if holes.pop().is_some() {
+                self.edges[v as usize] = e;
+                self.data[v as usize] = data;
+            } else {
+                self.edges.push(e);
+                self.data.push(data);
+            }
         }
         // Leftover holes: move vertices from the end into them.
         holes.sort_unstable();
@@ -693,15 +800,16 @@ impl Slider {
             let d = self.data.pop().expect("data parallels edges");
             self.edges[h as usize] = e;
             self.data[h as usize] = d;
-            self.he.insert(e, h);
+            self.he.set(e, h);
             change.moved_vertices.push(((last - 1) as u32, h));
             Self::edge_cells(&lattice, e, reindex);
         }
         ascending_unique(reindex, marks);
         // One scratch list for every cell's triangles, not an allocation per cell.
         for &cell in reindex.iter() {
-            if let Some(&entry) = self.hc.get(&cell) {
-                self.cell_triangles(cell, entry.case, tris)?;
+            let key = grid_key(&lattice, cell as usize);
+            if let Some(entry) = self.hc.get(key) {
+                self.cell_triangles(cell, key, entry.case, tris)?;
                 let b = &mut self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
                 b.triangles[s..s + b.size].copy_from_slice(tris);
@@ -713,7 +821,8 @@ impl Slider {
             if case == 0 || case == 255 {
                 continue;
             }
-            self.cell_triangles(cell, case, tris)?;
+            let key = grid_key(&lattice, cell as usize);
+            self.cell_triangles(cell, key, case, tris)?;
             change.added_triangles.extend_from_slice(tris);
             let b = &mut self.buckets[tris.len()];
             b.triangles.extend_from_slice(tris);
@@ -723,7 +832,7 @@ impl Slider {
                 bucket: tris.len() as u8,
                 slot: (b.cells.len() - 1) as u32,
             };
-            self.hc.insert(cell, entry);
+            self.hc.insert(key, entry);
         }
         Ok(())
     }
@@ -738,7 +847,7 @@ impl Slider {
             b.triangles
                 .copy_within(last * b.size..(last + 1) * b.size, slot * b.size);
             b.cells[slot] = moved;
-            if let Some(m) = self.hc.get_mut(&moved) {
+            if let Some(m) = (self.hc).get_mut(grid_key(self.store.lattice(), moved as usize)) {
                 m.slot = slot as u32;
             }
         }
@@ -758,22 +867,23 @@ impl Slider {
         Ok(case)
     }
 
-    /// Triangles of `cell` in `case`, as vertex indices through HE, into `out` (cleared).
-    /// Each of the cell's edges is looked up in HE once, however many triangles share it.
-    fn cell_triangles(&self, cell: u32, case: u8, out: &mut Vec<[u32; 3]>) -> Result<()> {
-        let mut vertex = [u32::MAX; 12];
+    /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE, into
+    /// `out` (cleared). The cell's edges come from one HE brick lookup (eight where the
+    /// cell straddles bricks).
+    fn cell_triangles(&self, cell: u32, key: u64, case: u8, out: &mut Vec<[u32; 3]>) -> Result<()> {
+        let around = self.he.around(key);
         out.clear();
         for tri in &case_table().triangles[case as usize] {
             let mut t = [0u32; 3];
             for (k, &local) in tri.iter().enumerate() {
-                let local = local as usize;
-                if vertex[local] == u32::MAX {
-                    let e = (3 * cell as usize + self.offsets.edges[local]) as u32;
-                    vertex[local] = *self.he.get(&e).ok_or_else(|| {
+                let (corner, axis) = EDGE_CORNER_AXIS[local as usize];
+                t[k] = around[corner as usize][axis as usize];
+                if t[k] == NO_VERTEX {
+                    let e = 3 * cell as usize + self.offsets.edges[local as usize];
+                    return Err(
                         self.corrupt(format!("cell {cell} in case {case} needs edge {e}, not on"))
-                    })?;
+                    );
                 }
-                t[k] = vertex[local];
             }
             out.push(t);
         }
