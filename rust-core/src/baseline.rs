@@ -8,7 +8,7 @@ use crate::correctors::vertices::Placement;
 use crate::correctors::{clip_cells, surface, virtual_grid, Extraction, Params, Stats};
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
-use crate::field::sph::SphField;
+use crate::field::sph::{SphField, NODE_TILE};
 use crate::mc::{case_index, ActiveCell, VirtualGrid};
 use crate::mesh::Mesh;
 use crate::progress::Progress;
@@ -63,14 +63,34 @@ pub fn extract(
     let slice = nodes[0] * nodes[1];
     let mut samples = vec![(0.0, 0.0); count as usize];
     progress.phase("resampling", 0.0, 0.5)?;
-    for (z, chunk) in samples.chunks_mut(slice).enumerate() {
-        chunk.par_iter_mut().enumerate().for_each(|(i, s)| {
-            let (x, y) = (i % nodes[0], i / nodes[0]);
-            *s = field.value_and_weight(
-                grid.node_position(VirtualGrid::key(x as u32, y as u32, z as u32)),
-            );
-        });
-        progress.report((z + 1) as f64 / nodes[2] as f64)?;
+    // Slabs of whole node tiles, listed tile by tile: the field evaluates a tile's
+    // nodes together and needs no sorting.
+    let tiles = nodes.map(|n| n.div_ceil(NODE_TILE));
+    for (b, slab) in samples.chunks_mut(slice * NODE_TILE).enumerate() {
+        let depth = slab.len() / slice;
+        let keys: Vec<u64> = (0..tiles[0] * tiles[1])
+            .into_par_iter()
+            .flat_map_iter(|t| {
+                let corner = [t % tiles[0], t / tiles[0]].map(|c| c * NODE_TILE);
+                (0..depth).flat_map(move |z| {
+                    (0..NODE_TILE).flat_map(move |y| {
+                        (0..NODE_TILE).filter_map(move |x| {
+                            let (x, y) = (corner[0] + x, corner[1] + y);
+                            let z = b * NODE_TILE + z;
+                            (x < nodes[0] && y < nodes[1])
+                                .then(|| VirtualGrid::key(x as u32, y as u32, z as u32))
+                        })
+                    })
+                })
+            })
+            .collect();
+        let values = field.values_and_weights_at_nodes(&grid, &keys);
+        let z0 = b * NODE_TILE;
+        for (&k, v) in keys.iter().zip(values) {
+            let [x, y, z] = VirtualGrid::coords(k).map(|c| c as usize);
+            slab[x + nodes[0] * (y + nodes[1] * (z - z0))] = v;
+        }
+        progress.report((z0 + depth) as f64 / nodes[2] as f64)?;
     }
     let dense = DenseNodes { nodes, samples };
     let mut stats = Stats {

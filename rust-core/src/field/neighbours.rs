@@ -121,11 +121,24 @@ impl NeighbourGrid {
     #[inline]
     pub fn candidate_ranges(&self, p: DVec3, reach: i64) -> CandidateRanges<'_> {
         let c = self.cell_coords(p);
+        self.cell_block(c.map(|c| c - reach), c.map(|c| c + reach))
+    }
+
+    /// Each sorted-slot range that may hold a particle inside the box `lo..=hi`: the
+    /// cells the box overlaps, z-row by y-row, so the slots come in ascending order.
+    #[inline]
+    pub fn ranges_in_box(&self, lo: DVec3, hi: DVec3) -> CandidateRanges<'_> {
+        self.cell_block(self.cell_coords(lo), self.cell_coords(hi))
+    }
+
+    /// The ranges of the cell block `first..=last` (cell coordinates, clipped to the grid).
+    #[inline]
+    fn cell_block(&self, first: [i64; 3], last: [i64; 3]) -> CandidateRanges<'_> {
         let mut lo = [0usize; 3];
         let mut hi = [0usize; 3];
         for a in 0..3 {
             let d = self.dims[a] as i64;
-            let (l, h) = ((c[a] - reach).max(0), (c[a] + reach).min(d - 1));
+            let (l, h) = (first[a].max(0), last[a].min(d - 1));
             if l > h {
                 return CandidateRanges::empty(self);
             }
@@ -199,7 +212,7 @@ impl Iterator for CandidateRanges<'_> {
 /// SSE4.1 `roundsd`): truncate, then step down for negative non-integers. Equal to it for
 /// every finite `v` within ±2⁶³; NaN gives 0 as `as` does.
 #[inline(always)]
-fn floor_i64(v: f64) -> i64 {
+pub(crate) fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
     t - i64::from((t as f64) > v)
 }

@@ -164,6 +164,9 @@ macro_rules! with_kernel {
     };
 }
 
+mod nodes;
+pub(crate) use nodes::TILE as NODE_TILE;
+
 /// One particle as the evaluation loop wants it, stored in neighbour-grid order.
 #[derive(Clone, Copy, Debug)]
 struct Packed {
@@ -387,10 +390,18 @@ impl SphField {
         if UNIT {
             a = s;
         }
-        if self.shepard {
-            a = if s > 0.0 { a / s } else { 0.0 };
+        (self.normalised(a, s), s)
+    }
+
+    /// A from its sum Σ V_j A_j W and the sum of weights S: divided by S under Shepard
+    /// normalisation (0 where no particle reaches).
+    #[inline(always)]
+    fn normalised(&self, a: f64, s: f64) -> f64 {
+        match self.shepard {
+            true if s > 0.0 => a / s,
+            true => 0.0,
+            false => a,
         }
-        (a, s)
     }
 
     /// Value, gradient, sum of weights and its gradient at `x`.

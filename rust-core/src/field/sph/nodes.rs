@@ -1,0 +1,293 @@
+//! The field at many nodes of a lattice at once: what the surface trackers and the
+//! full-grid baseline ask for.
+//!
+//! Evaluating node by node, each node scans its whole candidate block of particles and
+//! keeps about one in four (the support sphere fills a quarter of the block). Here the
+//! nodes are taken an 8×8×8 tile at a time and the loop is turned around: each particle
+//! near the tile finds, row by row, the nodes its support covers, and the distance test
+//! runs only for those. A tile's particles come in ascending slot order, the order the
+//! node-by-node loop sums in, and each node's distance and weight are computed by the same
+//! expressions, so every node's value is the same to the bit as
+//! [`SphField::value_and_weight`] at its position.
+
+use super::{Kernel, SphField};
+use crate::field::neighbours::floor_i64;
+use crate::mc::radix;
+use crate::mc::VirtualGrid;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Nodes per tile edge (a tile is `TILE`³ nodes; a row's nodes fit one byte's bits).
+pub(crate) const TILE: usize = 8;
+const SHIFT: u32 = TILE.trailing_zeros();
+const LOCAL: u32 = TILE as u32 - 1;
+
+impl SphField {
+    /// (A, S) at every node of `nodes` (keys of `grid`), in the order given; equal to the
+    /// bit to [`SphField::value_and_weight`] at [`VirtualGrid::node_position`].
+    pub fn values_and_weights_at_nodes(
+        &self,
+        grid: &VirtualGrid,
+        nodes: &[u64],
+    ) -> Vec<(f64, f64)> {
+        // Tile key above the node's place in its tile: sorting groups each tile's nodes.
+        let mut order: Vec<(u64, u32)> = nodes
+            .par_iter()
+            .enumerate()
+            .map(|(i, &n)| {
+                let [x, y, z] = VirtualGrid::coords(n);
+                let tile = VirtualGrid::key(x >> SHIFT, y >> SHIFT, z >> SHIFT);
+                let local = (x & LOCAL) | (y & LOCAL) << SHIFT | (z & LOCAL) << (2 * SHIFT);
+                (tile << (3 * SHIFT) | local as u64, i as u32)
+            })
+            .collect();
+        // Callers with whole tiles hand them over in this order already.
+        if !order.windows(2).all(|w| w[0].0 <= w[1].0) {
+            radix::sort_by_key(&mut order, |&(k, _)| k);
+        }
+        let mut tiles = Vec::new();
+        let mut start = 0;
+        for i in 1..=order.len() {
+            if i == order.len() || order[i].0 >> (3 * SHIFT) != order[start].0 >> (3 * SHIFT) {
+                tiles.push(start..i);
+                start = i;
+            }
+        }
+        let unit = self.unit_values;
+        let samples: Vec<(f64, f64)> = tiles
+            .par_iter()
+            .flat_map_iter(|r| {
+                let tile = &order[r.clone()];
+                if unit {
+                    with_kernel!(self.kernel, K => self.tile::<true>(K, grid, tile))
+                } else {
+                    with_kernel!(self.kernel, K => self.tile::<false>(K, grid, tile))
+                }
+            })
+            .collect();
+        let mut out = vec![(0.0, 0.0); nodes.len()];
+        for (&(_, i), s) in order.iter().zip(samples) {
+            out[i as usize] = s;
+        }
+        out
+    }
+
+    /// The samples of one tile's nodes (`(tile key and local index, _)`, sorted), in
+    /// that order.
+    #[inline(always)]
+    fn tile<const UNIT: bool>(
+        &self,
+        kernel: Kernel,
+        grid: &VirtualGrid,
+        tile: &[(u64, u32)],
+    ) -> Vec<(f64, f64)> {
+        let key = tile[0].0 >> (3 * SHIFT);
+        let corner = VirtualGrid::coords(key).map(|c| c << SHIFT);
+        // Which nodes are wanted, one byte per row (y, z), and their bounding box.
+        let mut rows = [0u8; TILE * TILE];
+        let (mut lo, mut hi) = ([TILE; 3], [0usize; 3]);
+        for &(k, _) in tile {
+            let l = k as usize & (TILE * TILE * TILE - 1);
+            let at = [l & (TILE - 1), l >> SHIFT & (TILE - 1), l >> (2 * SHIFT)];
+            rows[at[1] + TILE * at[2]] |= 1 << at[0];
+            for a in 0..3 {
+                lo[a] = lo[a].min(at[a]);
+                hi[a] = hi[a].max(at[a]);
+            }
+        }
+        // Node coordinates along each axis, computed as `node_position` computes them.
+        let axis = |a: usize| -> [f64; TILE] {
+            std::array::from_fn(|i| {
+                let lattice = grid.offset[a] + (corner[a] as usize + i) as i64;
+                grid.origin[a] + lattice as f64 * grid.cell_size
+            })
+        };
+        let (xs, ys, zs) = (axis(0), axis(1), axis(2));
+        let inv_c = 1.0 / grid.cell_size;
+        let reach = DVec3::splat(self.max_support);
+        let box_lo = DVec3::new(xs[lo[0]], ys[lo[1]], zs[lo[2]]) - reach;
+        let box_hi = DVec3::new(xs[hi[0]], ys[hi[1]], zs[hi[2]]) + reach;
+
+        let mut a_sum = [0.0f64; TILE * TILE * TILE];
+        let mut s_sum = [0.0f64; TILE * TILE * TILE];
+        // The local index range along one axis that a support of radius `r` (in cells)
+        // around `t` (in cells from the tile's first node) can reach, a node wider on
+        // each side than rounding could need; the exact test is made per node.
+        let span = |t: f64, r: f64, a: usize| -> std::ops::Range<usize> {
+            let first = (floor_i64(t - r) - 1).max(lo[a] as i64);
+            let last = (floor_i64(t + r) + 2).min(hi[a] as i64);
+            if last < first {
+                0..0
+            } else {
+                first as usize..last as usize + 1
+            }
+        };
+        for range in self.grid.ranges_in_box(box_lo, box_hi) {
+            for p in &self.particles[range] {
+                let r = p.support2.sqrt() * inv_c;
+                let ys_reached = span((p.pos.y - ys[0]) * inv_c, r, 1);
+                let tx = (p.pos.x - xs[0]) * inv_c;
+                for z in span((p.pos.z - zs[0]) * inv_c, r, 2) {
+                    let dz = zs[z] - p.pos.z;
+                    let dz2 = dz * dz;
+                    if dz2 >= p.support2 {
+                        continue;
+                    }
+                    for y in ys_reached.clone() {
+                        let wanted = rows[y + TILE * z];
+                        if wanted == 0 {
+                            continue;
+                        }
+                        let dy = ys[y] - p.pos.y;
+                        // r² = (dx² + dy²) + dz² is at least dy² + dz² in floating point
+                        // too, so a row this far is out for every node on it.
+                        let dyz2 = dy * dy + dz2;
+                        if dyz2 >= p.support2 {
+                            continue;
+                        }
+                        let rx = (p.support2 - dyz2).sqrt() * inv_c;
+                        let first = (floor_i64(tx - rx) - 1).max(0) as u32;
+                        let last = (floor_i64(tx + rx) + 2).min(TILE as i64 - 1);
+                        if last < first as i64 {
+                            continue;
+                        }
+                        let span_bits = ((1u32 << (last as u32 + 1)) - (1u32 << first)) as u8;
+                        let mut bits = wanted & span_bits;
+                        let row = TILE * (y + TILE * z);
+                        while bits != 0 {
+                            let x = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            let dx = xs[x] - p.pos.x;
+                            let r2 = dx * dx + dy * dy + dz * dz;
+                            if r2 < p.support2 {
+                                let w = p.weight_scale * kernel.shape(r2.sqrt() * p.inv_h).0;
+                                if !UNIT {
+                                    a_sum[row + x] += w * p.value;
+                                }
+                                s_sum[row + x] += w;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        tile.iter()
+            .map(|&(k, _)| {
+                let l = k as usize & (TILE * TILE * TILE - 1);
+                let s = s_sum[l];
+                let a = if UNIT { s } else { a_sum[l] };
+                (self.normalised(a, s), s)
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Quantity, SmoothingLength, SphSettings};
+    use super::*;
+    use crate::field::particles::{Attribute, ParticleData};
+
+    /// A jittered slab of particles with smoothing lengths varying by 2×, a pressure
+    /// array, and a few loose particles far out.
+    fn particles() -> ParticleData {
+        let mut next = crate::test_rng::unit(5);
+        let mut positions = Vec::new();
+        for i in 0..14 {
+            for j in 0..11 {
+                for k in 0..6 {
+                    let jitter = DVec3::new(next(), next(), next()) - DVec3::splat(0.5);
+                    positions.push((DVec3::new(i as f64, j as f64, k as f64) + jitter * 0.6) * 0.1);
+                }
+            }
+        }
+        positions.extend([DVec3::new(2.0, 0.3, 0.2), DVec3::new(-0.7, 1.4, 0.9)]);
+        let n = positions.len();
+        let h = (0..n).map(|_| 0.07 + 0.07 * next()).collect();
+        let p = (0..n).map(|_| 1000.0 + 500.0 * next()).collect();
+        ParticleData {
+            positions,
+            attributes: vec![Attribute::scalar("h", h), Attribute::scalar("p", p)],
+        }
+    }
+
+    /// Every node of a box of the lattice that covers the particles and a margin, in a
+    /// scattered order, plus a sparse sample of a second, offset window.
+    fn nodes(grid: &VirtualGrid) -> Vec<u64> {
+        let mut next = crate::test_rng::lcg(3);
+        let mut keys = Vec::new();
+        for z in 0..grid.cells[2] + 1 {
+            for y in 0..grid.cells[1] + 1 {
+                for x in 0..grid.cells[0] + 1 {
+                    // Whole tiles in one region, one node in three elsewhere: tiles
+                    // both full and sparse.
+                    if (x < 16 && y < 8) || next().is_multiple_of(3) {
+                        keys.push(VirtualGrid::key(x, y, z));
+                    }
+                }
+            }
+        }
+        // Not sorted: the caller's order must come back.
+        for i in (1..keys.len()).rev() {
+            keys.swap(i, next() as usize % (i + 1));
+        }
+        keys
+    }
+
+    #[test]
+    fn tiles_give_each_node_the_pointwise_value_to_the_bit() {
+        let data = particles();
+        for kernel in Kernel::ALL {
+            for (quantity, shepard) in [
+                (Quantity::SumOfWeights, false),
+                (Quantity::Scalar("p".into()), false),
+                (Quantity::Scalar("p".into()), true),
+            ] {
+                let settings = SphSettings {
+                    kernel,
+                    smoothing_length: SmoothingLength::Array("h".into()),
+                    quantity,
+                    shepard,
+                    ..SphSettings::default()
+                };
+                let field = SphField::new(&data, &settings).unwrap();
+                let (lo, hi) = field.bounds();
+                let margin = DVec3::splat(0.3);
+                let grid = VirtualGrid::on_lattice(
+                    DVec3::new(-0.013, 0.007, 0.0),
+                    0.037,
+                    lo - margin,
+                    hi + margin,
+                )
+                .unwrap();
+                let keys = nodes(&grid);
+                let tiled = field.values_and_weights_at_nodes(&grid, &keys);
+                let mut reached = 0;
+                for (&n, &got) in keys.iter().zip(&tiled) {
+                    let x = grid.node_position(n);
+                    let want = field.value_and_weight(x);
+                    assert!(
+                        got.0.to_bits() == want.0.to_bits() && got.1.to_bits() == want.1.to_bits(),
+                        "{kernel:?}, shepard {shepard}, node {:?}: {got:?} vs {want:?}",
+                        VirtualGrid::coords(n)
+                    );
+                    reached += usize::from(want.1 > 0.0);
+                }
+                assert!(reached > 5000, "most nodes see particles ({reached})");
+                assert!(reached < keys.len(), "some nodes see none");
+            }
+        }
+    }
+
+    #[test]
+    fn no_nodes_give_no_samples() {
+        let data = particles();
+        let settings = SphSettings {
+            smoothing_length: SmoothingLength::Constant(0.1),
+            ..SphSettings::default()
+        };
+        let field = SphField::new(&data, &settings).unwrap();
+        let grid = VirtualGrid::covering(DVec3::ZERO, DVec3::ONE, 0.1).unwrap();
+        assert!(field.values_and_weights_at_nodes(&grid, &[]).is_empty());
+    }
+}
