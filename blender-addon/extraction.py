@@ -42,6 +42,14 @@ def isobar_module():
     return isobar
 
 
+def auto_backend_note(backend: str) -> str:
+    """Why Backend `backend` runs on the CPU: the core's reason (the text the CLI prints
+    after "backend auto: running on the CPU (") for AUTO without a hardware GPU, else ""."""
+    if backend.upper() != "AUTO":
+        return ""
+    return isobar_module().auto_backend_note() or ""
+
+
 def _decimal(value):
     """Blender stores float properties in single precision: 0.05 comes back as
     0.05000000074505806. Return the shortest decimal that float32 value stands for (0.05),
@@ -298,6 +306,7 @@ __all__ = [
     "VELOCITY_ATTRIBUTE",
     "VELOCITY_NAMES",
     "array_infos",
+    "auto_backend_note",
     "blender_name",
     "extract",
     "frame_mesh_from_surface",

@@ -368,6 +368,7 @@ def update_object(
             _, n, m, origin = _shown[object_key(obj)]
             message = f"Frame {frame}: {n} vertices, {m} triangles ({origin})"
             _set_status(settings, message, False)
+            _set_backend_note(settings)
             return True, message
         mesh_io.write(obj.data, mesh)
         if key is not None:
@@ -378,6 +379,7 @@ def update_object(
         timing = f", {seconds:.2f} s" if isinstance(seconds, (int, float)) and origin != "bake" else ""
         message = f"Frame {frame}: {mesh.n_points} vertices, {mesh.n_triangles} triangles ({origin}{timing})"
         _set_status(settings, message, False)
+        _set_backend_note(settings)
         return True, message
     except Exception as error:  # noqa: BLE001 - nothing may raise into Blender
         message = describe_error(error)
@@ -407,6 +409,14 @@ def _set_status(settings, message: str, is_error: bool) -> None:
         settings.status = message
     if settings.status_error != is_error:
         settings.status_error = is_error
+
+
+def _set_backend_note(settings) -> None:
+    """Keeps ``settings.backend_note`` (shown in the panel, reported by the operators)
+    saying why Backend Auto runs on the CPU, "" otherwise."""
+    note = extraction.auto_backend_note(settings.backend)
+    if settings.backend_note != note:
+        settings.backend_note = note
 
 
 def update_all(scene, depsgraph=None) -> None:

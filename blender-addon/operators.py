@@ -50,6 +50,13 @@ def _default_material():
     return material
 
 
+def _report_backend_note(operator, settings) -> None:
+    """A warning, with the CLI's words, when Backend Auto ran on the CPU (the user chose
+    Auto and may expect the GPU); the update that just ran set ``backend_note``."""
+    if settings.backend_note:
+        operator.report({"WARNING"}, f"backend auto: running on the CPU ({settings.backend_note})")
+
+
 class _SurfaceParameters:
     """Parameters asked for when a surface is made (the panel has them all)."""
 
@@ -159,6 +166,7 @@ class ISOBAR_OT_import_sequence(bpy.types.Operator, ImportHelper, _SurfaceParame
             self.report({"WARNING"}, f"Imported '{obj.name}', but the current frame failed: {message}")
         else:
             self.report({"INFO"}, f"Imported {len(seq.numbers)} files as '{obj.name}': {message}")
+            _report_backend_note(self, settings)
         return {"FINISHED"}
 
 
@@ -314,6 +322,7 @@ class ISOBAR_OT_surface_from_object(bpy.types.Operator, _SurfaceParameters):
             self.report({"WARNING"}, f"Made '{obj.name}', but the current frame failed: {message}")
         else:
             self.report({"INFO"}, f"Made '{obj.name}': {message}")
+            _report_backend_note(self, settings)
         return {"FINISHED"}
 
 
@@ -338,6 +347,7 @@ class ISOBAR_OT_refresh(bpy.types.Operator):
             self.report({"ERROR"}, message)
             return {"CANCELLED"}
         self.report({"INFO"}, message)
+        _report_backend_note(self, obj.isobar)
         return {"FINISHED"}
 
 

@@ -95,6 +95,8 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
         layout.prop(settings, "grid_factor")
         layout.prop(settings, "method")
         layout.prop(settings, "backend")
+        if settings.backend == "AUTO" and settings.backend_note:
+            layout.label(text=f"Running on the CPU: {settings.backend_note}", icon="INFO")
         if settings.method == "ADAPTIVE":
             layout.prop(settings, "splash_threshold")
             layout.prop(settings, "max_error")

@@ -293,6 +293,10 @@ class IsobarSettings(bpy.types.PropertyGroup):
     )
     status: StringProperty(name="Status", description="Result of the last update of this surface")
     status_error: BoolProperty(name="Status Is Error", default=False)
+    backend_note: StringProperty(
+        name="Backend Note",
+        description="Why Backend Auto runs on the CPU on this machine (empty: Backend is not Auto, or it runs on a GPU)",
+    )
 
 
 def _slide(self, context):

@@ -286,6 +286,16 @@ extern "C" {
 // the next isobar call on the same thread.
 const char *isobar_last_error_message(void);
 
+// Why `ISOBAR_BACKEND_AUTO` runs on the CPU on this machine, for hosts to tell their
+// user: `*note` is set to "" when AUTO would run on the GPU (a hardware adapter), else to
+// the reason the CLI prints after "backend auto: running on the CPU (" (no adapter, a
+// software rasteriser only, or a build without the `gpu` feature). Thread-local storage,
+// valid until the next isobar call on the same thread, as `isobar_last_error_message`.
+// A status rather than a bare string: a panic while probing the adapter comes back as
+// `ISOBAR_ERR_INTERNAL` with its message, never as an "" that would read as "on the GPU".
+// The first call may take a moment (it opens the GPU device once per process).
+enum IsobarStatus isobar_auto_backend_note(const char **note);
+
 // The ABI version (`ISOBAR_ABI_VERSION` of the library actually loaded).
 uint32_t isobar_abi_version(void);
 

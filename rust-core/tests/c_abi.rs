@@ -1,5 +1,6 @@
 //! Compiles tests/c/capi_test.c against include/isobar.h and the shared library with
-//! `gcc -std=c11 -Wall -Wextra -Werror`, then runs it.
+//! `gcc -std=c11 -Wall -Wextra -Werror`, then runs it with the CLI's `--backend auto`
+//! reason as its argument (the C ABI's note must say the same).
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -40,7 +41,7 @@ fn c_program_extracts_through_the_header_and_library() {
         "gcc failed:\n{}",
         String::from_utf8_lossy(&cc.stderr)
     );
-    let run = Command::new(&out).output().unwrap();
+    let run = Command::new(&out).arg(cli_auto_note()).output().unwrap();
     let _ = std::fs::remove_file(&out);
     assert!(
         run.status.success(),
@@ -48,4 +49,31 @@ fn c_program_extracts_through_the_header_and_library() {
         String::from_utf8_lossy(&run.stdout),
         String::from_utf8_lossy(&run.stderr)
     );
+}
+
+/// What `isobar sph --backend auto` prints on this machine after "backend auto: running on
+/// the CPU (" up to the line's closing parenthesis; "" when it prints no such line (AUTO
+/// runs on a GPU here).
+fn cli_auto_note() -> String {
+    let frame = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/splashsurf/double_dam_break_frame_26_4732_particles.vtk");
+    let ply = std::env::temp_dir().join(format!("isobar_capi_auto_{}.ply", std::process::id()));
+    let run = Command::new(env!("CARGO_BIN_EXE_isobar"))
+        .arg("sph")
+        .arg(&frame)
+        .args(["--iso", "0.6", "--h", "0.05", "--backend", "auto", "-o"])
+        .arg(&ply)
+        .output()
+        .expect("the isobar CLI runs");
+    let _ = std::fs::remove_file(&ply);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        run.status.success(),
+        "isobar sph --backend auto failed:\n{err}"
+    );
+    const LEAD: &str = "backend auto: running on the CPU (";
+    err.lines()
+        .find_map(|l| l.strip_prefix(LEAD)?.strip_suffix(')'))
+        .unwrap_or_default()
+        .to_string()
 }

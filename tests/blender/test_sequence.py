@@ -281,3 +281,36 @@ def test_adaptive_method(scene, isobar, demo_sequence):
     assert not settings.status_error, settings.status
     assert_mesh_equals(obj, correctors)
     settings.backend = "CPU"
+
+
+class _Reports:
+    """Stands in for a running operator: collects its reports."""
+
+    def __init__(self, object_name):
+        self.object_name = object_name
+        self.reports = []
+
+    def report(self, kind, message):
+        self.reports.append((set(kind), message))
+
+
+def test_backend_auto_on_the_cpu_is_reported_with_the_core_reason(scene, addon, isobar, demo_sequence):
+    # Without a hardware GPU (lavapipe in CI is a software rasteriser) Auto runs on the CPU:
+    # the surface keeps the reason (shown in the panel) and the operators warn with the
+    # CLI's line; Backend CPU has no note.
+    note = isobar.auto_backend_note() or ""
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    assert settings.backend == "CPU" and settings.backend_note == ""
+    settings.backend = "AUTO"  # a live update re-extracts
+    assert not settings.status_error, settings.status
+    assert settings.backend_note == note
+    op = _Reports(obj.name)
+    assert addon.operators.ISOBAR_OT_refresh.execute(op, bpy.context) == {"FINISHED"}
+    warnings = [m for kind, m in op.reports if "WARNING" in kind]
+    assert warnings == ([f"backend auto: running on the CPU ({note})"] if note else []), op.reports
+    settings.backend = "CPU"
+    assert settings.backend_note == ""
+    op = _Reports(obj.name)
+    addon.operators.ISOBAR_OT_refresh.execute(op, bpy.context)
+    assert not [m for kind, m in op.reports if "WARNING" in kind], op.reports

@@ -45,9 +45,23 @@ static int32_t cancel_at_once(void *user, double fraction, const char *phase) {
     return 1;
 }
 
-int main(void) {
+/* argv[1], when given, is what `isobar ... --backend auto` printed on this machine after
+ * "backend auto: running on the CPU (" ("" when it printed no such line): the note must
+ * be the same text, so every host that shows it tells the user what the CLI does. */
+int main(int argc, char **argv) {
     CHECK(isobar_abi_version() == ISOBAR_ABI_VERSION, "ABI %u", isobar_abi_version());
     CHECK(strlen(isobar_version()) > 0, "version");
+
+    {
+        const char *note = NULL;
+        CHECK(isobar_auto_backend_note(&note) == ISOBAR_STATUS_OK, "auto backend note");
+        CHECK(note != NULL, "auto backend note is NULL");
+        if (note != NULL && argc > 1)
+            CHECK(strcmp(note, argv[1]) == 0, "auto backend note '%s' differs from the CLI's '%s'", note, argv[1]);
+        CHECK(isobar_auto_backend_note(NULL) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "NULL note pointer");
+        CHECK(strstr(isobar_last_error_message(), "note") != NULL, "message names note: %s",
+              isobar_last_error_message());
+    }
 
     const double centre[3] = {0.5, -0.25, 1.0};
     const double h = 0.4, value = 3.0, volume = 0.7;

@@ -113,3 +113,32 @@ def test_backend_is_checked():
     # The full-grid baseline runs on the CPU only: a GPU request is refused, not ignored.
     with pytest.raises(isobar.InvalidArgumentError, match="CPU only"):
         isobar.extract(np.zeros((1, 3)), 0.5, h=0.1, full_grid=True, backend="gpu")
+
+
+CPU_LEAD = "backend auto: running on the CPU ("
+
+
+def cli_auto_note(cli, dam_break_path, tmp_path):
+    """What `isobar sph --backend auto` says after CPU_LEAD up to the line's ')' (None: no
+    such line, AUTO runs on a GPU here)."""
+    run = subprocess.run(
+        [str(cli), "sph", str(dam_break_path), "--iso", "0.6", "--h", "0.05", "--backend", "auto",
+         "-o", str(tmp_path / "auto.ply")],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stderr
+    for line in run.stderr.splitlines():
+        if line.startswith(CPU_LEAD) and line.endswith(")"):
+            return line[len(CPU_LEAD) : -1]
+    return None
+
+
+def test_auto_backend_note_is_what_the_cli_says(cli, dam_break_path, tmp_path):
+    note = isobar.auto_backend_note()
+    assert note is None or note.strip(), repr(note)
+    assert note == cli_auto_note(cli, dam_break_path, tmp_path)
+    # The note is exactly when AUTO ran on the CPU.
+    particles = isobar.Particles.read(dam_break_path)
+    _, stats = isobar.extract_adaptive(particles, 0.6, h=0.05, backend="auto")
+    assert stats["backend"] == ("cpu" if note else "gpu")

@@ -138,3 +138,31 @@ def test_cli_passes_max_error_to_the_core(cli, tmp_path):
     assert off.n_triangles != default.n_triangles
     off.release()
     default.release()
+
+
+def _record(path):
+    from pxr import Sdf
+
+    return dict(Sdf.Layer.FindOrOpen(str(path)).customLayerData["isobarUsd"])
+
+
+def test_backend_auto_on_the_cpu_says_why_on_stderr_and_in_the_layer(cli, tmp_path):
+    """--backend auto where it runs on the CPU (lavapipe in CI is a software rasteriser):
+    the isobar CLI's line on stderr (not with -q), the core's reason in the layer's
+    customLayerData record as backendNote; another backend says nothing."""
+    note = isobar.auto_backend_note()
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    line = f"backend auto: running on the CPU ({note})"
+    for method, backend, quiet in [("adaptive", "auto", False), ("correctors", "auto", True),
+                                   ("adaptive", "cpu", False)]:
+        out = tmp_path / f"{method}-{backend}-{quiet}.usd"
+        proc = run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", method, "--backend", backend,
+                       "--layout", "flat", "--no-velocities", "-o", out, *(["-q"] if quiet else []))
+        said = [x for x in proc.stderr.splitlines() if x.startswith("backend auto:")]
+        auto = note is not None and backend == "auto"
+        assert said == ([line] if auto and not quiet else []), proc.stderr
+        assert _record(out).get("backendNote") == (note if auto else None)
+    # The API records it too, the method's default backend included (adaptive: auto).
+    out = tmp_path / "api.usd"
+    isobar_usd.write_frame(str(need(FRAME_26)), out, ISO, method="adaptive", **DAM)
+    assert _record(out).get("backendNote") == note

@@ -64,19 +64,32 @@ def run_all(only=None):
 
 
 class Errors:
-    """Collects the ErrorEvent messages of a VTK object."""
+    """Collects the ErrorEvent messages of a VTK object (WarningEvent with `event`)."""
 
-    def __init__(self, obj):
+    def __init__(self, obj, event="ErrorEvent"):
         from vtkmodules.util.vtkConstants import VTK_STRING
         from vtkmodules.vtkCommonCore import vtkCommand
 
         self.messages = []
 
-        def on_error(o, e, data):
+        def on_event(o, e, data):
             self.messages.append(data)
 
-        on_error.CallDataType = VTK_STRING
-        obj.AddObserver(vtkCommand.ErrorEvent, on_error)
+        on_event.CallDataType = VTK_STRING
+        obj.AddObserver(getattr(vtkCommand, event), on_event)
+
+
+def core_auto_note():
+    """The C ABI's isobar_auto_backend_note() from the workspace's libisobar.so (the
+    build the plugin links statically): "" when Auto runs on a GPU here."""
+    import ctypes
+
+    lib = ctypes.CDLL(os.path.join(REPO, "target", "release", "libisobar.so"))
+    lib.isobar_auto_backend_note.restype = ctypes.c_int
+    lib.isobar_auto_backend_note.argtypes = [ctypes.POINTER(ctypes.c_char_p)]
+    note = ctypes.c_char_p()
+    assert lib.isobar_auto_backend_note(ctypes.byref(note)) == 0
+    return note.value.decode()
 
 
 def tmpdir():

@@ -159,6 +159,32 @@ def test_marching_correctors_backend_gpu_gives_the_cpu_surface():
     assert any("CPU only" in m for m in errors.messages), errors.messages
 
 
+@test
+def test_backend_auto_on_the_cpu_says_why_in_a_warning_and_field_data():
+    # Auto runs on the CPU without a hardware GPU (lavapipe in CI is software): the filter
+    # warns with the CLI's line and leaves the core's reason in the field data; a run that
+    # did not ask for Auto carries no note.
+    note = h.core_auto_note()
+    for method in (vtkIsobarSPHIsosurface.MARCHING_CORRECTORS, vtkIsobarSPHIsosurface.ADAPTIVE):
+        f = free_surface_filter(reader(h.FRAME_26), Method=method, Backend=2)
+        warnings = Errors(f, "WarningEvent")
+        f.Update()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        out = f.GetOutput()
+        assert out.GetNumberOfCells() > 1000, out.GetNumberOfCells()
+        array = out.GetFieldData().GetAbstractArray("IsobarBackendNote")
+        if note:
+            assert array is not None and array.GetNumberOfValues() == 1, method
+            assert array.GetValue(0) == note, (array.GetValue(0), note)
+            line = f"backend auto: running on the CPU ({note})"
+            assert any(line in m for m in warnings.messages), warnings.messages
+        else:
+            assert array is None and warnings.messages == [], warnings.messages
+    cpu = free_surface_filter(reader(h.FRAME_26), Backend=0)
+    cpu.Update()
+    assert cpu.GetOutput().GetFieldData().GetAbstractArray("IsobarBackendNote") is None
+
+
 def blobs_image(n=24):
     """Two overlapping Gaussian blobs on an n³ image (origin (1, 2, 3), spacing 0.5)."""
     from vtkmodules.vtkCommonDataModel import vtkImageData

@@ -222,6 +222,13 @@ def _run_sph(args) -> int:
                 flush=True,
             )
 
+    options = _extract_options(args)
+    if not args.quiet:
+        from .sequence import auto_backend_note
+
+        note = auto_backend_note(options)
+        if note:  # the isobar CLI's line, word for word
+            print(f"backend auto: running on the CPU ({note})", file=sys.stderr, flush=True)
     result = write_sequence(
         args.input,
         args.output,
@@ -238,7 +245,7 @@ def _run_sph(args) -> int:
         velocities=None if args.no_velocities else args.velocities,
         primvars="auto" if args.primvars is None else args.primvars,
         progress=progress,
-        **_extract_options(args),
+        **options,
     )
     if not args.quiet:
         span = f"{result.frames[0]}..{result.frames[-1]}" if result.frames else "-"

@@ -309,10 +309,25 @@ def produce(item, job: Job) -> FrameMesh:
     return to_mesh(item, primvars=job.primvars if job.primvars is not None else (), velocities=job.velocities)
 
 
+def auto_backend_note(options: Mapping[str, Any]) -> str:
+    """Why the extraction `options` ask for (backend "auto", given or the method's
+    default) run on the CPU here: the core's reason, the text the isobar CLI prints after
+    "backend auto: running on the CPU ("; "" when another backend is asked for or Auto
+    picks a GPU."""
+    import isobar
+
+    fn = isobar.extract_adaptive if options.get("method") == "adaptive" else isobar.extract
+    backend = options.get("backend", inspect.signature(fn).parameters["backend"].default)
+    return (isobar.auto_backend_note() or "") if backend == "auto" else ""
+
+
 def _frame_info(item, job: Job, mesh: FrameMesh) -> Dict[str, Any]:
     info: Dict[str, Any] = {"source": _label(item), "points": mesh.n_points, "triangles": mesh.n_triangles}
     if _is_path(item):
         info["extraction"] = job.describe()
+        note = auto_backend_note(job.options)
+        if note:
+            info["backendNote"] = note
     return info
 
 
@@ -675,6 +690,8 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
                 raise frame_error(entry.number, _label(entry.item), e) from e
             info = _frame_info(entry.item, job, frame_mesh)
             info["seconds"] = time.perf_counter() - t
+            if "backendNote" in info:  # the flat layer's record says it too
+                layer.info["backendNote"] = info["backendNote"]
             del frame_mesh
             _report(progress, done, total, entry.number, entry.item, info)
         if not layer.frames:

@@ -8,6 +8,7 @@
 #include "vtkDataObject.h"
 #include "vtkDataSetAttributes.h"
 #include "vtkDoubleArray.h"
+#include "vtkFieldData.h"
 #include "vtkFloatArray.h"
 #include "vtkIdTypeArray.h"
 #include "vtkInformation.h"
@@ -19,6 +20,7 @@
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
 #include "vtkSmartPointer.h"
+#include "vtkStringArray.h"
 #include "vtkUnsignedCharArray.h"
 
 #include "isobar.h"
@@ -1039,6 +1041,10 @@ int vtkIsobarSPHIsosurface::RequestData(
     {
       failure = SurfaceToPolyData(surface.Ptr, output);
     }
+    if (failure.empty() && this->Backend == ISOBAR_BACKEND_AUTO)
+    {
+      failure = this->NoteAutoBackend(output);
+    }
   }
   if (parallel)
   {
@@ -1072,6 +1078,29 @@ int vtkIsobarSPHIsosurface::RequestData(
   }
   this->UpdateProgress(1.0);
   return 1;
+}
+
+//------------------------------------------------------------------------------
+std::string vtkIsobarSPHIsosurface::NoteAutoBackend(vtkPolyData* output)
+{
+  const char* note = nullptr;
+  const IsobarStatus status = isobar_auto_backend_note(&note);
+  if (status != ISOBAR_STATUS_OK)
+  {
+    return CoreError("isobar_auto_backend_note", status);
+  }
+  if (note == nullptr || note[0] == '\0')
+  {
+    return ""; // Auto ran on a GPU
+  }
+  // A warning, not an error: the surface is right, only slower than the user may expect.
+  // ParaView lists it in Output Messages; the CLI prints the same line on stderr.
+  vtkWarningMacro(<< "backend auto: running on the CPU (" << note << ")");
+  vtkNew<vtkStringArray> array;
+  array->SetName("IsobarBackendNote");
+  array->InsertNextValue(note);
+  output->GetFieldData()->AddArray(array);
+  return "";
 }
 
 //------------------------------------------------------------------------------

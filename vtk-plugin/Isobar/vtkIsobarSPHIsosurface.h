@@ -177,7 +177,10 @@ public:
   /// Where the work runs, ISOBAR_BACKEND_CPU (0, default), ISOBAR_BACKEND_GPU (1, wgpu;
   /// an error when there is no adapter) or ISOBAR_BACKEND_AUTO (2, a hardware GPU when
   /// there is one): Marching Correctors' seed-cell neighbour search (same surface on
-  /// every back end; FullGrid refuses GPU), or the Adaptive method's grids.
+  /// every back end; FullGrid refuses GPU), or the Adaptive method's grids. When Auto
+  /// runs on the CPU, a warning says why (as the CLI's "backend auto: running on the CPU
+  /// (...)") and the output's field data carries the reason as the string array
+  /// "IsobarBackendNote".
   vtkSetClampMacro(Backend, int, 0, 2);
   vtkGetMacro(Backend, int);
   ///@}
@@ -280,6 +283,11 @@ protected:
 
   /// Reports `message` through vtkErrorMacro and remembers it for GetErrorMessage.
   void Fail(const std::string& message);
+
+  /// With Backend Auto on a machine where Auto runs on the CPU: the core's reason
+  /// (isobar_auto_backend_note) as a warning and as the output's field data string array
+  /// "IsobarBackendNote". Returns an error message or "".
+  std::string NoteAutoBackend(vtkPolyData* output);
 
   /// Progress from the core: UpdateProgress, and whether to abort.
   bool ReportProgress(double fraction, const char* phase);

@@ -13,8 +13,14 @@ installed)::
 Errors raise :class:`isobar.Error` subclasses carrying the core's message and status.
 """
 
+from __future__ import annotations
+
+from ctypes import byref as _byref
+from ctypes import c_char_p as _c_char_p
+
 from ._version import __version__
 from ._lib import ABI_VERSION
+from ._lib import check as _check
 from ._lib import lib as _lib_handle
 from ._lib import path as library_path
 from .errors import (
@@ -49,6 +55,19 @@ def abi_version() -> int:
     return int(_lib_handle.isobar_abi_version())
 
 
+def auto_backend_note() -> str | None:
+    """Why ``backend="auto"`` runs on the CPU on this machine, or None when it picks a GPU.
+
+    The same text the ``isobar`` CLI prints after "backend auto: running on the CPU ("
+    (no GPU adapter, only a software rasteriser such as lavapipe, or a core built without
+    GPU support), for a host to show its user. The first call opens the GPU device once.
+    """
+    note = _c_char_p()
+    _check(_lib_handle.isobar_auto_backend_note(_byref(note)))
+    text = (note.value or b"").decode("utf-8", "replace")
+    return text or None
+
+
 __all__ = [
     "__version__",
     "ABI_VERSION",
@@ -70,6 +89,7 @@ __all__ = [
     "Status",
     "Surface",
     "abi_version",
+    "auto_backend_note",
     "core_version",
     "default_params",
     "extract",

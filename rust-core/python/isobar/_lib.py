@@ -233,6 +233,7 @@ _PROTOTYPES = {
     "isobar_last_error_message": (c_char_p, []),
     "isobar_abi_version": (c_uint32, []),
     "isobar_version": (c_char_p, []),
+    "isobar_auto_backend_note": (_Status, [POINTER(c_char_p)]),
     # particles
     "isobar_particles_create": (_Status, [POINTER(c_double), c_size_t, POINTER(POINTER(ParticlesHandle))]),
     "isobar_particles_create_f32": (_Status, [POINTER(c_float), c_size_t, POINTER(POINTER(ParticlesHandle))]),

@@ -55,6 +55,9 @@ pub enum IsobarStatus {
 
 thread_local! {
     static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
+    /// The text `isobar_auto_backend_note` hands out, kept apart from `LAST_ERROR` so the
+    /// call's own success (which clears the error message) leaves the note intact.
+    static AUTO_NOTE: RefCell<CString> = RefCell::new(CString::default());
 }
 
 fn set_last_error(message: &str) {
@@ -337,6 +340,27 @@ pub extern "C" fn isobar_last_error_message() -> *const c_char {
     LAST_ERROR.with(|e| e.borrow().as_ptr())
 }
 
+/// Why `ISOBAR_BACKEND_AUTO` runs on the CPU on this machine, for hosts to tell their
+/// user: `*note` is set to "" when AUTO would run on the GPU (a hardware adapter), else to
+/// the reason the CLI prints after "backend auto: running on the CPU (" (no adapter, a
+/// software rasteriser only, or a build without the `gpu` feature). Thread-local storage,
+/// valid until the next isobar call on the same thread, as `isobar_last_error_message`.
+/// A status rather than a bare string: a panic while probing the adapter comes back as
+/// `ISOBAR_ERR_INTERNAL` with its message, never as an "" that would read as "on the GPU".
+/// The first call may take a moment (it opens the GPU device once per process).
+#[no_mangle]
+pub extern "C" fn isobar_auto_backend_note(note: *mut *const c_char) -> IsobarStatus {
+    guard(|| {
+        let text = crate::gpu::auto_fallback_reason().unwrap_or_default();
+        let c = CString::new(text.replace('\0', " ")).unwrap_or_default();
+        let ptr = AUTO_NOTE.with(|n| {
+            *n.borrow_mut() = c;
+            n.borrow().as_ptr()
+        });
+        put(note, ptr, "note")
+    })
+}
+
 /// The ABI version (`ISOBAR_ABI_VERSION` of the library actually loaded).
 #[no_mangle]
 pub extern "C" fn isobar_abi_version() -> u32 {
@@ -393,6 +417,32 @@ mod tests {
                 self.map.as_mut_ptr().add(at).cast()
             }
         }
+    }
+
+    /// The note is the core's fallback reason ("" where AUTO picks a GPU), survives the
+    /// success of its own call, and a NULL out-pointer is refused by name.
+    #[test]
+    fn auto_backend_note_is_why_auto_skips_the_gpu() {
+        let mut note: *const c_char = std::ptr::null();
+        assert_eq!(isobar_auto_backend_note(&mut note), IsobarStatus::Ok);
+        // SAFETY: set by the call above, valid until the next isobar call here.
+        let text = unsafe { CStr::from_ptr(note) }
+            .to_str()
+            .unwrap()
+            .to_string();
+        let expected = crate::gpu::auto_fallback_reason().unwrap_or_default();
+        assert_eq!(text, expected);
+        assert_eq!(
+            text.is_empty(),
+            crate::gpu::Backend::Auto.resolve().unwrap() == crate::gpu::Backend::Gpu
+        );
+        assert_eq!(
+            isobar_auto_backend_note(std::ptr::null_mut()),
+            IsobarStatus::ErrInvalidArgument
+        );
+        // SAFETY: the thread's last-error message, valid until the next call.
+        let message = unsafe { CStr::from_ptr(isobar_last_error_message()) };
+        assert!(message.to_str().unwrap().contains("note"), "{message:?}");
     }
 
     #[test]

@@ -168,6 +168,13 @@ mod no_gpu_tests {
         assert_eq!(Backend::Auto.resolve().unwrap(), Backend::Cpu);
         let why = super::auto_fallback_reason().expect("Auto falls back here");
         assert!(why.contains("feature 'gpu' is off"), "{why}");
+        // The hosts get the same text through the C ABI.
+        let mut note: *const std::ffi::c_char = std::ptr::null();
+        let status = crate::capi::isobar_auto_backend_note(&mut note);
+        assert_eq!(status, crate::capi::IsobarStatus::Ok);
+        // SAFETY: set by the call above, valid until the next isobar call on this thread.
+        let note = unsafe { std::ffi::CStr::from_ptr(note) };
+        assert_eq!(note.to_str().unwrap(), why);
         assert_no_gpu(Backend::Gpu.resolve().unwrap_err());
         assert_no_gpu(super::adapter_name().unwrap_err());
 
