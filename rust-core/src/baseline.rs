@@ -8,23 +8,22 @@ use crate::correctors::vertices::Placement;
 use crate::correctors::{clip_cells, surface, virtual_grid, Extraction, Params, Stats};
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
-use crate::field::sph::{SphField, NODE_TILE};
+use crate::field::sph::{NodeTiles, SphField};
 use crate::mc::{case_index, ActiveCell, VirtualGrid};
 use crate::mesh::Mesh;
 use crate::progress::Progress;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Every node of the grid, evaluated.
+/// Every node of the grid, evaluated, stored tile by tile.
 struct DenseNodes {
-    nodes: [usize; 3],
+    tiles: NodeTiles,
     samples: Vec<NodeSample>,
 }
 
 impl NodeValues for DenseNodes {
     fn node(&self, node: u64) -> NodeSample {
-        let [x, y, z] = VirtualGrid::coords(node).map(|c| c as usize);
-        self.samples[x + self.nodes[0] * (y + self.nodes[1] * z)]
+        self.samples[self.tiles.index(node)]
     }
 }
 
@@ -49,7 +48,8 @@ pub fn extract(
     let grid = virtual_grid(field, params)?;
     let nodes = grid.cells.map(|c| c as usize + 1);
     let count = nodes.iter().map(|&n| n as u128).product::<u128>();
-    let needed = count * std::mem::size_of::<NodeSample>() as u128;
+    let tiles = NodeTiles::new(nodes);
+    let needed = tiles.slots() * std::mem::size_of::<NodeSample>() as u128;
     if needed > memory_budget as u128 {
         return Err(Error::OverBudget {
             what: format!(
@@ -60,39 +60,13 @@ pub fn extract(
             budget_bytes: memory_budget,
         });
     }
-    let slice = nodes[0] * nodes[1];
-    let mut samples = vec![(0.0, 0.0); count as usize];
+    let mut samples = vec![(0.0, 0.0); tiles.slots() as usize];
     progress.phase("resampling", 0.0, 0.5)?;
-    // Slabs of whole node tiles, listed tile by tile: the field evaluates a tile's
-    // nodes together and needs no sorting.
-    let tiles = nodes.map(|n| n.div_ceil(NODE_TILE));
-    for (b, slab) in samples.chunks_mut(slice * NODE_TILE).enumerate() {
-        let depth = slab.len() / slice;
-        let keys: Vec<u64> = (0..tiles[0] * tiles[1])
-            .into_par_iter()
-            .flat_map_iter(|t| {
-                let corner = [t % tiles[0], t / tiles[0]].map(|c| c * NODE_TILE);
-                (0..depth).flat_map(move |z| {
-                    (0..NODE_TILE).flat_map(move |y| {
-                        (0..NODE_TILE).filter_map(move |x| {
-                            let (x, y) = (corner[0] + x, corner[1] + y);
-                            let z = b * NODE_TILE + z;
-                            (x < nodes[0] && y < nodes[1])
-                                .then(|| VirtualGrid::key(x as u32, y as u32, z as u32))
-                        })
-                    })
-                })
-            })
-            .collect();
-        let values = field.values_and_weights_at_nodes(&grid, &keys);
-        let z0 = b * NODE_TILE;
-        for (&k, v) in keys.iter().zip(values) {
-            let [x, y, z] = VirtualGrid::coords(k).map(|c| c as usize);
-            slab[x + nodes[0] * (y + nodes[1] * (z - z0))] = v;
-        }
-        progress.report((z0 + depth) as f64 / nodes[2] as f64)?;
+    for (layer, chunk) in samples.chunks_mut(tiles.layer_len()).enumerate() {
+        field.values_and_weights_on_tile_layer(&grid, &tiles, layer, chunk);
+        progress.report((layer + 1) as f64 / tiles.layers() as f64)?;
     }
-    let dense = DenseNodes { nodes, samples };
+    let dense = DenseNodes { tiles, samples };
     let mut stats = Stats {
         virtual_cells: grid.cell_count(),
         node_evaluations: count as u64,

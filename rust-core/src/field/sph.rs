@@ -165,7 +165,7 @@ macro_rules! with_kernel {
 }
 
 mod nodes;
-pub(crate) use nodes::TILE as NODE_TILE;
+pub use nodes::NodeTiles;
 
 /// One particle as the evaluation loop wants it, stored in neighbour-grid order.
 #[derive(Clone, Copy, Debug)]

@@ -18,9 +18,60 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Nodes per tile edge (a tile is `TILE`³ nodes; a row's nodes fit one byte's bits).
-pub(crate) const TILE: usize = 8;
+const TILE: usize = 8;
 const SHIFT: u32 = TILE.trailing_zeros();
 const LOCAL: u32 = TILE as u32 - 1;
+
+/// Nodes per tile.
+const TILE3: usize = TILE * TILE * TILE;
+
+/// Dense storage of a grid's first `nodes` nodes per axis, tile by tile: each tile's
+/// `TILE`³ samples are contiguous, so tiles are filled in parallel without sorting or
+/// scattering. Tiles at the far faces are padded.
+#[derive(Clone, Copy, Debug)]
+pub struct NodeTiles {
+    nodes: [usize; 3],
+    tiles: [usize; 3],
+}
+
+impl NodeTiles {
+    pub fn new(nodes: [usize; 3]) -> Self {
+        NodeTiles {
+            nodes,
+            tiles: nodes.map(|n| n.div_ceil(TILE)),
+        }
+    }
+
+    /// Samples the layout holds, padding included.
+    pub fn slots(&self) -> u128 {
+        self.tiles.iter().map(|&t| t as u128).product::<u128>() * TILE3 as u128
+    }
+
+    /// Samples in one layer of tiles (`TILE` node slices).
+    pub fn layer_len(&self) -> usize {
+        self.tiles[0] * self.tiles[1] * TILE3
+    }
+
+    /// Layers of tiles.
+    pub fn layers(&self) -> usize {
+        self.tiles[2]
+    }
+
+    /// Where node `key` is stored.
+    #[inline]
+    pub fn index(&self, key: u64) -> usize {
+        let [x, y, z] = VirtualGrid::coords(key).map(|c| c as usize);
+        let tile = x / TILE + self.tiles[0] * (y / TILE + self.tiles[1] * (z / TILE));
+        tile * TILE3 + x % TILE + TILE * (y % TILE + TILE * (z % TILE))
+    }
+}
+
+/// Local index of a node within its tile, from its key.
+#[inline]
+fn local(key: u64) -> usize {
+    let [x, y, z] = VirtualGrid::coords(key);
+    ((x & LOCAL) | (y & LOCAL) << SHIFT | (z & LOCAL) << (2 * SHIFT)) as usize
+}
 
 impl SphField {
     /// (A, S) at every node of `nodes` (keys of `grid`), in the order given; equal to the
@@ -37,14 +88,10 @@ impl SphField {
             .map(|(i, &n)| {
                 let [x, y, z] = VirtualGrid::coords(n);
                 let tile = VirtualGrid::key(x >> SHIFT, y >> SHIFT, z >> SHIFT);
-                let local = (x & LOCAL) | (y & LOCAL) << SHIFT | (z & LOCAL) << (2 * SHIFT);
-                (tile << (3 * SHIFT) | local as u64, i as u32)
+                (tile << (3 * SHIFT) | local(n) as u64, i as u32)
             })
             .collect();
-        // Callers with whole tiles hand them over in this order already.
-        if !order.windows(2).all(|w| w[0].0 <= w[1].0) {
-            radix::sort_by_key(&mut order, |&(k, _)| k);
-        }
+        radix::sort_by_key(&mut order, |&(k, _)| k);
         let mut tiles = Vec::new();
         let mut start = 0;
         for i in 1..=order.len() {
@@ -53,16 +100,20 @@ impl SphField {
                 start = i;
             }
         }
-        let unit = self.unit_values;
         let samples: Vec<(f64, f64)> = tiles
             .par_iter()
             .flat_map_iter(|r| {
                 let tile = &order[r.clone()];
-                if unit {
-                    with_kernel!(self.kernel, K => self.tile::<true>(K, grid, tile))
-                } else {
-                    with_kernel!(self.kernel, K => self.tile::<false>(K, grid, tile))
+                let corner = VirtualGrid::coords(tile[0].0 >> (3 * SHIFT)).map(|c| c << SHIFT);
+                let mut rows = [0u8; TILE * TILE];
+                for &(k, _) in tile {
+                    let l = k as usize & (TILE3 - 1);
+                    rows[l >> SHIFT] |= 1 << (l & (TILE - 1));
                 }
+                let mut sums = [(0.0, 0.0); TILE3];
+                self.fill_tile(grid, corner, &rows, &mut sums);
+                tile.iter()
+                    .map(move |&(k, _)| sums[k as usize & (TILE3 - 1)])
             })
             .collect();
         let mut out = vec![(0.0, 0.0); nodes.len()];
@@ -72,29 +123,74 @@ impl SphField {
         out
     }
 
-    /// The samples of one tile's nodes (`(tile key and local index, _)`, sorted), in
-    /// that order.
+    /// (A, S) at every node of layer `layer` of `tiles` (see [`NodeTiles`]) into `out`,
+    /// `tiles.layer_len()` samples; padding nodes get (0, 0).
+    pub fn values_and_weights_on_tile_layer(
+        &self,
+        grid: &VirtualGrid,
+        tiles: &NodeTiles,
+        layer: usize,
+        out: &mut [(f64, f64)],
+    ) {
+        assert_eq!(out.len(), tiles.layer_len(), "one layer of tiles");
+        out.par_chunks_mut(TILE3).enumerate().for_each(|(t, sums)| {
+            let corner = [t % tiles.tiles[0], t / tiles.tiles[0], layer].map(|c| c * TILE);
+            let reach: [usize; 3] = std::array::from_fn(|a| (tiles.nodes[a] - corner[a]).min(TILE));
+            let row = ((1u32 << reach[0]) - 1) as u8;
+            let mut rows = [0u8; TILE * TILE];
+            for z in 0..reach[2] {
+                for y in 0..reach[1] {
+                    rows[y + TILE * z] = row;
+                }
+            }
+            sums.fill((0.0, 0.0));
+            let sums: &mut [(f64, f64); TILE3] = sums.try_into().expect("a tile");
+            self.fill_tile(grid, corner.map(|c| c as u32), &rows, sums);
+        });
+    }
+
+    /// Writes (A, S) for the nodes `rows` marks (one byte per (y, z) row of the tile whose
+    /// first node is `corner`, bit x for node x) into `out`, by local index.
+    fn fill_tile(
+        &self,
+        grid: &VirtualGrid,
+        corner: [u32; 3],
+        rows: &[u8; TILE * TILE],
+        out: &mut [(f64, f64); TILE3],
+    ) {
+        if self.unit_values {
+            with_kernel!(self.kernel, K => self.fill_tile_with::<true>(K, grid, corner, rows, out))
+        } else {
+            with_kernel!(self.kernel, K => self.fill_tile_with::<false>(K, grid, corner, rows, out))
+        }
+    }
+
+    /// [`SphField::fill_tile`] with the kernel known at compile time.
     #[inline(always)]
-    fn tile<const UNIT: bool>(
+    fn fill_tile_with<const UNIT: bool>(
         &self,
         kernel: Kernel,
         grid: &VirtualGrid,
-        tile: &[(u64, u32)],
-    ) -> Vec<(f64, f64)> {
-        let key = tile[0].0 >> (3 * SHIFT);
-        let corner = VirtualGrid::coords(key).map(|c| c << SHIFT);
-        // Which nodes are wanted, one byte per row (y, z), and their bounding box.
-        let mut rows = [0u8; TILE * TILE];
+        corner: [u32; 3],
+        rows: &[u8; TILE * TILE],
+        out: &mut [(f64, f64); TILE3],
+    ) {
+        // The wanted nodes' bounding box.
         let (mut lo, mut hi) = ([TILE; 3], [0usize; 3]);
-        for &(k, _) in tile {
-            let l = k as usize & (TILE * TILE * TILE - 1);
-            let at = [l & (TILE - 1), l >> SHIFT & (TILE - 1), l >> (2 * SHIFT)];
-            rows[at[1] + TILE * at[2]] |= 1 << at[0];
-            for a in 0..3 {
-                lo[a] = lo[a].min(at[a]);
-                hi[a] = hi[a].max(at[a]);
+        let mut columns = 0u8;
+        for (r, &bits) in rows.iter().enumerate() {
+            if bits != 0 {
+                let (y, z) = (r % TILE, r / TILE);
+                (lo[1], hi[1]) = (lo[1].min(y), hi[1].max(y));
+                (lo[2], hi[2]) = (lo[2].min(z), hi[2].max(z));
+                columns |= bits;
             }
         }
+        if columns == 0 {
+            return;
+        }
+        lo[0] = columns.trailing_zeros() as usize;
+        hi[0] = 7 - columns.leading_zeros() as usize;
         // Node coordinates along each axis, computed as `node_position` computes them.
         let axis = |a: usize| -> [f64; TILE] {
             std::array::from_fn(|i| {
@@ -108,8 +204,8 @@ impl SphField {
         let box_lo = DVec3::new(xs[lo[0]], ys[lo[1]], zs[lo[2]]) - reach;
         let box_hi = DVec3::new(xs[hi[0]], ys[hi[1]], zs[hi[2]]) + reach;
 
-        let mut a_sum = [0.0f64; TILE * TILE * TILE];
-        let mut s_sum = [0.0f64; TILE * TILE * TILE];
+        let mut a_sum = [0.0f64; TILE3];
+        let mut s_sum = [0.0f64; TILE3];
         // The local index range along one axis that a support of radius `r` (in cells)
         // around `t` (in cells from the tile's first node) can reach, a node wider on
         // each side than rounding could need; the exact test is made per node.
@@ -171,14 +267,16 @@ impl SphField {
                 }
             }
         }
-        tile.iter()
-            .map(|&(k, _)| {
-                let l = k as usize & (TILE * TILE * TILE - 1);
+        for (r, &wanted) in rows.iter().enumerate() {
+            let mut bits = wanted;
+            while bits != 0 {
+                let l = TILE * r + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
                 let s = s_sum[l];
                 let a = if UNIT { s } else { a_sum[l] };
-                (self.normalised(a, s), s)
-            })
-            .collect()
+                out[l] = (self.normalised(a, s), s);
+            }
+        }
     }
 }
 
@@ -275,6 +373,63 @@ mod tests {
                 }
                 assert!(reached > 5000, "most nodes see particles ({reached})");
                 assert!(reached < keys.len(), "some nodes see none");
+            }
+        }
+    }
+
+    #[test]
+    fn tile_layers_give_every_node_the_pointwise_value_to_the_bit() {
+        let data = particles();
+        for (quantity, shepard) in [
+            (Quantity::SumOfWeights, false),
+            (Quantity::Scalar("p".into()), true),
+        ] {
+            let settings = SphSettings {
+                kernel: Kernel::WendlandC2,
+                smoothing_length: SmoothingLength::Array("h".into()),
+                quantity,
+                shepard,
+                ..SphSettings::default()
+            };
+            let field = SphField::new(&data, &settings).unwrap();
+            let (lo, hi) = field.bounds();
+            // A cell size that leaves partly filled tiles on every axis.
+            let grid = [0.041, 0.043, 0.047, 0.053, 0.059]
+                .iter()
+                .map(|&c| VirtualGrid::covering(lo - DVec3::splat(0.2), hi, c).unwrap())
+                .find(|g| {
+                    g.cells
+                        .iter()
+                        .all(|&c| !(c as usize + 1).is_multiple_of(TILE))
+                })
+                .expect("padded tiles on every axis");
+            let nodes = grid.cells.map(|c| c as usize + 1);
+            let tiles = NodeTiles::new(nodes);
+            // Filled with a marker: every real node must be overwritten, padding zeroed.
+            let mut samples = vec![(7.0, 7.0); tiles.slots() as usize];
+            for (layer, chunk) in samples.chunks_mut(tiles.layer_len()).enumerate() {
+                field.values_and_weights_on_tile_layer(&grid, &tiles, layer, chunk);
+            }
+            let mut real = vec![false; samples.len()];
+            for z in 0..nodes[2] as u32 {
+                for y in 0..nodes[1] as u32 {
+                    for x in 0..nodes[0] as u32 {
+                        let key = VirtualGrid::key(x, y, z);
+                        let i = tiles.index(key);
+                        assert!(!real[i], "two nodes share slot {i}");
+                        real[i] = true;
+                        let want = field.value_and_weight(grid.node_position(key));
+                        let got = samples[i];
+                        assert!(
+                            got.0.to_bits() == want.0.to_bits()
+                                && got.1.to_bits() == want.1.to_bits(),
+                            "node {x} {y} {z}: {got:?} vs {want:?}"
+                        );
+                    }
+                }
+            }
+            for (i, s) in samples.iter().enumerate() {
+                assert!(real[i] || *s == (0.0, 0.0), "padding slot {i} holds {s:?}");
             }
         }
     }
