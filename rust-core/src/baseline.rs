@@ -66,7 +66,7 @@ pub fn extract(
         field.values_and_weights_on_tile_layer(&grid, &tiles, layer, chunk);
         progress.report((layer + 1) as f64 / tiles.layers() as f64)?;
     }
-    let dense = DenseNodes { tiles, samples };
+    let mut dense = DenseNodes { tiles, samples };
     let mut stats = Stats {
         virtual_cells: grid.cell_count(),
         node_evaluations: count as u64,
@@ -100,17 +100,24 @@ pub fn extract(
             .collect();
         clip_cells(&grid, &mut active, params);
         stats.cells_used += active.len() as u64;
-        let part = surface::build(
+        let span = (0.5 + 0.5 * k as f64 / n, 0.5 + 0.5 * (k as f64 + 1.0) / n);
+        let cut = surface::cut_edges(&dense, &active, progress, span, &mut stats)?;
+        if k + 1 == params.isovalues.len() {
+            // The full grid is read no more: freed before the mesh's arrays are allocated.
+            dense.samples = Vec::new();
+        }
+        let vertices =
+            surface::place_vertices(&grid, cut, iso, Placement::Linear, progress, &mut stats)?;
+        let part = surface::finish(
             field,
-            &grid,
-            &dense,
+            vertices,
             &active,
             iso,
             params,
             Placement::Linear,
             &attributes,
             progress,
-            (0.5 + 0.5 * k as f64 / n, 0.5 + 0.5 * (k as f64 + 1.0) / n),
+            span,
             &mut stats,
         )?;
         surface::append_surface(&mut mesh, part, iso, params);

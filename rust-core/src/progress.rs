@@ -74,12 +74,30 @@ pub fn chunked<T: Sync, R: Send>(
     progress: &mut Progress,
     work: impl Fn(&[T]) -> Vec<R> + Sync,
 ) -> Result<Vec<R>> {
+    let mut out = Vec::with_capacity(items.len());
+    for_chunks(
+        items,
+        progress,
+        |_, part| work(part),
+        |part| out.extend(part),
+    )?;
+    Ok(out)
+}
+
+/// Runs `work` over `items` in chunks (given the index of each chunk's first item) and
+/// hands each chunk's result to `sink`, in order, reporting after each chunk: for results
+/// that are folded or split as they come, so the whole list of them never exists at once.
+pub fn for_chunks<T: Sync, R>(
+    items: &[T],
+    progress: &mut Progress,
+    work: impl Fn(usize, &[T]) -> R + Sync,
+    mut sink: impl FnMut(R),
+) -> Result<()> {
     // Chunks big enough to keep threads busy, small enough to answer a cancel quickly.
     let chunk = (items.len() / 64).clamp(4096, 1 << 18);
-    let mut out = Vec::with_capacity(items.len());
     for (i, part) in items.chunks(chunk).enumerate() {
-        out.extend(work(part));
+        sink(work(i * chunk, part));
         progress.report(((i + 1) * chunk).min(items.len()) as f64 / items.len().max(1) as f64)?;
     }
-    Ok(out)
+    Ok(())
 }

@@ -334,6 +334,9 @@ pub fn extract(
         stats.discarded_cells += tracked.discarded;
         stats.cells_used += tracked.active.len() as u64;
         stats.cached_nodes = stats.cached_nodes.max(cache.len() as u64);
+        stats.node_lookups = cache.lookups;
+        stats.node_evaluations = cache.evaluations;
+        stats.cache_hit_ratio = cache.hit_ratio();
         stats.timings.tracking += t.elapsed().as_secs_f64();
 
         let placement = if params.correct {
@@ -344,25 +347,29 @@ pub fn extract(
         } else {
             Placement::Linear
         };
-        let part = surface::build(
+        let span = (at(0.5), at(1.0));
+        let cut = surface::cut_edges(&cache, &tracked.active, progress, span, &mut stats)?;
+        if k + 1 == params.isovalues.len() {
+            // No node is read again: the cache's bricks (more bytes than the finished mesh on
+            // large frames) are freed before the mesh's arrays are allocated.
+            cache = NodeCache::default();
+        }
+        let vertices = surface::place_vertices(&grid, cut, iso, placement, progress, &mut stats)?;
+        let part = surface::finish(
             field,
-            &grid,
-            &cache,
+            vertices,
             &tracked.active,
             iso,
             params,
             placement,
             &attributes,
             progress,
-            (at(0.5), at(1.0)),
+            span,
             &mut stats,
         )?;
         surface::append_surface(&mut mesh, part, iso, params);
     }
-    stats.node_lookups = cache.lookups;
-    stats.node_evaluations = cache.evaluations;
-    stats.cache_hit_ratio = cache.hit_ratio();
-    stats.field_evaluations += cache.evaluations;
+    stats.field_evaluations += stats.node_evaluations;
     stats.vertices = mesh.vertex_count() as u64;
     stats.triangles = mesh.triangles.len() as u64;
     stats.timings.total = start.elapsed().as_secs_f64();

@@ -3,7 +3,7 @@
 //! full-grid baseline both end here; they differ only in which cells are active, where
 //! node values come from, and how vertices are placed.
 
-use super::cache::NodeValues;
+use super::cache::{NodeSample, NodeValues};
 use super::trimming::{self, CutTarget, Untrimmed};
 use super::vertices::{self, Placement};
 use super::{Params, Stats};
@@ -12,7 +12,7 @@ use crate::field::particles::{Attribute, ParticleData};
 use crate::field::sph::SphField;
 use crate::mc::{self, ActiveCell, VirtualGrid};
 use crate::mesh::Mesh;
-use crate::progress::{chunked, Progress};
+use crate::progress::{chunked, for_chunks, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -62,12 +62,139 @@ pub fn append_surface(mesh: &mut Mesh, mut part: Mesh, iso: f64, params: &Params
     mesh.append(part);
 }
 
-/// Builds the mesh of `active` cells for `iso`, reporting within `span` of the run.
-#[allow(clippy::too_many_arguments)]
-pub fn build(
-    field: &SphField,
-    grid: &VirtualGrid,
+/// The edges of a surface's active cells that the surface cuts, with the samples at both
+/// ends of each: all that vertex placement needs from the nodes.
+pub struct CutEdges {
+    /// Sorted: vertex i will sit on edge i.
+    edges: Vec<u64>,
+    ends: Vec<[NodeSample; 2]>,
+}
+
+/// A surface's vertices, one per cut edge, before triangulation.
+pub struct PlacedVertices {
+    edges: Vec<u64>,
+    positions: Vec<DVec3>,
+    gradients: Vec<DVec3>,
+    weights: Vec<f64>,
+}
+
+/// Running sums of the vertex corrections, pooled into [`Stats`] at the end.
+#[derive(Default)]
+struct Corrections {
+    count: f64,
+    sum: f64,
+    sum2: f64,
+    max: f64,
+}
+
+impl Corrections {
+    fn add(&mut self, p: &vertices::Placed) {
+        self.count += 1.0;
+        self.sum += p.correction;
+        self.sum2 += p.correction * p.correction;
+        self.max = self.max.max(p.correction);
+    }
+
+    /// Pools these with earlier isovalues' vertices.
+    fn pool_into(&self, stats: &mut Stats) {
+        let n0 = stats.corrected_vertices as f64;
+        let total = n0 + self.count;
+        if total > 0.0 {
+            let mean0 = stats.correction_mean;
+            let m2_0 = (stats.correction_stdev.powi(2) + mean0 * mean0) * n0;
+            let mean = (mean0 * n0 + self.sum) / total;
+            let var = ((m2_0 + self.sum2) / total - mean * mean).max(0.0);
+            stats.correction_mean = mean;
+            stats.correction_stdev = var.sqrt();
+        }
+        stats.correction_max = stats.correction_max.max(self.max);
+        stats.corrected_vertices += self.count as u64;
+    }
+}
+
+/// First step of a surface: lists the edges of `active` that the surface `iso` cuts and
+/// reads their end nodes, reporting the start of the "vertices" phase within `span`. This
+/// is the last step that reads `nodes`: the caller may free them before
+/// [`place_vertices`] and [`finish`] allocate the mesh's arrays.
+pub fn cut_edges(
     nodes: &impl NodeValues,
+    active: &[ActiveCell],
+    progress: &mut Progress,
+    span: (f64, f64),
+    stats: &mut Stats,
+) -> Result<CutEdges> {
+    progress.phase("vertices", span.0, span.0 + 0.6 * (span.1 - span.0))?;
+    let t = Instant::now();
+    let edges = mc::cut_edges(active);
+    let ends = edges
+        .par_iter()
+        .map(|&e| {
+            [
+                nodes.node(mc::edge_node_axis(e).0),
+                nodes.node(mc::edge_upper_node(e)),
+            ]
+        })
+        .collect();
+    stats.timings.vertices += t.elapsed().as_secs_f64();
+    Ok(CutEdges { edges, ends })
+}
+
+/// Second step: places a vertex on every cut edge.
+pub fn place_vertices(
+    grid: &VirtualGrid,
+    cut: CutEdges,
+    iso: f64,
+    placement: Placement,
+    progress: &mut Progress,
+    stats: &mut Stats,
+) -> Result<PlacedVertices> {
+    let t = Instant::now();
+    let CutEdges { edges, ends } = cut;
+    let n = edges.len();
+    let mut out = PlacedVertices {
+        edges: Vec::new(),
+        positions: Vec::with_capacity(n),
+        gradients: Vec::with_capacity(n),
+        weights: Vec::with_capacity(n),
+    };
+    // Chunk by chunk into the surface's arrays: a list of all placements (three times the
+    // bytes of a position) would sit beside them at the peak.
+    let mut corrections = Corrections::default();
+    for_chunks(
+        &edges,
+        progress,
+        |first, part| {
+            part.par_iter()
+                .zip(&ends[first..first + part.len()])
+                .map(|(&e, &s)| vertices::place(grid, e, s, iso, placement))
+                .collect::<Vec<_>>()
+        },
+        |placed| {
+            for p in &placed {
+                corrections.add(p);
+                stats.unconverged_vertices += u64::from(!p.converged);
+                stats.field_evaluations += u64::from(p.evaluations);
+            }
+            out.positions.extend(placed.iter().map(|p| p.position));
+            out.gradients.extend(placed.iter().map(|p| p.gradient));
+            out.weights.extend(placed.iter().map(|p| p.weight));
+        },
+    )?;
+    if let Placement::Corrected { .. } = placement {
+        corrections.pool_into(stats);
+    }
+    drop(ends);
+    out.edges = edges;
+    stats.timings.vertices += t.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// Last step: triangulates `active` on `vertices`, trims, and adds normals and
+/// attributes, reporting within the last 40 % of `span`.
+#[allow(clippy::too_many_arguments)]
+pub fn finish(
+    field: &SphField,
+    vertices: PlacedVertices,
     active: &[ActiveCell],
     iso: f64,
     params: &Params,
@@ -78,48 +205,21 @@ pub fn build(
     stats: &mut Stats,
 ) -> Result<Mesh> {
     let at = |f: f64| span.0 + (span.1 - span.0) * f;
-    progress.phase("vertices", at(0.0), at(0.6))?;
     let t = Instant::now();
-    let edges = mc::cut_edges(active);
-    let placed = chunked(&edges, progress, |part| {
-        part.par_iter()
-            .map(|&e| vertices::place(grid, nodes, e, iso, placement))
-            .collect()
-    })?;
+    let PlacedVertices {
+        edges,
+        positions,
+        gradients,
+        weights,
+    } = vertices;
     let triangles = mc::triangulate(active, &edges);
     drop(edges);
-    if let Placement::Corrected { .. } = placement {
-        let n = placed.len() as f64;
-        let (sum, sum2, max) = placed.iter().fold((0.0, 0.0, 0.0f64), |(s, s2, m), p| {
-            (
-                s + p.correction,
-                s2 + p.correction * p.correction,
-                m.max(p.correction),
-            )
-        });
-        // Pool with earlier isovalues' vertices.
-        let n0 = stats.corrected_vertices as f64;
-        let total = n0 + n;
-        if total > 0.0 {
-            let mean0 = stats.correction_mean;
-            let m2_0 = (stats.correction_stdev.powi(2) + mean0 * mean0) * n0;
-            let mean = (mean0 * n0 + sum) / total;
-            let var = ((m2_0 + sum2) / total - mean * mean).max(0.0);
-            stats.correction_mean = mean;
-            stats.correction_stdev = var.sqrt();
-        }
-        stats.correction_max = stats.correction_max.max(max);
-        stats.corrected_vertices += placed.len() as u64;
-        stats.unconverged_vertices += placed.iter().filter(|p| !p.converged).count() as u64;
-        stats.field_evaluations += placed.iter().map(|p| p.evaluations as u64).sum::<u64>();
-    }
     let mut surface = Untrimmed {
-        positions: placed.iter().map(|p| p.position).collect(),
-        gradients: placed.iter().map(|p| p.gradient).collect(),
-        weights: placed.iter().map(|p| p.weight).collect(),
+        positions,
+        gradients,
+        weights,
         triangles,
     };
-    drop(placed);
     stats.timings.vertices += t.elapsed().as_secs_f64();
 
     progress.phase("trimming", at(0.6), at(0.7))?;
@@ -151,7 +251,16 @@ pub fn build(
     } else {
         face_normals(&surface)
     };
-    let mut mesh_attributes = vec![Attribute::scalar("SumOfWeights", surface.weights.clone())];
+    // From here each array moves into the mesh as it is finished, so no array of the
+    // surface exists twice.
+    let Untrimmed {
+        positions,
+        gradients,
+        weights,
+        triangles,
+    } = surface;
+    drop(gradients);
+    let mut mesh_attributes = vec![Attribute::scalar("SumOfWeights", weights)];
     let width = attributes.components();
     if width > 0 {
         let arrays: Vec<(&[f64], usize)> = attributes
@@ -159,7 +268,7 @@ pub fn build(
             .iter()
             .map(|(_, c, d)| (d.as_slice(), *c))
             .collect();
-        let values: Vec<Vec<f64>> = chunked(&surface.positions, progress, |part| {
+        let values: Vec<Vec<f64>> = chunked(&positions, progress, |part| {
             part.par_iter()
                 .map(|&x| {
                     let mut out = vec![0.0; width];
@@ -185,9 +294,10 @@ pub fn build(
     }
     stats.timings.attributes += t.elapsed().as_secs_f64();
     Ok(Mesh {
-        positions: surface.positions.iter().map(|p| p.to_array()).collect(),
+        // Same size and alignment: collected in place, without a second buffer.
+        positions: positions.into_iter().map(|p| p.to_array()).collect(),
         normals,
-        triangles: surface.triangles,
+        triangles,
         attributes: mesh_attributes,
     })
 }

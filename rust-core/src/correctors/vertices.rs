@@ -4,9 +4,9 @@
 //! |F(v) − iso| <= tolerance. The first step goes to the root of the cubic that matches
 //! the two node values and the first sample's value and slope, not to the tangent's.
 
-use super::cache::NodeValues;
+use super::cache::NodeSample;
 use crate::field::sph::{Sample, SphField};
-use crate::mc::{edge_node_axis, edge_upper_node, linear_crossing, VirtualGrid};
+use crate::mc::{edge_node_axis, linear_crossing, VirtualGrid};
 use glam::DVec3;
 
 /// A vertex on a grid edge.
@@ -34,18 +34,17 @@ pub enum Placement<'a> {
     Corrected { field: &'a SphField, tolerance: f64 },
 }
 
-/// Places the vertex of edge `edge` for isovalue `iso`.
+/// Places the vertex of edge `edge`, whose end nodes have the samples `ends`, for
+/// isovalue `iso`.
 pub fn place(
     grid: &VirtualGrid,
-    nodes: &impl NodeValues,
     edge: u64,
+    ends: [NodeSample; 2],
     iso: f64,
     placement: Placement,
 ) -> Placed {
     let (n0, axis) = edge_node_axis(edge);
-    let n1 = edge_upper_node(edge);
-    let (f0, w0) = nodes.node(n0);
-    let (f1, w1) = nodes.node(n1);
+    let [(f0, w0), (f1, w1)] = ends;
     let x0 = grid.node_position(n0);
     let mut dir = DVec3::ZERO;
     dir[axis] = grid.cell_size;
