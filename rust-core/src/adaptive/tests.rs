@@ -530,9 +530,9 @@ fn droplets_near_a_slab_stay_fine_and_its_interior_stays_coarse() {
 /// particles, so the splash rule (threshold 1) leaves it alone. With the error criterion
 /// off (max_error 0, which leaves the rule on) the droplet is a component of its own, as
 /// on the uniform finest grid, with the same bounding box within half a finest cell;
-/// with the rule off too it vanishes. (The error criterion at its default happens to catch this one droplet
-/// as well, by raising the cell to 2 and then 3; on double_dam_break_frame_26 it does not,
-/// see `tests/adaptive_frames.rs`.)
+/// with the rule off too it vanishes. (The error criterion at its default happens to
+/// catch this droplet as well, raising the cell to 2 and then 3; the rule is the guard
+/// that does not depend on the next level's samples falling inside the droplet.)
 #[test]
 fn hidden_surface_rule_keeps_a_droplet_between_the_corners() {
     let dx = 0.1;
