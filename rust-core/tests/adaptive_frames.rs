@@ -34,6 +34,7 @@ fn real_frames_are_watertight_at_every_setting() {
         "dam_break_frame_9_6859_particles.bgeo",
         "dam_break_frame_23_24389_particles.bgeo",
         "double_dam_break_frame_01_4732_particles.vtk",
+        "double_dam_break_frame_26_4732_particles.vtk",
     ] {
         let field = field(name);
         for (grid_factor, threshold, dilation) in [(0.375, 1, 1), (1.0, 1, 0), (1.0, 3, 1)] {
@@ -61,17 +62,23 @@ fn real_frames_are_watertight_at_every_setting() {
 
 /// Issue #9's quality target on the splashing frames with the default parameters: the
 /// adaptive surface within half a finest cell (Hausdorff) of the uniform finest-level
-/// one, with fewer triangles; the splash criterion alone (max_error 0) misses it (1.57 /
-/// 1.97 and 0.72 / 0.69 fine cells).
-/// Measured at the default (max_error 0.5, 2026-12-02): Hausdorff 0.42 / 0.44
-/// (dam break, grid factor 0.375 / 0.5) and 0.46 / 0.12 fine cells (double dam break),
-/// triangles 1.25 / 1.27 / 1.24 / 2.28 times fewer: the 3x target is not met on these
-/// frames (the splash cells and their dilation alone hold most of it).
+/// one, with fewer triangles. The hidden-surface rule is independent of max_error (it
+/// guards topology, not distance), so max_error 0 keeps it; neither max_error 0 nor the
+/// rule off is asserted (both only print), as max_error 0 misses the target on every
+/// frame (1.57 / 1.97, 0.72 / 0.69, 3.21 / 3.71 fine cells).
+/// Measured with the rule (2026-12-03), default max_error 0.5, grid factor 0.375 / 0.5:
+/// dam_break_23 0.416 / 0.440 fine cells, 1.25 / 1.27x fewer triangles; double_dam_01
+/// 0.459 / 0.120, 1.24 / 2.28x (both as without the rule); double_dam_26 0.663 / 0.648,
+/// 1.03 / 1.29x: the rule raises 154 / 2 cells there but leaves the worst point as it
+/// was, so double_dam_26 stays open for issue #9 (its Hausdorff is printed, not
+/// asserted; its mesh must still be closed with fewer triangles).
 #[test]
 fn default_refinement_stays_within_half_a_fine_cell_of_uniform_finest() {
+    let mut failures = Vec::new();
     for name in [
         "dam_break_frame_23_24389_particles.bgeo",
         "double_dam_break_frame_01_4732_particles.vtk",
+        "double_dam_break_frame_26_4732_particles.vtk",
     ] {
         let field = field(name);
         for grid_factor in [0.375, 0.5] {
@@ -89,9 +96,14 @@ fn default_refinement_stays_within_half_a_fine_cell_of_uniform_finest() {
                 &mut Progress::none(),
             )
             .unwrap();
-            for max_error in [params.max_error, 0.0] {
+            for (max_error, hidden_surfaces) in [
+                (params.max_error, true),
+                (0.0, true),
+                (params.max_error, false),
+            ] {
                 let p = Params {
                     max_error,
+                    hidden_surfaces,
                     ..params.clone()
                 };
                 let out = adaptive::extract_sph(&field, &p, &mut Progress::none()).unwrap();
@@ -100,13 +112,19 @@ fn default_refinement_stays_within_half_a_fine_cell_of_uniform_finest() {
                         / grid.fine;
                 let ratio = uniform.stats.triangles as f64 / out.stats.triangles as f64;
                 let what = format!(
-                    "{name} grid factor {grid_factor} max_error {max_error}: Hausdorff {d:.3} fine cells, {ratio:.2}x fewer triangles"
+                    "{name} grid factor {grid_factor} max_error {max_error} hidden {hidden_surfaces}: Hausdorff {d:.3} fine cells, {ratio:.2}x fewer triangles, hidden raised {}",
+                    out.stats.hidden_raised
                 );
                 eprintln!("{what}");
-                assert!(out.mesh.topology().is_watertight_oriented(), "{what}");
-                assert!(ratio > 1.0, "{what}");
-                assert_eq!(d < 0.5, max_error > 0.0, "{what}");
+                if !out.mesh.topology().is_watertight_oriented() || ratio <= 1.0 {
+                    failures.push(format!("not closed or not fewer: {what}"));
+                }
+                let open = name.starts_with("double_dam_break_frame_26");
+                if max_error > 0.0 && hidden_surfaces && d >= 0.5 && !open {
+                    failures.push(format!("default off target: {what}"));
+                }
             }
         }
     }
+    assert!(failures.is_empty(), "{failures:#?}");
 }

@@ -29,6 +29,10 @@ pub struct AdaptiveArgs {
     /// (0 = off, the splash criterion alone).
     #[arg(long, default_value_t = Params::default().max_error)]
     pub max_error: f64,
+    /// Turn off the hidden-surface rule (cells rise until their sub-cell corners see the
+    /// side of the isovalue the field at each of their particles is on).
+    #[arg(long)]
+    pub no_hidden_surfaces: bool,
     /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
     #[arg(long, default_value_t = Params::default().bisection_iterations)]
     pub bisection_iterations: u32,
@@ -74,6 +78,7 @@ pub fn run(
         splash_threshold: args.splash_threshold,
         splash_dilation: args.splash_dilation,
         max_error: args.max_error,
+        hidden_surfaces: !args.no_hidden_surfaces,
         bisection_iterations: args.bisection_iterations,
         normals: common.normals,
         memory_budget: common.memory_budget,
@@ -146,6 +151,10 @@ fn rows(data: &ParticleData, s: &Stats, build_s: f64) -> Vec<(String, String)> {
         (
             "error criterion: cells 2 -> 3".into(),
             s.error_raised[1].to_string(),
+        ),
+        (
+            "hidden-surface rule: cells raised".into(),
+            s.hidden_raised.to_string(),
         ),
         ("transition faces".into(), s.transition_faces.to_string()),
         ("crack triangles".into(), s.crack_triangles.to_string()),

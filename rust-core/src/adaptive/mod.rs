@@ -1,8 +1,9 @@
 //! Adaptive crack-free SPH surfaces on 3-level grids, after
 //! `shared/papers/gpu-adaptive-3level-sph-surfaces.txt`: coarse cells split to level 3
 //! where they hold few particles (splashes), cells at the surface raised where the next
-//! level's surface would lie more than `max_error` finest cells away ([`refine`]), face
-//! neighbours raised so levels differ by at most one,
+//! level's surface would lie more than `max_error` finest cells away ([`refine`]), cells
+//! hiding a droplet between their sub-cell corners raised until a node sees it
+//! ([`refine::hidden_surfaces`]), face neighbours raised so levels differ by at most one,
 //! marching cubes per level with bisected edge points that coincide across levels, and
 //! the cracks between levels filled from a table of every transition-face pattern.
 //!
@@ -50,6 +51,11 @@ pub struct Params {
     /// many finest cells from the current level's interpolant ([`refine`]). 0 = off (the
     /// splash criterion alone).
     pub max_error: f64,
+    /// Hidden-surface rule ([`refine::hidden_surfaces`]): a cell rises to the level whose
+    /// sub-cell corners see the side of the isovalue that the field at one of its
+    /// particles lies on (a droplet or bubble between the corners would otherwise vanish).
+    /// Independent of `max_error`: it guards topology, not distance. On by default.
+    pub hidden_surfaces: bool,
     /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5).
     pub bisection_iterations: u32,
     /// Vertex normals from the field gradient.
@@ -68,6 +74,7 @@ impl Default for Params {
             splash_threshold: 1,
             splash_dilation: 1,
             max_error: DEFAULT_MAX_ERROR,
+            hidden_surfaces: true,
             bisection_iterations: 5,
             normals: true,
             memory_budget: crate::field::DEFAULT_MEMORY_BUDGET,
@@ -134,6 +141,8 @@ pub struct Stats {
     pub triangles_per_level: [u64; 3],
     /// Cells the error criterion raised 1 → 2 and 2 → 3 (before balancing).
     pub error_raised: [u64; 2],
+    /// Cells the hidden-surface rule raised (before balancing).
+    pub hidden_raised: u64,
     pub transition_faces: u64,
     pub crack_triangles: u64,
     pub vertices: u64,
@@ -181,7 +190,7 @@ fn levels_and_refined(
     check_grid_budget(grid, params)?;
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
     let counts = grid::register(grid, &positions)?;
-    Ok(levels_from_counts(field, grid, &counts, params))
+    Ok(levels_from_counts(field, grid, &positions, &counts, params))
 }
 
 /// Refuses a coarse grid whose counts and levels (5 bytes a cell) exceed the budget.
@@ -200,17 +209,27 @@ fn check_grid_budget(grid: &CoarseGrid, params: &Params) -> Result<()> {
 }
 
 /// Steps 2–3 from step 1's particle counts per coarse cell: the splash criterion and its
-/// dilation, the error criterion on `field` ([`refine`]), then balancing. Both back ends
-/// take their levels from here, so they contour the same cells.
+/// dilation, the hidden-surface rule at the `positions` of the particles
+/// ([`refine::hidden_surfaces`]), the error criterion on `field` ([`refine`]), then
+/// balancing. Both back ends take their levels from here (the GPU's field evaluations for
+/// the levels run here on the CPU), so they contour the same cells.
 pub fn levels_from_counts<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
+    positions: &[glam::DVec3],
     counts: &[u32],
     params: &Params,
 ) -> (Vec<u8>, refine::Refined) {
     let mut levels = grid::split(counts, params.splash_threshold);
     grid::dilate(grid, &mut levels, params.splash_dilation);
-    let refined = refine::refine(
+    // Before the error criterion, so that its balancing rounds test the neighbours these
+    // cells pull up.
+    let hidden = if params.hidden_surfaces {
+        refine::hidden_surfaces(field, grid, positions, &mut levels, params.isovalue)
+    } else {
+        refine::Refined::default()
+    };
+    let mut refined = refine::refine(
         field,
         grid,
         counts,
@@ -218,6 +237,8 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
         params.isovalue,
         params.max_error,
     );
+    refined.hidden = hidden.hidden;
+    refined.evaluations += hidden.evaluations;
     grid::balance(grid, &mut levels);
     (levels, refined)
 }
@@ -225,6 +246,7 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
 /// Adds the error criterion's work to an extraction's stats.
 fn add_refined(stats: &mut Stats, refined: refine::Refined) {
     stats.error_raised = refined.raised;
+    stats.hidden_raised = refined.hidden;
     stats.field_evaluations += refined.evaluations;
 }
 
@@ -271,7 +293,8 @@ fn extract_sph_gpu(
     let registered = crate::gpu::register::register(gpu, &on_device, field, grid)?;
     // The error criterion's samples are evaluated on the CPU (`refine`), so the GPU
     // contours exactly the CPU's levels.
-    let (levels, refined) = levels_from_counts(field, grid, &registered.counts, params);
+    let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
+    let (levels, refined) = levels_from_counts(field, grid, &positions, &registered.counts, params);
     let elapsed = start.elapsed().as_secs_f64();
     let mut out = extract_gpu_on(gpu, &on_device, grid, &levels, params, progress)?;
     out.stats.timings.levels = elapsed;

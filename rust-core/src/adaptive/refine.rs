@@ -14,14 +14,119 @@
 
 use super::grid::{self, subdivisions, CoarseGrid, FINE_PER_COARSE};
 use crate::field::ScalarField;
+use glam::DVec3;
 use rayon::prelude::*;
 
-/// What the criterion did: cells it raised 1 → 2 and 2 → 3, and the field evaluations (with
-/// gradient) it took.
+/// What the criteria did: cells the error criterion raised 1 → 2 and 2 → 3, cells the
+/// hidden-surface rule raised ([`hidden_surfaces`]), and the field evaluations (with
+/// gradient for the error criterion) both took.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Refined {
     pub raised: [u64; 2],
+    pub hidden: u64,
     pub evaluations: u64,
+}
+
+/// The hidden-surface rule. A cell contours its sub-cells from their corner values, so a
+/// closed piece of level set that lies strictly inside one sub-cell (a droplet between
+/// the corners, or a bubble) is invisible to it, and to the error criterion as well when
+/// the next level's samples miss it too. The field's extremum of such a piece sits near
+/// the particles that make it, so the field at each particle is the witness: a particle
+/// whose value lies on the other side of `iso` from every corner of the sub-cell holding
+/// it at level L is hidden at level L.
+///
+/// Each particle asks for the lowest level whose sub-cell holding it has a node on its
+/// side (level 1: the coarse cell's corners; level 2: the corners of its half-size
+/// sub-cell; 3 if neither). Nodes nest across levels (every level-L node is a node of
+/// level L + 1), so once the cell is at that level or above, its contouring has a node on
+/// the particle's side within one level-L sub-cell of it and the piece gets a surface.
+/// The level asked for does not depend on the cell's current level, so the rule reads
+/// nothing but the field and the particles (any order, any thread count, both back
+/// ends) and only raises levels; a cell already at level 2 is compared on its level-2
+/// sub-cell, which the ask already includes. Balancing runs after it (in [`refine`] and
+/// in `levels_from_counts`). One field evaluation per particle in a cell below level 3,
+/// plus the corner values of the cells those particles lie in.
+pub fn hidden_surfaces<F: ScalarField + ?Sized>(
+    field: &F,
+    grid: &CoarseGrid,
+    positions: &[DVec3],
+    levels: &mut [u8],
+    iso: f64,
+) -> Refined {
+    // (cell, particle position, field there) for every particle whose cell can still rise.
+    let mut at: Vec<(usize, DVec3, f64)> = positions
+        .par_iter()
+        .filter_map(|&p| {
+            let i = grid.cell_of(p)?;
+            (levels[i] < 3).then(|| (i, p, field.value(p)))
+        })
+        .collect();
+    let mut out = Refined {
+        evaluations: at.len() as u64,
+        ..Refined::default()
+    };
+    // Stable: within a cell the particles keep their order, so the lazily evaluated
+    // nodes (and the evaluation count) do not depend on the thread count.
+    at.par_sort_by_key(|a| a.0);
+    let groups: Vec<&[(usize, DVec3, f64)]> = at.chunk_by(|a, b| a.0 == b.0).collect();
+    const N: usize = FINE_PER_COARSE as usize + 1;
+    let asks: Vec<(usize, u8, u64)> = groups
+        .par_iter()
+        .map(|g| {
+            let i = g[0].0;
+            let base = grid.coords(i).map(|x| (x * FINE_PER_COARSE) as i64);
+            let origin = grid.point(base, 0);
+            // The cell's finest-lattice node values, evaluated when first needed (NaN:
+            // not yet), at the same lattice points the levels contour.
+            let mut nodes = [f64::NAN; N * N * N];
+            let mut evaluations = 0u64;
+            let mut value = |l: [usize; 3]| {
+                let v = &mut nodes[l[0] + N * (l[1] + N * l[2])];
+                if v.is_nan() {
+                    let sub = std::array::from_fn(|a| base[a] + l[a] as i64);
+                    *v = field.value(grid.point(sub, 0));
+                    evaluations += 1;
+                }
+                *v
+            };
+            let mut need = 1u8;
+            for &(_, p, f) in g.iter() {
+                let side = f > iso;
+                // The particle's position in finest cells from the cell's first node.
+                let local = (p - origin) / grid.fine;
+                let mut ask = 3;
+                for level in 1..=2u8 {
+                    let step = (FINE_PER_COARSE / subdivisions(level)) as usize;
+                    let lo: [usize; 3] = std::array::from_fn(|a| {
+                        let k = (local[a] / step as f64).floor().max(0.0) as usize;
+                        k.min(subdivisions(level) as usize - 1) * step
+                    });
+                    let seen = (0..8).any(|v| {
+                        let n = [v & 1, v >> 1 & 1, v >> 2 & 1];
+                        let l = std::array::from_fn(|a| lo[a] + n[a] * step);
+                        (value(l) > iso) == side
+                    });
+                    if seen {
+                        ask = level;
+                        break;
+                    }
+                }
+                need = need.max(ask);
+                if need == 3 {
+                    break;
+                }
+            }
+            (i, need, evaluations)
+        })
+        .collect();
+    for (i, need, evaluations) in asks {
+        out.evaluations += evaluations;
+        if need > levels[i] {
+            levels[i] = need;
+            out.hidden += 1;
+        }
+    }
+    out
 }
 
 /// Raises cells of `levels` (after splitting and dilation; balanced on return) where the
@@ -209,7 +314,6 @@ fn next_level_error<F: ScalarField + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
 
     struct Linear;
 

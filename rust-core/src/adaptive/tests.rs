@@ -395,8 +395,9 @@ fn error_criterion_meets_both_targets_on_a_torus() {
     }
 }
 
-/// max_error 0 gives exactly the splash criterion's levels (split, dilate, balance); any
-/// tolerance only raises levels, and the levels are those of one thread on three.
+/// max_error 0 without the hidden-surface rule gives exactly the splash criterion's levels
+/// (split, dilate, balance); any tolerance only raises levels, and the levels are those of
+/// one thread on three.
 #[test]
 fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
     let data = fluid(
@@ -416,9 +417,11 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
     grid::balance(&grid, &mut splash);
     let off = Params {
         max_error: 0.0,
+        hidden_surfaces: false,
         ..params.clone()
     };
-    let (levels, refined) = levels_from_counts(&field, &grid, &counts, &off);
+    let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
+    let (levels, refined) = levels_from_counts(&field, &grid, &positions, &counts, &off);
     assert_eq!(levels, splash);
     assert_eq!(refined, refine::Refined::default());
     let run = |threads| {
@@ -426,7 +429,7 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| levels_from_counts(&field, &grid, &counts, &params))
+            .install(|| levels_from_counts(&field, &grid, &positions, &counts, &params))
     };
     let (one, refined) = run(1);
     assert_eq!((one.clone(), refined), run(3));
@@ -518,4 +521,101 @@ fn droplets_near_a_slab_stay_fine_and_its_interior_stays_coarse() {
         }
     }
     assert!(bulk >= 4, "{bulk} bulk cells");
+}
+
+/// The hidden-surface rule: a droplet of four particles 0.02 apart (F about 1 at its centre,
+/// about 0.3 one finest cell diagonally off, iso 0.5) placed one finest cell diagonally in from
+/// a corner of a coarse cell above a slab, so its level set lies strictly inside the
+/// level-2 sub-cell there: no level-1 or level-2 node sees it, and the cell holds four
+/// particles, so the splash rule (threshold 1) leaves it alone. With the error criterion
+/// off (max_error 0, which leaves the rule on) the droplet is a component of its own, as
+/// on the uniform finest grid, with the same bounding box within half a finest cell;
+/// with the rule off too it vanishes. (The error criterion at its default happens to
+/// catch this droplet as well, raising the cell to 2 and then 3; the rule is the guard
+/// that does not depend on the next level's samples falling inside the droplet.)
+#[test]
+fn hidden_surface_rule_keeps_a_droplet_between_the_corners() {
+    let dx = 0.1;
+    let h = 2.0 * dx;
+    let mut slab = Vec::new();
+    for z in -5..=5 {
+        for y in -8..=8 {
+            for x in -8..=8 {
+                slab.push(DVec3::new(x as f64, y as f64, z as f64) * dx);
+            }
+        }
+    }
+    let base = Params {
+        isovalue: 0.5,
+        max_error: 0.0,
+        ..Params::default()
+    };
+    let data = |positions: Vec<DVec3>| ParticleData {
+        positions,
+        attributes: vec![],
+    };
+    // The grid's origin is the particles' lower bound less a padding: the slab's alone,
+    // as the droplet lies above it. Its cell: one coarse cell above the kernel support.
+    let g = grid_for(&sph(&data(slab.clone()), h), &base).unwrap();
+    let coarse = g.fine * FINE_PER_COARSE as f64;
+    let k = ((DVec3::new(0.0, 0.0, 1.1) - g.origin) / coarse).floor();
+    let centre = g.origin + k * coarse + DVec3::splat(g.fine);
+    let mut positions = slab;
+    for j in 0..4 {
+        let o = DVec3::new((j & 1) as f64, (j >> 1) as f64, 0.5) * 2.0 - DVec3::ONE;
+        positions.push(centre + 0.02 * o);
+    }
+    let field = sph(&data(positions), h);
+    let grid = grid_for(&field, &base).unwrap();
+    assert_eq!(grid.origin, g.origin);
+    let cell = grid.cell_of(centre).unwrap();
+    assert_eq!(counts(&field, &grid)[cell], 4);
+    let reference = uniform_finest(&field, &base);
+    assert_eq!(reference.mesh.components(), 2, "slab + droplet");
+    // The droplet's vertices (all within a coarse cell of its centre; the slab is
+    // farther) as a bounding box, lower corner then upper.
+    let droplet = |mesh: &crate::mesh::Mesh| {
+        let near: Vec<DVec3> = mesh
+            .positions
+            .iter()
+            .map(|&p| DVec3::from_array(p))
+            .filter(|p| p.distance(centre) < coarse)
+            .collect();
+        let lo = near.iter().fold(DVec3::INFINITY, |a, &p| a.min(p));
+        let hi = near.iter().fold(DVec3::NEG_INFINITY, |a, &p| a.max(p));
+        (!near.is_empty()).then_some((lo, hi))
+    };
+    let (lo, hi) = droplet(&reference.mesh).unwrap();
+    for (max_error, hidden_surfaces) in [(0.0, true), (0.0, false), (0.5, true)] {
+        let params = Params {
+            max_error,
+            hidden_surfaces,
+            ..base.clone()
+        };
+        let out = extract_sph(&field, &params, &mut Progress::none()).unwrap();
+        let d = hausdorff(&out.mesh, &reference.mesh, 8.0 * grid.fine) / grid.fine;
+        let found = droplet(&out.mesh);
+        let what = format!(
+            "max_error {max_error} hidden_surfaces {hidden_surfaces}: droplet {found:?} (uniform {lo} {hi}), Hausdorff {d} fine cells, {:?}",
+            out.stats
+        );
+        eprintln!("{what}");
+        assert!(out.mesh.topology().is_watertight_oriented(), "{what}");
+        assert_eq!(out.mesh.components() == 2, hidden_surfaces, "{what}");
+        assert_eq!(found.is_some(), hidden_surfaces, "{what}");
+        if let Some((a, b)) = found {
+            // The droplet cell is level 3, as on the uniform grid: the same box.
+            let off = (a - lo).abs().max((b - hi).abs()).max_element() / grid.fine;
+            assert!(off < 0.5, "{what}");
+        }
+        let levels = levels_for(&field, &grid, &params).unwrap();
+        assert_eq!(levels[cell] == 3, hidden_surfaces, "{what}");
+        if max_error == 0.0 {
+            assert_eq!(out.stats.hidden_raised > 0, hidden_surfaces, "{what}");
+        } else {
+            // With the error criterion at its default the whole surface is within half
+            // a finest cell too (the slab's rim needs it; at max_error 0 it is 0.59).
+            assert!(d < 0.5, "{what}");
+        }
+    }
 }

@@ -161,6 +161,8 @@ pub extern "C" fn isobar_adaptive_extract(
             splash_threshold: a.splash_threshold,
             splash_dilation: a.splash_dilation,
             max_error: a.max_error,
+            // Not in the C struct (its layout is versioned): always the default, on.
+            hidden_surfaces: Params::default().hidden_surfaces,
             bisection_iterations: a.bisection_iterations,
             normals: sph_params.normals,
             memory_budget: sph_params.memory_budget,
