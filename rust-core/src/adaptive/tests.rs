@@ -448,6 +448,24 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
     assert!(e.to_string().contains("max_error"), "{e}");
 }
 
+/// Particles on the integer lattice points of a box, spaced `dx`.
+fn slab(
+    xs: std::ops::RangeInclusive<i32>,
+    ys: std::ops::RangeInclusive<i32>,
+    zs: std::ops::RangeInclusive<i32>,
+    dx: f64,
+) -> Vec<DVec3> {
+    let mut out = Vec::new();
+    for z in zs {
+        for y in ys.clone() {
+            for x in xs.clone() {
+                out.push(DVec3::new(x as f64, y as f64, z as f64) * dx);
+            }
+        }
+    }
+    out
+}
+
 /// A slab of fluid eleven particles (2.5 coarse cells) thick with isolated droplets near
 /// it (two single particles and a pair), each farther than the kernel support from
 /// everything else: at the default parameters every droplet stays a component of its own
@@ -460,14 +478,7 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
 fn droplets_near_a_slab_stay_fine_and_its_interior_stays_coarse() {
     let dx = 0.1;
     let h = 2.0 * dx;
-    let mut positions = Vec::new();
-    for z in -5..=5 {
-        for y in -12..=12 {
-            for x in -20..=12 {
-                positions.push(DVec3::new(x as f64, y as f64, z as f64) * dx);
-            }
-        }
-    }
+    let mut positions = slab(-20..=12, -12..=12, -5..=5, dx);
     let droplets = [
         DVec3::new(0.05, 0.02, 1.13),
         DVec3::new(0.61, -0.48, -1.09),
@@ -537,14 +548,7 @@ fn droplets_near_a_slab_stay_fine_and_its_interior_stays_coarse() {
 fn hidden_surface_rule_keeps_a_droplet_between_the_corners() {
     let dx = 0.1;
     let h = 2.0 * dx;
-    let mut slab = Vec::new();
-    for z in -5..=5 {
-        for y in -8..=8 {
-            for x in -8..=8 {
-                slab.push(DVec3::new(x as f64, y as f64, z as f64) * dx);
-            }
-        }
-    }
+    let slab = slab(-8..=8, -8..=8, -5..=5, dx);
     let base = Params {
         isovalue: 0.5,
         max_error: 0.0,

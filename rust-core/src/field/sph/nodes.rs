@@ -1,5 +1,6 @@
-//! The field at many nodes of a lattice at once: what the surface trackers and the
-//! full-grid baseline ask for.
+//! The field at every node of a lattice, tile by tile: what the full-grid baseline asks
+//! for. (Surface tracking's node cache stays node by node: its wavefronts touch about 15
+//! nodes of a tile at a time, too few to pay for a tile's set-up.)
 //!
 //! Evaluating node by node, each node scans its whole candidate block of particles and
 //! keeps about one in four (the support sphere fills a quarter of the block). Here the
@@ -12,15 +13,12 @@
 
 use super::{Kernel, SphField};
 use crate::field::neighbours::floor_i64;
-use crate::mc::radix;
 use crate::mc::VirtualGrid;
 use glam::DVec3;
 use rayon::prelude::*;
 
 /// Nodes per tile edge (a tile is `TILE`³ nodes; a row's nodes fit one byte's bits).
 const TILE: usize = 8;
-const SHIFT: u32 = TILE.trailing_zeros();
-const LOCAL: u32 = TILE as u32 - 1;
 
 /// Nodes per tile.
 const TILE3: usize = TILE * TILE * TILE;
@@ -66,63 +64,7 @@ impl NodeTiles {
     }
 }
 
-/// Local index of a node within its tile, from its key.
-#[inline]
-fn local(key: u64) -> usize {
-    let [x, y, z] = VirtualGrid::coords(key);
-    ((x & LOCAL) | (y & LOCAL) << SHIFT | (z & LOCAL) << (2 * SHIFT)) as usize
-}
-
 impl SphField {
-    /// (A, S) at every node of `nodes` (keys of `grid`), in the order given; equal to the
-    /// bit to [`SphField::value_and_weight`] at [`VirtualGrid::node_position`].
-    pub fn values_and_weights_at_nodes(
-        &self,
-        grid: &VirtualGrid,
-        nodes: &[u64],
-    ) -> Vec<(f64, f64)> {
-        // Tile key above the node's place in its tile: sorting groups each tile's nodes.
-        let mut order: Vec<(u64, u32)> = nodes
-            .par_iter()
-            .enumerate()
-            .map(|(i, &n)| {
-                let [x, y, z] = VirtualGrid::coords(n);
-                let tile = VirtualGrid::key(x >> SHIFT, y >> SHIFT, z >> SHIFT);
-                (tile << (3 * SHIFT) | local(n) as u64, i as u32)
-            })
-            .collect();
-        radix::sort_by_key(&mut order, |&(k, _)| k);
-        let mut tiles = Vec::new();
-        let mut start = 0;
-        for i in 1..=order.len() {
-            if i == order.len() || order[i].0 >> (3 * SHIFT) != order[start].0 >> (3 * SHIFT) {
-                tiles.push(start..i);
-                start = i;
-            }
-        }
-        let samples: Vec<(f64, f64)> = tiles
-            .par_iter()
-            .flat_map_iter(|r| {
-                let tile = &order[r.clone()];
-                let corner = VirtualGrid::coords(tile[0].0 >> (3 * SHIFT)).map(|c| c << SHIFT);
-                let mut rows = [0u8; TILE * TILE];
-                for &(k, _) in tile {
-                    let l = k as usize & (TILE3 - 1);
-                    rows[l >> SHIFT] |= 1 << (l & (TILE - 1));
-                }
-                let mut sums = [(0.0, 0.0); TILE3];
-                self.fill_tile(grid, corner, &rows, &mut sums);
-                tile.iter()
-                    .map(move |&(k, _)| sums[k as usize & (TILE3 - 1)])
-            })
-            .collect();
-        let mut out = vec![(0.0, 0.0); nodes.len()];
-        for (&(_, i), s) in order.iter().zip(samples) {
-            out[i as usize] = s;
-        }
-        out
-    }
-
     /// (A, S) at every node of layer `layer` of `tiles` (see [`NodeTiles`]) into `out`,
     /// `tiles.layer_len()` samples; padding nodes get (0, 0).
     pub fn values_and_weights_on_tile_layer(
@@ -309,83 +251,20 @@ mod tests {
         }
     }
 
-    /// Every node of a box of the lattice that covers the particles and a margin, in a
-    /// scattered order, plus a sparse sample of a second, offset window.
-    fn nodes(grid: &VirtualGrid) -> Vec<u64> {
-        let mut next = crate::test_rng::lcg(3);
-        let mut keys = Vec::new();
-        for z in 0..grid.cells[2] + 1 {
-            for y in 0..grid.cells[1] + 1 {
-                for x in 0..grid.cells[0] + 1 {
-                    // Whole tiles in one region, one node in three elsewhere: tiles
-                    // both full and sparse.
-                    if (x < 16 && y < 8) || next().is_multiple_of(3) {
-                        keys.push(VirtualGrid::key(x, y, z));
-                    }
-                }
-            }
-        }
-        // Not sorted: the caller's order must come back.
-        for i in (1..keys.len()).rev() {
-            keys.swap(i, next() as usize % (i + 1));
-        }
-        keys
-    }
-
-    #[test]
-    fn tiles_give_each_node_the_pointwise_value_to_the_bit() {
-        let data = particles();
-        for kernel in Kernel::ALL {
-            for (quantity, shepard) in [
-                (Quantity::SumOfWeights, false),
-                (Quantity::Scalar("p".into()), false),
-                (Quantity::Scalar("p".into()), true),
-            ] {
-                let settings = SphSettings {
-                    kernel,
-                    smoothing_length: SmoothingLength::Array("h".into()),
-                    quantity,
-                    shepard,
-                    ..SphSettings::default()
-                };
-                let field = SphField::new(&data, &settings).unwrap();
-                let (lo, hi) = field.bounds();
-                let margin = DVec3::splat(0.3);
-                let grid = VirtualGrid::on_lattice(
-                    DVec3::new(-0.013, 0.007, 0.0),
-                    0.037,
-                    lo - margin,
-                    hi + margin,
-                )
-                .unwrap();
-                let keys = nodes(&grid);
-                let tiled = field.values_and_weights_at_nodes(&grid, &keys);
-                let mut reached = 0;
-                for (&n, &got) in keys.iter().zip(&tiled) {
-                    let x = grid.node_position(n);
-                    let want = field.value_and_weight(x);
-                    assert!(
-                        got.0.to_bits() == want.0.to_bits() && got.1.to_bits() == want.1.to_bits(),
-                        "{kernel:?}, shepard {shepard}, node {:?}: {got:?} vs {want:?}",
-                        VirtualGrid::coords(n)
-                    );
-                    reached += usize::from(want.1 > 0.0);
-                }
-                assert!(reached > 5000, "most nodes see particles ({reached})");
-                assert!(reached < keys.len(), "some nodes see none");
-            }
-        }
-    }
-
     #[test]
     fn tile_layers_give_every_node_the_pointwise_value_to_the_bit() {
         let data = particles();
-        for (quantity, shepard) in [
+        let cases = [
             (Quantity::SumOfWeights, false),
+            (Quantity::Scalar("p".into()), false),
             (Quantity::Scalar("p".into()), true),
-        ] {
+        ];
+        for (kernel, (quantity, shepard)) in Kernel::ALL
+            .into_iter()
+            .flat_map(|k| cases.iter().cloned().map(move |c| (k, c)))
+        {
             let settings = SphSettings {
-                kernel: Kernel::WendlandC2,
+                kernel,
                 smoothing_length: SmoothingLength::Array("h".into()),
                 quantity,
                 shepard,
@@ -411,6 +290,7 @@ mod tests {
                 field.values_and_weights_on_tile_layer(&grid, &tiles, layer, chunk);
             }
             let mut real = vec![false; samples.len()];
+            let mut reached = 0;
             for z in 0..nodes[2] as u32 {
                 for y in 0..nodes[1] as u32 {
                     for x in 0..nodes[0] as u32 {
@@ -423,26 +303,17 @@ mod tests {
                         assert!(
                             got.0.to_bits() == want.0.to_bits()
                                 && got.1.to_bits() == want.1.to_bits(),
-                            "node {x} {y} {z}: {got:?} vs {want:?}"
+                            "{kernel:?}, shepard {shepard}, node {x} {y} {z}: {got:?} vs {want:?}"
                         );
+                        reached += usize::from(want.1 > 0.0);
                     }
                 }
             }
             for (i, s) in samples.iter().enumerate() {
                 assert!(real[i] || *s == (0.0, 0.0), "padding slot {i} holds {s:?}");
             }
+            assert!(reached > 5000, "most nodes see particles ({reached})");
+            assert!(reached < nodes.iter().product(), "some nodes see none");
         }
-    }
-
-    #[test]
-    fn no_nodes_give_no_samples() {
-        let data = particles();
-        let settings = SphSettings {
-            smoothing_length: SmoothingLength::Constant(0.1),
-            ..SphSettings::default()
-        };
-        let field = SphField::new(&data, &settings).unwrap();
-        let grid = VirtualGrid::covering(DVec3::ZERO, DVec3::ONE, 0.1).unwrap();
-        assert!(field.values_and_weights_at_nodes(&grid, &[]).is_empty());
     }
 }
