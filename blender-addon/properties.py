@@ -198,9 +198,9 @@ class IsobarSettings(bpy.types.PropertyGroup):
     )
     max_error: FloatProperty(
         name="Max Error",
-        description="Adaptive: cells at the surface are refined a level where the next level's field samples lie "
-        "more than this many finest cells from the current level's interpolant (0: off, splash criterion alone)",
-        default=0.5,
+        description="Adaptive: each cell at the surface takes the lowest level whose surface lies within this many "
+        "finest cells of the finest level's there (0: off, splash criterion alone)",
+        default=0.4,
         min=0.0,
         soft_max=2.0,
         update=_changed,

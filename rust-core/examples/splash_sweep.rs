@@ -14,8 +14,12 @@
 //! - `vanish:S:D:E`  a cell holding particles none of whose nodes of spacing S finest
 //!   cells (2: level 2, 4: level 1) lies above the isovalue.
 //!
-//! `DIAG=1` prints the six worst sample points each way with their cell's level, count
-//! and 3×3×3 block count.
+//! Every spec then gets the hidden-surface rule as the library applies it (`NO_HIDDEN=1`
+//! leaves it out) and the error criterion. `DIAG=1` prints the six worst sample points
+//! each way (vertices, edge midpoints, centroids, as the Hausdorff distance samples them)
+//! with their cell's level, particle count and 3×3×3 block count; `DIAG=2` adds the point
+//! in finest cells from the cell's first node, F and |∇F| (per finest cell) there, and
+//! F − iso on the cell's 5³ finest lattice.
 //!
 //! `cargo run --release -p isobar --example splash_sweep -- FRAME G SPEC...`
 use glam::{DVec3, IVec3};
@@ -116,6 +120,9 @@ fn main() {
         let max_error = arg(&p, p.len() - 1);
         let splash = levels.iter().filter(|&&l| l == 3).count();
         grid::dilate(&g, &mut levels, dilation);
+        if std::env::var("NO_HIDDEN").is_err() {
+            refine::hidden_surfaces(&field, &g, &positions, &mut levels, ISO);
+        }
         let r = refine::refine(&field, &g, &counts, &mut levels, ISO, max_error);
         grid::balance(&g, &mut levels);
         let levels_s = t.elapsed().as_secs_f64();
@@ -138,6 +145,29 @@ fn main() {
                         counts[i],
                         block(i)
                     );
+                    if std::env::var("DIAG").as_deref() == Ok("2") {
+                        let c = g.coords(i);
+                        let base = c.map(|x| x as i64 * 4);
+                        let o = g.point(base, 0);
+                        let (f, gr) = field.value_and_gradient(pt);
+                        println!(
+                            "    at {:.2?} fine, F {f:.4} |grad| {:.4}",
+                            ((pt - o) / g.fine).to_array(),
+                            gr.length() * g.fine
+                        );
+                        for z in 0..5i64 {
+                            let mut line = String::new();
+                            for y in 0..5i64 {
+                                for x in 0..5i64 {
+                                    let v = field
+                                        .value(g.point([base[0] + x, base[1] + y, base[2] + z], 0));
+                                    line += &format!("{:+.3} ", v - ISO);
+                                }
+                                line += "| ";
+                            }
+                            println!("    z{z}: {line}");
+                        }
+                    }
                 }
             }
         }
@@ -182,7 +212,8 @@ fn neighbour_counts(positions: &[DVec3], r: f64) -> Vec<usize> {
         .collect()
 }
 
-/// The six worst vertices of `from` (at least `bucket` apart) by distance to `to`.
+/// The six worst samples of `from` (vertices, edge midpoints, centroids, as the Hausdorff
+/// distance samples them) (at least `bucket` apart) by distance to `to`.
 fn worst(from: &Mesh, to: &Mesh, bucket: f64) -> Vec<(f64, DVec3)> {
     let pos = |m: &Mesh, i: u32| DVec3::from(m.positions[i as usize]);
     let key = |p: DVec3| (p / bucket).floor().as_ivec3();
@@ -198,9 +229,17 @@ fn worst(from: &Mesh, to: &Mesh, bucket: f64) -> Vec<(f64, DVec3)> {
             }
         }
     }
-    let mut v: Vec<(f64, DVec3)> = (0..from.positions.len() as u32)
-        .map(|i| {
-            let p = pos(from, i);
+    let samples: Vec<DVec3> = from
+        .triangles
+        .iter()
+        .flat_map(|t| {
+            let [a, b, c] = t.map(|i| pos(from, i));
+            [a, (a + b) / 2.0, (a + b + c) / 3.0]
+        })
+        .collect();
+    let mut v: Vec<(f64, DVec3)> = samples
+        .into_iter()
+        .map(|p| {
             let best = (0..27)
                 .filter_map(|d| {
                     buckets.get(&(key(p) + IVec3::new(d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1)))

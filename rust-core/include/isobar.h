@@ -87,9 +87,9 @@ typedef struct IsobarAdaptiveParams {
   // `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU adapter: ..." without one) or
   // `ISOBAR_BACKEND_AUTO` (the GPU when an adapter exists). Added in version 2.
   uint32_t backend;
-  // Error criterion: cells at the surface rise a level where the next level's samples
-  // lie more than this many finest cells from the current level's interpolant (0 = off,
-  // the splash criterion alone). Added in version 3; older structs get the default.
+  // Error criterion: each cell at the surface takes the lowest level whose surface lies
+  // within this many finest cells of the finest level's there (0 = off, the splash
+  // criterion alone). Added in version 3; older structs get the default.
   double max_error;
 } IsobarAdaptiveParams;
 

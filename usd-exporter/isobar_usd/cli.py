@@ -77,8 +77,8 @@ def _parser() -> argparse.ArgumentParser:
                    "grids): cpu, gpu (wgpu; an error without an adapter) or auto (a hardware GPU when there is one); "
                    "default: the core's (correctors cpu, adaptive auto)")
     g.add_argument("--splash-threshold", type=int, help="adaptive: coarse cells holding 1..N particles are refined to the finest level (core default 1)")
-    g.add_argument("--max-error", type=float, help="adaptive: cells at the surface are refined a level where the next level's "
-                   "field samples lie more than this many finest cells from the current level's interpolant "
+    g.add_argument("--max-error", type=float, help="adaptive: each cell at the surface takes the lowest level whose surface lies "
+                   "within this many finest cells of the finest level's there "
                    "(0: off, the splash criterion alone; default: the core's)")
 
     u = sph.add_argument_group("USD")

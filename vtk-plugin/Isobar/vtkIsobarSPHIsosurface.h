@@ -166,9 +166,9 @@ public:
   ///@}
 
   ///@{
-  /// Adaptive method, error criterion added to the splash one: cells at the surface are
-  /// refined a level where the next level's field samples lie more than this many finest
-  /// cells from the current level's interpolant (core default; 0 turns it off).
+  /// Adaptive method, error criterion added to the splash one: each cell at the surface
+  /// takes the lowest level whose surface lies within this many finest cells of the
+  /// finest level's there (core default; 0 turns it off).
   vtkSetClampMacro(MaxError, double, 0.0, VTK_DOUBLE_MAX);
   vtkGetMacro(MaxError, double);
   ///@}

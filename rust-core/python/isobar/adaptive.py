@@ -54,9 +54,9 @@ def extract_adaptive(
             default 1, the paper's; 0 keeps every cell at level 1).
         splash_dilation: layers of neighbour cells raised to level 3 around each splash
             cell (core default 1; 0 is the paper's criterion alone).
-        max_error: error criterion, added to the splash one: cells at the surface rise a
-            level where the next level's field samples lie more than this many finest
-            cells from the current level's interpolant (core default in
+        max_error: error criterion, added to the splash one: each cell at the surface
+            takes the lowest level whose surface lies within this many finest cells of
+            the finest level's there (core default in
             ``default_params().max_error``; 0 turns it off).
         bisection_iterations: halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
         backend: "cpu", "gpu" (wgpu; raises "no GPU adapter: ..." without one) or "auto"

@@ -24,9 +24,9 @@ pub struct AdaptiveArgs {
     /// paper's criterion alone).
     #[arg(long, default_value_t = Params::default().splash_dilation)]
     pub splash_dilation: u32,
-    /// Error criterion: cells at the surface rise a level where the next level's field
-    /// samples lie more than this many finest cells from the current level's interpolant
-    /// (0 = off, the splash criterion alone).
+    /// Error criterion: each cell at the surface takes the lowest level whose surface lies
+    /// within this many finest cells of the finest level's there (0 = off, the splash
+    /// criterion alone).
     #[arg(long, default_value_t = Params::default().max_error)]
     pub max_error: f64,
     /// Turn off the hidden-surface rule (cells rise until their sub-cell corners see the
@@ -145,11 +145,11 @@ fn rows(data: &ParticleData, s: &Stats, build_s: f64) -> Vec<(String, String)> {
     }
     r.extend([
         (
-            "error criterion: cells 1 -> 2".into(),
+            "error criterion: cells to level 2".into(),
             s.error_raised[0].to_string(),
         ),
         (
-            "error criterion: cells 2 -> 3".into(),
+            "error criterion: cells to level 3".into(),
             s.error_raised[1].to_string(),
         ),
         (

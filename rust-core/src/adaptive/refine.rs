@@ -1,23 +1,28 @@
 //! Error-driven refinement, added to the paper's splash criterion (which counts particles
-//! and never looks at the surface). For each coarse cell at or next to the surface, the
-//! field is sampled at the nodes the next level would add (edge midpoints, face and cell
-//! centres of the cell's current sub-cells) and compared with the trilinear interpolant of
-//! the current level's node values; the difference, turned into a distance with the
-//! field's gradient (|F − F_lin| / |∇F|), estimates how far the current level's surface
-//! lies from the next one's. A cell whose estimate exceeds `max_error` finest cells is
-//! raised one level, 1 → 2 and then 2 → 3, with `grid::balance` between the rounds and
-//! after them.
+//! and never looks at the surface). Each coarse cell at or next to the surface samples
+//! the field on its finest lattice (5³ nodes) and contours it three ways: every node
+//! (level 3), every second (level 2) and the corners (level 1), edge points placed by
+//! bisecting the lattice values as the extractor bisects the field. The cell takes the
+//! lowest level whose surface lies within `max_error` finest cells of the level-3 one
+//! ([`surface_distance`]); `grid::balance` runs after.
 //!
-//! Every cell's decision reads only the field and the levels as they were before the
-//! pass, so the result does not depend on the thread count. The GPU back end takes its
-//! levels from the same function, its samples evaluated here on the CPU.
+//! The meshes are compared, not the fields: an interpolation error |F − F_lin| / |∇F| at
+//! the next level's nodes (this module's first estimate) misses how far a flat piece
+//! cuts across a bump between the nodes, the side of a small droplet, where the adaptive
+//! surface strayed most; and a level-by-level test (1 against 2, then 2 against 3) let
+//! the two steps' errors add up in cells kept at level 1.
+//!
+//! Every cell's decision reads only the field, so the result does not depend on the
+//! order of the cells or the thread count. The GPU back end takes its levels from the
+//! same function, its samples evaluated here on the CPU.
 
 use super::grid::{self, subdivisions, CoarseGrid, FINE_PER_COARSE};
 use crate::field::ScalarField;
+use crate::mesh::hausdorff::point_triangle;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// What the criteria did: cells the error criterion raised 1 → 2 and 2 → 3, cells the
+/// What the criteria did: cells the error criterion raised to level 2 and to 3, cells the
 /// hidden-surface rule raised ([`hidden_surfaces`]), and the field evaluations (with
 /// gradient for the error criterion) both took.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -129,11 +134,12 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
     out
 }
 
-/// Raises cells of `levels` (after splitting and dilation; balanced on return) where the
-/// next level's samples are more than `max_error` finest cells off the current level's
-/// interpolant near the surface. `counts` are the particles per coarse cell (a cell
-/// holding particles but no corner inside the fluid may hide a droplet between its
-/// corners). `max_error` ≤ 0 leaves the levels as they are.
+/// Raises each coarse cell of `levels` (after splitting and dilation; balanced on return)
+/// at or next to the surface to the lowest level whose surface lies within `max_error`
+/// finest cells of the finest one in that cell ([`needed_level`]). `counts` are the
+/// particles per coarse cell (a cell holding particles but no corner inside the fluid
+/// may hide a droplet between its corners, and its neighbours parts of that droplet's
+/// surface). `max_error` ≤ 0 leaves the levels as they are.
 pub fn refine<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
@@ -146,94 +152,64 @@ pub fn refine<F: ScalarField + ?Sized>(
     if max_error <= 0.0 {
         return out;
     }
-    let tolerance = max_error * grid.fine;
     let corners = corner_values(field, grid);
     let node = |c: [u32; 3]| {
         c[0] as usize
             + (grid.cells[0] as usize + 1)
                 * (c[1] as usize + (grid.cells[1] as usize + 1) * c[2] as usize)
     };
+    let corner_list = |c: [u32; 3]| -> [f64; 8] {
+        std::array::from_fn(|v| {
+            corners[node([
+                c[0] + (v as u32 & 1),
+                c[1] + (v as u32 >> 1 & 1),
+                c[2] + (v as u32 >> 2 & 1),
+            ])]
+        })
+    };
     // Sign of each cell's corners: bit 0 some corner inside, bit 1 some corner outside.
     let signs: Vec<u8> = (0..levels.len())
         .into_par_iter()
         .map(|i| {
-            let c = grid.coords(i);
-            (0..8).fold(0u8, |s, v| {
-                let n = [c[0] + (v & 1), c[1] + (v >> 1 & 1), c[2] + (v >> 2 & 1)];
-                s | if corners[node(n)] > iso { 1 } else { 2 }
-            })
+            corner_list(grid.coords(i))
+                .iter()
+                .fold(0u8, |s, &v| s | if v > iso { 1 } else { 2 })
         })
         .collect();
-    let crossed = |i: usize| signs[i] == 3;
-    // Candidates: cells the surface crosses or touches (a corner sign change in
-    // the cell or one of its 26 neighbours), and cells holding particles with no corner
-    // inside (a droplet that may fall between the corners).
+    // Candidates: cells in the 3×3×3 block of a cell the surface crosses at the corners,
+    // or of a cell holding particles with no corner inside (a droplet between the corners
+    // reaches into its neighbours too).
+    let marked = |i: usize| signs[i] == 3 || (counts[i] > 0 && signs[i] & 1 == 0);
     let candidate = |i: usize| {
         let c = grid.coords(i);
-        if counts[i] > 0 && signs[i] & 1 == 0 {
-            return true;
-        }
         (0..27).any(|d| {
             let n: [i64; 3] =
                 std::array::from_fn(|a| c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1);
             (0..3).all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
-                && crossed(grid.index(n.map(|x| x as u32)))
+                && marked(grid.index(n.map(|x| x as u32)))
         })
     };
-    let corner_list = |c: [u32; 3]| -> Vec<f64> {
-        (0..8)
-            .map(|v| corners[node([c[0] + (v & 1), c[1] + (v >> 1 & 1), c[2] + (v >> 2 & 1)])])
-            .collect()
-    };
-    // 1 → 2 on every level-1 candidate.
-    let tested: Vec<(usize, bool)> = (0..levels.len())
+    let needs: Vec<(usize, u8)> = (0..levels.len())
         .into_par_iter()
-        .filter(|&i| levels[i] == 1 && candidate(i))
+        .filter(|&i| levels[i] < 3 && candidate(i))
         .map(|i| {
             let c = grid.coords(i);
-            let (_, error) = next_level_error(field, grid, c, 1, &corner_list(c), iso);
-            (i, error > tolerance)
+            (
+                i,
+                needed_level(field, grid, c, &corner_list(c), iso, max_error),
+            )
         })
         .collect();
-    out.evaluations += corners.len() as u64 + tested.len() as u64 * 19;
-    for &(i, raise) in &tested {
-        if raise {
-            levels[i] = 2;
-            out.raised[0] += 1;
+    const LATTICE: u64 = (FINE_PER_COARSE as u64 + 1).pow(3) - 8;
+    out.evaluations += corners.len() as u64 + needs.len() as u64 * LATTICE;
+    for (i, need) in needs {
+        if need > levels[i] {
+            levels[i] = need;
+            out.raised[need as usize - 2] += 1;
         }
     }
-    // 2 → 3 on every level-2 candidate, from its level-2 values. Balancing raises more
-    // cells to level 2 around level-3 ones (splash cells or cells raised here), whose
-    // surface the test has not seen: repeat on those until none is new. Each round
-    // reads the levels as the previous one left them, so the rounds are deterministic.
-    let mut seen = vec![false; levels.len()];
-    loop {
-        grid::balance(grid, levels);
-        let fresh: Vec<usize> = (0..levels.len())
-            .into_par_iter()
-            .filter(|&i| levels[i] == 2 && !seen[i] && candidate(i))
-            .collect();
-        if fresh.is_empty() {
-            return out;
-        }
-        let raise: Vec<usize> = fresh
-            .par_iter()
-            .filter_map(|&i| {
-                let c = grid.coords(i);
-                let (two, _) = next_level_error(field, grid, c, 1, &corner_list(c), iso);
-                let (_, error) = next_level_error(field, grid, c, 2, &two, iso);
-                (error > tolerance).then_some(i)
-            })
-            .collect();
-        out.evaluations += fresh.len() as u64 * (19 + 98);
-        for &i in &fresh {
-            seen[i] = true;
-        }
-        out.raised[1] += raise.len() as u64;
-        for i in raise {
-            levels[i] = 3;
-        }
-    }
+    grid::balance(grid, levels);
+    out
 }
 
 /// The field at every coarse-grid node, x fastest.
@@ -248,67 +224,118 @@ fn corner_values<F: ScalarField + ?Sized>(field: &F, grid: &CoarseGrid) -> Vec<f
         .collect()
 }
 
-/// The node values of coarse cell `c` at level `level + 1` ((2k+1)³, x fastest, with
-/// k = subdivisions(level)), and the largest distance estimate |F − F_lin| / |∇F| over
-/// the new nodes near the surface, F_lin the trilinear interpolant of `values` (the
-/// (k+1)³ node values at `level`) in the sub-cell holding the node.
-///
-/// A node counts when it is within one current sub-cell of the surface by either value
-/// (|F − iso| / |∇F| or |F_lin − iso| / |∇F|), or when F and F_lin lie on different
-/// sides of `iso` (the next level would see surface the current one misses).
-fn next_level_error<F: ScalarField + ?Sized>(
+/// The lowest level whose marching-cubes surface in coarse cell `c` lies within
+/// `max_error` finest cells of the finest level's, from the field on the cell's finest
+/// lattice (`corners`: its eight corner values, already known).
+fn needed_level<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
     c: [u32; 3],
-    level: u8,
-    values: &[f64],
+    corners: &[f64; 8],
     iso: f64,
-) -> (Vec<f64>, f64) {
-    let k = subdivisions(level) as usize;
-    let (n, m) = (k + 1, 2 * k + 1);
-    let step = (FINE_PER_COARSE as usize / (2 * k)) as u32;
-    let band = grid.fine * (2 * step) as f64;
-    let mut out = vec![0.0; m * m * m];
-    let mut error = 0.0f64;
-    for (v, sample) in out.iter_mut().enumerate() {
-        let l = [v % m, v / m % m, v / (m * m)];
-        if l.iter().all(|x| x % 2 == 0) {
-            *sample = values[l[0] / 2 + n * (l[1] / 2 + n * (l[2] / 2))];
-            continue;
-        }
-        let sub: [i64; 3] =
-            std::array::from_fn(|a| (c[a] * FINE_PER_COARSE + l[a] as u32 * step) as i64);
-        let (f, g) = field.value_and_gradient(grid.point(sub, 0));
-        *sample = f;
-        // Trilinear interpolation in the current sub-cell: odd local coordinates sit at
-        // its middle along that axis (weight ½ each side), even ones on its nodes.
-        let mut lin = 0.0;
-        for corner in 0..8usize {
-            let mut w = 1.0;
-            let mut at = [0usize; 3];
-            for a in 0..3 {
-                let hi = corner >> a & 1;
-                if l[a] % 2 == 0 {
-                    if hi == 1 {
-                        w = 0.0;
-                    }
-                    at[a] = l[a] / 2;
-                } else {
-                    w *= 0.5;
-                    at[a] = l[a] / 2 + hi;
-                }
-            }
-            if w > 0.0 {
-                lin += w * values[at[0] + n * (at[1] + n * at[2])];
-            }
-        }
-        let gradient = g.length().max(f64::MIN_POSITIVE);
-        let near = (f - iso).abs().min((lin - iso).abs()) <= band * gradient;
-        if near || (f > iso) != (lin > iso) {
-            error = error.max((f - lin).abs() / gradient);
+    max_error: f64,
+) -> u8 {
+    const M: usize = FINE_PER_COARSE as usize + 1;
+    let mut values = [0.0; M * M * M];
+    for (v, sample) in values.iter_mut().enumerate() {
+        let l = [v % M, v / M % M, v / (M * M)];
+        *sample = if l.iter().all(|&x| x % (M - 1) == 0) {
+            corners[l[0] / (M - 1) + 2 * (l[1] / (M - 1)) + 4 * (l[2] / (M - 1))]
+        } else {
+            let sub: [i64; 3] =
+                std::array::from_fn(|a| (c[a] * FINE_PER_COARSE) as i64 + l[a] as i64);
+            field.value(grid.point(sub, 0))
+        };
+    }
+    let finest = lattice_surface(&values, M, 1, iso);
+    for level in 1..=2u8 {
+        let stride = (FINE_PER_COARSE / subdivisions(level)) as usize;
+        let surface = lattice_surface(&values, M, stride, iso);
+        if surface_distance(&surface, &finest, (M - 1) as f64) <= max_error {
+            return level;
         }
     }
-    (out, error)
+    3
+}
+
+/// Marching-cubes triangles of the node values `values` (m³, x fastest) taking every
+/// `stride`-th node (a power of two), in node units. A cut edge's point is found as the
+/// extractor finds it: bisection (here on the lattice values along the edge) down to one
+/// lattice step, then linearly in that step.
+fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DVec3; 3]> {
+    let table = crate::mc::case_table();
+    let at = |l: [usize; 3]| values[l[0] + m * (l[1] + m * l[2])];
+    let cells = (m - 1) / stride;
+    let mut triangles = Vec::new();
+    for v in 0..cells * cells * cells {
+        let origin = [v % cells, v / cells % cells, v / (cells * cells)].map(|x| x * stride);
+        let node = |corner: usize| -> [usize; 3] {
+            let o = crate::mc::corner_offset(corner);
+            std::array::from_fn(|a| origin[a] + o[a] as usize * stride)
+        };
+        let corners: [f64; 8] = std::array::from_fn(|corner| at(node(corner)));
+        let case = crate::mc::case_index(&corners, iso);
+        let point = |e: u8| -> DVec3 {
+            let (corner, axis) = crate::mc::edge_corner_axis(e as usize);
+            let mut lo = node(corner);
+            let mut length = stride;
+            while length > 1 {
+                length /= 2;
+                let mut mid = lo;
+                mid[axis] += length;
+                if (at(lo) > iso) == (at(mid) > iso) {
+                    lo = mid;
+                }
+            }
+            let mut hi = lo;
+            hi[axis] += 1;
+            let mut p = DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
+            p[axis] += crate::mc::linear_crossing(at(lo), at(hi), iso);
+            p
+        };
+        for tri in &table.triangles[case as usize] {
+            triangles.push(tri.map(point));
+        }
+    }
+    triangles
+}
+
+/// How far apart two triangle sets lie inside the box [0, size]³, sampled at each
+/// triangle's vertices, edge midpoints and centroid: 0 when both are empty, infinite when
+/// a sample on a face of the box finds nothing.
+///
+/// A sample inside the box counts at most its distance to the box's faces: beyond them
+/// lies the neighbouring cells' surface, which this cell cannot see (those cells test
+/// themselves), so a piece of the finer surface grazing a face is not taken for a
+/// missing one. Samples on a face are not capped: both cells' surfaces end in the same
+/// trace there, and a coarse trace off the fine one is what the crack triangles between
+/// a coarse and a fine cell would span.
+fn surface_distance(a: &[[DVec3; 3]], b: &[[DVec3; 3]], size: f64) -> f64 {
+    let one_way = |from: &[[DVec3; 3]], to: &[[DVec3; 3]]| -> f64 {
+        let mut worst = 0.0f64;
+        for t in from {
+            let samples = [
+                t[0],
+                t[1],
+                t[2],
+                (t[0] + t[1]) / 2.0,
+                (t[1] + t[2]) / 2.0,
+                (t[2] + t[0]) / 2.0,
+                (t[0] + t[1] + t[2]) / 3.0,
+            ];
+            for p in samples {
+                let face = p.min_element().min(size - p.max_element());
+                let cap = if face > 0.0 { face } else { f64::INFINITY };
+                let nearest = to
+                    .iter()
+                    .map(|u| point_triangle(p, u[0], u[1], u[2]))
+                    .fold(cap, f64::min);
+                worst = worst.max(nearest);
+            }
+        }
+        worst
+    };
+    one_way(a, b).max(one_way(b, a))
 }
 
 #[cfg(test)]
@@ -364,56 +391,69 @@ mod tests {
         assert!(levels.iter().all(|&l| l == 1));
     }
 
-    /// On a sphere F − F_lin at an edge midpoint of a sub-cell of length L is L²/4
-    /// exactly, at a face centre L²/2, at a cell centre 3L²/4; the samples counted lie
-    /// within one sub-cell of the surface, where |∇F| = 2|x − c| ≥ 2(R − L). So a
-    /// tolerance above 3L²/(8(R − L)) for the coarse L raises nothing, and one above it
-    /// for L/2 (but below the coarse cells' centre error) raises cells to 2, none to 3.
+    /// The criterion's promise, checked on the meshes themselves: on a sphere of radius
+    /// 9 finest cells (level 1's surface lies up to 0.58 finest cells off level 3's in a
+    /// cell, level 2's up to 0.13), the adaptive mesh at the levels it picks lies within
+    /// the tolerance of the uniform finest mesh by an independent Hausdorff distance
+    /// (measured 0.13 at 0.25 and 0.33 at 0.4), with over 3× fewer triangles; a tolerance
+    /// below level 2's error gives the uniform mesh, one above level 1's raises nothing,
+    /// and only cells near the surface rise.
     #[test]
-    fn a_sphere_is_refined_where_the_estimate_says() {
+    fn a_sphere_stays_within_the_tolerance_of_the_finest_surface() {
         let g = grid();
-        let coarse = 4.0 * g.fine;
-        let radius = 0.45;
-        let ball = Ball(radius);
-        let bound = |l: f64| 3.0 * l * l / (8.0 * (radius - l));
+        let ball = Ball(0.45);
         let none = vec![0; g.cell_count()];
+        let params = crate::adaptive::Params {
+            isovalue: 0.0,
+            normals: false,
+            ..crate::adaptive::Params::default()
+        };
+        let extract = |levels: &[u8]| {
+            crate::adaptive::extract(
+                &ball,
+                &g,
+                levels,
+                &params,
+                &mut crate::progress::Progress::none(),
+            )
+            .unwrap()
+        };
+        let uniform = extract(&vec![3u8; g.cell_count()]);
         let mut levels = vec![1u8; g.cell_count()];
-        let r = refine(
-            &ball,
-            &g,
-            &none,
-            &mut levels,
-            0.0,
-            1.01 * bound(coarse) / g.fine,
+        assert_eq!(
+            refine(&ball, &g, &none, &mut levels, 0.0, 2.0).raised,
+            [0, 0]
         );
-        assert_eq!(r.raised, [0, 0], "above the coarse bound");
-        let r = refine(
-            &ball,
-            &g,
-            &none,
-            &mut levels,
-            0.0,
-            1.01 * bound(coarse / 2.0) / g.fine,
-        );
-        assert!(r.raised[0] > 0, "{r:?}");
-        assert_eq!(r.raised[1], 0, "{r:?}");
-        for (i, &l) in levels.iter().enumerate() {
-            if l > 1 {
-                let c = g.coords(i).map(|x| x as f64 * coarse);
-                let centre = DVec3::new(c[0], c[1], c[2]) + DVec3::splat(coarse / 2.0);
-                let d = ((centre - DVec3::splat(1.0)).length() - radius).abs();
-                assert!(d < 3.0 * coarse, "cell {i} raised {d} from the surface");
+        for tolerance in [0.1, 0.25, 0.4] {
+            let mut levels = vec![1u8; g.cell_count()];
+            let r = refine(&ball, &g, &none, &mut levels, 0.0, tolerance);
+            let out = extract(&levels);
+            assert!(out.mesh.topology().is_watertight_oriented());
+            let d =
+                crate::mesh::hausdorff::hausdorff(&out.mesh, &uniform.mesh, 8.0 * g.fine) / g.fine;
+            if tolerance < 0.13 {
+                // Below level 2's error anywhere on this sphere (0.13): every surface cell
+                // is raised to level 3, and the mesh is the uniform one.
+                assert!(r.raised[1] > 0 && r.raised[0] == 0, "{r:?}");
+                assert_eq!(out.stats.triangles, uniform.stats.triangles);
+                assert!(d < 1e-9, "{d}");
+            } else {
+                assert!(r.raised[0] > 0, "{tolerance}: {r:?}");
+                assert!(out.stats.triangles < uniform.stats.triangles / 3);
+                assert!(
+                    d <= tolerance + 0.05,
+                    "{tolerance}: Hausdorff {d} finest cells"
+                );
+            }
+            let coarse = 4.0 * g.fine;
+            for (i, &l) in levels.iter().enumerate() {
+                if l > 1 {
+                    let c = g.coords(i).map(|x| x as f64 * coarse);
+                    let centre = DVec3::new(c[0], c[1], c[2]) + DVec3::splat(coarse / 2.0);
+                    let d = ((centre - DVec3::splat(1.0)).length() - 0.45).abs();
+                    assert!(d < 3.0 * coarse, "cell {i} raised {d} from the surface");
+                }
             }
         }
-        let mut levels = vec![1u8; g.cell_count()];
-        let r = refine(
-            &ball,
-            &g,
-            &none,
-            &mut levels,
-            0.0,
-            0.01 * bound(coarse) / g.fine,
-        );
-        assert!(r.raised[1] > 0, "{r:?}");
     }
 }

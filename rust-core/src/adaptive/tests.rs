@@ -590,7 +590,7 @@ fn hidden_surface_rule_keeps_a_droplet_between_the_corners() {
         (!near.is_empty()).then_some((lo, hi))
     };
     let (lo, hi) = droplet(&reference.mesh).unwrap();
-    for (max_error, hidden_surfaces) in [(0.0, true), (0.0, false), (0.5, true)] {
+    for (max_error, hidden_surfaces) in [(0.0, true), (0.0, false), (DEFAULT_MAX_ERROR, true)] {
         let params = Params {
             max_error,
             hidden_surfaces,
