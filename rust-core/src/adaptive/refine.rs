@@ -4,7 +4,7 @@
 //! (level 3), every second (level 2) and the corners (level 1), edge points placed by
 //! bisecting the lattice values as the extractor bisects the field. The cell takes the
 //! lowest level whose surface lies within `max_error` finest cells of the level-3 one
-//! ([`surface_distance`]); `grid::balance` runs after.
+//! ([`surfaces_within`]); `grid::balance` runs after.
 //!
 //! The meshes are compared, not the fields: an interpolation error |F − F_lin| / |∇F| at
 //! the next level's nodes (this module's first estimate) misses how far a flat piece
@@ -192,15 +192,9 @@ pub fn refine<F: ScalarField + ?Sized>(
     let needs: Vec<(usize, u8)> = (0..levels.len())
         .into_par_iter()
         .filter(|&i| levels[i] < 3 && candidate(i))
-        .map(|i| {
-            let c = grid.coords(i);
-            (
-                i,
-                needed_level(field, grid, c, &corner_list(c), iso, max_error),
-            )
-        })
+        .map(|i| (i, needed_level(field, grid, grid.coords(i), iso, max_error)))
         .collect();
-    const LATTICE: u64 = (FINE_PER_COARSE as u64 + 1).pow(3) - 8;
+    const LATTICE: u64 = (FINE_PER_COARSE as u64 + 1).pow(3);
     out.evaluations += corners.len() as u64 + needs.len() as u64 * LATTICE;
     for (i, need) in needs {
         if need > levels[i] {
@@ -226,32 +220,23 @@ fn corner_values<F: ScalarField + ?Sized>(field: &F, grid: &CoarseGrid) -> Vec<f
 
 /// The lowest level whose marching-cubes surface in coarse cell `c` lies within
 /// `max_error` finest cells of the finest level's, from the field on the cell's finest
-/// lattice (`corners`: its eight corner values, already known).
+/// lattice (one block evaluation: for SPH about four times cheaper than node by node).
 fn needed_level<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
     c: [u32; 3],
-    corners: &[f64; 8],
     iso: f64,
     max_error: f64,
 ) -> u8 {
     const M: usize = FINE_PER_COARSE as usize + 1;
     let mut values = [0.0; M * M * M];
-    for (v, sample) in values.iter_mut().enumerate() {
-        let l = [v % M, v / M % M, v / (M * M)];
-        *sample = if l.iter().all(|&x| x % (M - 1) == 0) {
-            corners[l[0] / (M - 1) + 2 * (l[1] / (M - 1)) + 4 * (l[2] / (M - 1))]
-        } else {
-            let sub: [i64; 3] =
-                std::array::from_fn(|a| (c[a] * FINE_PER_COARSE) as i64 + l[a] as i64);
-            field.value(grid.point(sub, 0))
-        };
-    }
+    let first = c.map(|x| (x * FINE_PER_COARSE) as i64);
+    field.values_on_block(grid.origin, grid.fine, first, [M; 3], &mut values);
     let finest = lattice_surface(&values, M, 1, iso);
     for level in 1..=2u8 {
         let stride = (FINE_PER_COARSE / subdivisions(level)) as usize;
         let surface = lattice_surface(&values, M, stride, iso);
-        if surface_distance(&surface, &finest, (M - 1) as f64) <= max_error {
+        if surfaces_within(&surface, &finest, (M - 1) as f64, max_error) {
             return level;
         }
     }
@@ -300,9 +285,10 @@ fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DV
     triangles
 }
 
-/// How far apart two triangle sets lie inside the box [0, size]³, sampled at each
-/// triangle's vertices, edge midpoints and centroid: 0 when both are empty, infinite when
-/// a sample on a face of the box finds nothing.
+/// Whether two triangle sets lie within `tolerance` of each other inside the box
+/// [0, size]³: every sample of each (its triangles' vertices, edge midpoints and
+/// centroids) within `tolerance` of the other. Both empty: yes; one empty: only if all
+/// the other's samples may count their distance to a face (below).
 ///
 /// A sample inside the box counts at most its distance to the box's faces: beyond them
 /// lies the neighbouring cells' surface, which this cell cannot see (those cells test
@@ -310,10 +296,13 @@ fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DV
 /// missing one. Samples on a face are not capped: both cells' surfaces end in the same
 /// trace there, and a coarse trace off the fine one is what the crack triangles between
 /// a coarse and a fine cell would span.
-fn surface_distance(a: &[[DVec3; 3]], b: &[[DVec3; 3]], size: f64) -> f64 {
-    let one_way = |from: &[[DVec3; 3]], to: &[[DVec3; 3]]| -> f64 {
-        let mut worst = 0.0f64;
-        for t in from {
+///
+/// A predicate rather than a distance so that it can stop early: a sample stops at the
+/// first triangle close enough, the test at the first sample with none (the point
+/// distances were most of the criterion's time).
+fn surfaces_within(a: &[[DVec3; 3]], b: &[[DVec3; 3]], size: f64, tolerance: f64) -> bool {
+    let one_way = |from: &[[DVec3; 3]], to: &[[DVec3; 3]]| -> bool {
+        from.iter().all(|t| {
             let samples = [
                 t[0],
                 t[1],
@@ -323,19 +312,16 @@ fn surface_distance(a: &[[DVec3; 3]], b: &[[DVec3; 3]], size: f64) -> f64 {
                 (t[2] + t[0]) / 2.0,
                 (t[0] + t[1] + t[2]) / 3.0,
             ];
-            for p in samples {
+            samples.iter().all(|&p| {
                 let face = p.min_element().min(size - p.max_element());
-                let cap = if face > 0.0 { face } else { f64::INFINITY };
-                let nearest = to
-                    .iter()
-                    .map(|u| point_triangle(p, u[0], u[1], u[2]))
-                    .fold(cap, f64::min);
-                worst = worst.max(nearest);
-            }
-        }
-        worst
+                (face > 0.0 && face <= tolerance)
+                    || to
+                        .iter()
+                        .any(|u| point_triangle(p, u[0], u[1], u[2]) <= tolerance)
+            })
+        })
     };
-    one_way(a, b).max(one_way(b, a))
+    one_way(a, b) && one_way(b, a)
 }
 
 #[cfg(test)]

@@ -164,7 +164,7 @@ macro_rules! with_kernel {
     };
 }
 
-mod nodes;
+pub(crate) mod nodes;
 pub use nodes::NodeTiles;
 
 /// One particle as the evaluation loop wants it, stored in neighbour-grid order.
@@ -577,6 +577,16 @@ impl ScalarField for SphField {
     fn value_and_gradient(&self, x: DVec3) -> (f64, DVec3) {
         let s = self.sample(x);
         (s.value, s.gradient)
+    }
+    fn values_on_block(
+        &self,
+        origin: DVec3,
+        spacing: f64,
+        first: [i64; 3],
+        n: [usize; 3],
+        out: &mut [f64],
+    ) {
+        self.values_on_lattice_block(origin, spacing, first, n, out);
     }
 }
 

@@ -18,7 +18,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Nodes per tile edge (a tile is `TILE`³ nodes; a row's nodes fit one byte's bits).
-const TILE: usize = 8;
+pub(crate) const TILE: usize = 8;
 
 /// Nodes per tile.
 const TILE3: usize = TILE * TILE * TILE;
@@ -89,6 +89,40 @@ impl SphField {
             let sums: &mut [(f64, f64); TILE3] = sums.try_into().expect("a tile");
             self.fill_tile(grid, corner.map(|c| c as u32), &rows, sums);
         });
+    }
+
+    /// [`ScalarField::values_on_block`](crate::field::ScalarField::values_on_block): one
+    /// tile, its first node at lattice index `first`, the block's nodes marked.
+    pub(crate) fn values_on_lattice_block(
+        &self,
+        origin: DVec3,
+        spacing: f64,
+        first: [i64; 3],
+        n: [usize; 3],
+        out: &mut [f64],
+    ) {
+        assert!(n.iter().all(|&m| m <= TILE) && out.len() == n[0] * n[1] * n[2]);
+        if out.is_empty() {
+            return;
+        }
+        let grid = VirtualGrid {
+            origin,
+            offset: first,
+            cell_size: spacing,
+            cells: n.map(|m| m.saturating_sub(1) as u32),
+        };
+        let mut rows = [0u8; TILE * TILE];
+        for z in 0..n[2] {
+            for y in 0..n[1] {
+                rows[y + TILE * z] = ((1u32 << n[0]) - 1) as u8;
+            }
+        }
+        let mut tile = [(0.0, 0.0); TILE3];
+        self.fill_tile(&grid, [0; 3], &rows, &mut tile);
+        for (v, f) in out.iter_mut().enumerate() {
+            let l = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
+            *f = tile[l[0] + TILE * (l[1] + TILE * l[2])].0;
+        }
     }
 
     /// Writes (A, S) for the nodes `rows` marks (one byte per (y, z) row of the tile whose
@@ -314,6 +348,59 @@ mod tests {
             }
             assert!(reached > 5000, "most nodes see particles ({reached})");
             assert!(reached < nodes.iter().product(), "some nodes see none");
+        }
+    }
+
+    /// A block anywhere on a lattice (negative indices, every size up to a tile, nodes
+    /// inside the fluid and off it) gives `ScalarField::value` at each node to the bit,
+    /// for every kernel and quantity.
+    #[test]
+    fn blocks_give_each_node_the_pointwise_value_to_the_bit() {
+        use crate::field::ScalarField;
+        let data = particles();
+        for (kernel, quantity, shepard) in Kernel::ALL.into_iter().flat_map(|k| {
+            [
+                (k, Quantity::SumOfWeights, false),
+                (k, Quantity::Scalar("p".into()), true),
+            ]
+        }) {
+            let settings = SphSettings {
+                kernel,
+                smoothing_length: SmoothingLength::Array("h".into()),
+                quantity,
+                shepard,
+                ..SphSettings::default()
+            };
+            let field = SphField::new(&data, &settings).unwrap();
+            let origin = DVec3::new(-0.31, 0.017, -0.05);
+            let mut reached = 0;
+            for (first, n) in [
+                ([-3i64, 2, 1], [5usize, 5, 5]),
+                ([4, 7, 0], [8, 8, 8]),
+                ([20, -1, 3], [1, 3, 8]),
+                ([11, 5, 6], [7, 2, 4]),
+                ([0, 0, 0], [0, 4, 4]),
+            ] {
+                let spacing = 0.037;
+                let mut got = vec![f64::NAN; n[0] * n[1] * n[2]];
+                field.values_on_block(origin, spacing, first, n, &mut got);
+                for (v, got) in got.iter().enumerate() {
+                    let l = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
+                    let x = origin
+                        + DVec3::new(
+                            (first[0] + l[0] as i64) as f64,
+                            (first[1] + l[1] as i64) as f64,
+                            (first[2] + l[2] as i64) as f64,
+                        ) * spacing;
+                    let want = field.value(x);
+                    assert_eq!(got.to_bits(), want.to_bits(), "{kernel:?} {first:?} {l:?}");
+                    reached += usize::from(field.value_and_weight(x).1 > 0.0);
+                }
+            }
+            assert!(
+                reached > 200,
+                "{kernel:?}: only {reached} nodes near particles"
+            );
         }
     }
 }
