@@ -254,16 +254,43 @@ pub fn dilate(grid: &CoarseGrid, levels: &mut [u8], rings: u32) {
 /// input; (b) keeps the mesh manifold: with alternating cells, a sign change in the middle
 /// of the shared edge would give two fine blobs touching along that edge. Levels only
 /// rise, so this terminates; each pass reads the previous one, so it is deterministic.
+///
+/// A cell's requirement reads only its 3×3×3 block, so after the first pass only the
+/// blocks of the cells that changed are looked at again: the same passes, the same
+/// result, without sweeping every coarse cell per pass (balancing was a tenth of an
+/// adaptive extraction's time).
 pub fn balance(grid: &CoarseGrid, levels: &mut [u8]) {
+    let mut dirty: Vec<usize> = (0..levels.len()).collect();
     loop {
-        let next: Vec<u8> = (0..levels.len())
-            .into_par_iter()
-            .map(|i| required_level(grid, levels, i))
+        let changes: Vec<(usize, u8)> = dirty
+            .par_iter()
+            .filter_map(|&i| {
+                let need = required_level(grid, levels, i);
+                (need != levels[i]).then_some((i, need))
+            })
             .collect();
-        if next == levels {
+        if changes.is_empty() {
             return;
         }
-        levels.copy_from_slice(&next);
+        for &(i, need) in &changes {
+            levels[i] = need;
+        }
+        dirty = changes
+            .par_iter()
+            .flat_map_iter(|&(i, _)| {
+                let c = grid.coords(i);
+                (0..27usize).filter_map(move |d| {
+                    let n: [i64; 3] = std::array::from_fn(|a| {
+                        c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1
+                    });
+                    (0..3)
+                        .all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
+                        .then(|| grid.index(n.map(|x| x as u32)))
+                })
+            })
+            .collect();
+        dirty.par_sort_unstable();
+        dirty.dedup();
     }
 }
 
@@ -434,5 +461,43 @@ mod tests {
         let mut bad = levels.clone();
         bad[g.index([0, 0, 0])] = 3;
         assert!(check_levels(&g, &bad).is_err());
+    }
+
+    /// Balancing only the blocks of changed cells reaches the same fixed point as
+    /// sweeping every cell each pass, which is (a) and (b) of [`balance`] and raises no
+    /// cell that did not need it, on random maps of all three levels.
+    #[test]
+    fn balancing_the_changed_blocks_equals_sweeping_every_cell() {
+        let g = CoarseGrid {
+            origin: DVec3::ZERO,
+            fine: 0.25,
+            cells: [13, 9, 11],
+        };
+        let mut next = crate::test_rng::unit(17);
+        for density in [0.01, 0.05, 0.2] {
+            let start: Vec<u8> = (0..g.cell_count())
+                .map(|_| match next() {
+                    x if x < density => 3,
+                    x if x < 2.0 * density => 2,
+                    _ => 1,
+                })
+                .collect();
+            let mut swept = start.clone();
+            loop {
+                let pass: Vec<u8> = (0..swept.len())
+                    .map(|i| required_level(&g, &swept, i))
+                    .collect();
+                if pass == swept {
+                    break;
+                }
+                swept = pass;
+            }
+            let mut levels = start.clone();
+            balance(&g, &mut levels);
+            assert_eq!(levels, swept, "density {density}");
+            check_levels(&g, &levels).unwrap();
+            assert!(levels.iter().zip(&start).all(|(a, b)| a >= b));
+            assert!(levels != start, "density {density}: nothing to balance");
+        }
     }
 }
