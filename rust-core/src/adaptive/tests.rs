@@ -421,15 +421,17 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
         ..params.clone()
     };
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
-    let (levels, refined) = levels_from_counts(&field, &grid, &positions, &counts, &off);
-    assert_eq!(levels, splash);
-    assert_eq!(refined, refine::Refined::default());
+    let got = levels_from_counts(&field, &grid, &positions, &counts, &off).unwrap();
+    assert_eq!(got.levels, splash);
+    assert_eq!(got.refined, refine::Refined::default());
     let run = |threads| {
-        rayon::ThreadPoolBuilder::new()
+        let got = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap()
             .install(|| levels_from_counts(&field, &grid, &positions, &counts, &params))
+            .unwrap();
+        (got.levels, got.refined)
     };
     let (one, refined) = run(1);
     assert_eq!((one.clone(), refined), run(3));

@@ -13,6 +13,7 @@ use super::device;
 use super::level::{build_level, scan};
 use super::sph::GpuField;
 use crate::adaptive::grid::{self, CoarseGrid};
+use crate::adaptive::lattice::Lattice;
 use crate::adaptive::levels::{self, LevelArrays};
 use crate::adaptive::{self, grid_for, Params};
 use crate::field::kernel::Kernel;
@@ -284,11 +285,16 @@ fn level_arrays_equal_the_cpu_ones() {
             let (mut triangles, mut skipped) = (0, 0);
             for level in 1..=3u8 {
                 let what = format!("{kernel:?} {name} level {level}");
+                let mut lattice = Lattice::new(&grid);
+                lattice
+                    .cover_level(&field, &grid, levels, level, u64::MAX)
+                    .unwrap();
                 let cpu = levels::build_level(
                     &field,
                     &grid,
                     levels,
                     level,
+                    &lattice,
                     p.isovalue,
                     p.bisection_iterations,
                     true,
