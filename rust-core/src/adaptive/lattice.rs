@@ -277,12 +277,41 @@ impl Lattice {
     /// The `M`³ node values of coarse cell `c`, x fastest, into `out` (the cell must
     /// have been covered).
     pub fn cell(&self, c: [u32; 3], out: &mut [f64; M * M * M]) {
-        let first = c.map(|x| x * FINE_PER_COARSE);
-        for (v, f) in out.iter_mut().enumerate() {
-            let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
-            *f = self
-                .get(std::array::from_fn(|a| first[a] + l[a]))
-                .expect("the cell was covered");
+        self.block(c.map(|x| x * FINE_PER_COARSE), M, 1, out);
+    }
+
+    /// The values at the `n`³ nodes `first + stride · l` (l in 0..n per axis, x fastest)
+    /// into `out`; each must be stored. The tile of each node comes from per-axis tables
+    /// (this runs for every node of every contoured cell).
+    pub fn block(&self, first: [u32; 3], n: usize, stride: u32, out: &mut [f64]) {
+        assert!(n <= M && out.len() == n * n * n);
+        // Per axis and node: (tile coordinate, offset in the tile).
+        let axis: [[(usize, usize); M]; 3] = std::array::from_fn(|a| {
+            std::array::from_fn(|i| {
+                let x = (first[a] + i as u32 * stride) as usize;
+                (x / TILE, x % TILE)
+            })
+        });
+        let mut v = 0;
+        for &(tz, lz) in &axis[2][..n] {
+            for &(ty, ly) in &axis[1][..n] {
+                let row = ly + TILE * lz;
+                for (i, &(tx, lx)) in axis[0][..n].iter().enumerate() {
+                    let t = tx + self.tiles[0] * (ty + self.tiles[1] * tz);
+                    out[v] = match self.stored(t) {
+                        Some(slot) if self.marked[slot][row] >> lx & 1 == 1 => {
+                            self.values[slot * TILE3 + lx + TILE * row]
+                        }
+                        _ => {
+                            let node = [tx * TILE + lx, ty * TILE + ly, tz * TILE + lz];
+                            self.get(node.map(|x| x as u32)).unwrap_or_else(|| {
+                                panic!("node {node:?} (block node {i}) was not covered")
+                            })
+                        }
+                    };
+                    v += 1;
+                }
+            }
         }
     }
 }

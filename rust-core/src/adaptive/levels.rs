@@ -114,12 +114,10 @@ pub fn build_level<F: ScalarField + ?Sized>(
     let values: Vec<f64> = chunked(&cells, progress, |part| {
         part.par_iter()
             .flat_map_iter(|&cell| {
-                let c = grid.coords(cell as usize);
-                (0..nnn).map(move |v| {
-                    let l = [v % n, v / n % n, v / (n * n)].map(|x| x as u32);
-                    let node = std::array::from_fn(|a| c[a] * FINE_PER_COARSE + l[a] * step);
-                    lattice.get(node).expect("the level's cells were covered")
-                })
+                let first = grid.coords(cell as usize).map(|x| x * FINE_PER_COARSE);
+                let mut block = [0.0; (FINE_PER_COARSE as usize + 1).pow(3)];
+                lattice.block(first, n, step, &mut block[..nnn]);
+                block.into_iter().take(nnn)
             })
             .collect()
     })?;
