@@ -60,7 +60,10 @@ pub struct Params {
     /// particles lies on (a droplet or bubble between the corners would otherwise vanish).
     /// Independent of `max_error`: it guards topology, not distance. On by default.
     pub hidden_surfaces: bool,
-    /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5).
+    /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5),
+    /// then linear interpolation. 0 places level-3 points linearly between the finest
+    /// nodes, as uniform marching cubes does, and coarser edges halve only down to the
+    /// finest lattice (values already stored): points still coincide across levels.
     pub bisection_iterations: u32,
     /// Vertex normals from the field gradient.
     pub normals: bool,
@@ -112,10 +115,10 @@ impl Params {
                 ),
             );
         }
-        if !(1..=16).contains(&self.bisection_iterations) {
+        if self.bisection_iterations > 16 {
             return bad(
                 "bisection_iterations",
-                format!("must lie in 1..=16, got {}", self.bisection_iterations),
+                format!("must lie in 0..=16, got {}", self.bisection_iterations),
             );
         }
         Ok(())

@@ -520,14 +520,20 @@ fn particles_on_coarse_cell_boundaries_give_the_same_levels_and_surface() {
 fn gpu_surface_equals_cpu_surface_with_striped_levels() {
     let Some(_) = gpu() else { return };
     let field = body(Kernel::CubicSpline);
-    let p = params(0.5);
-    let grid = grid_for(&field, &p).unwrap();
-    let levels = striped_levels(&grid);
-    let cpu = adaptive::extract(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
-    let gpu = adaptive::extract_gpu(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
-    assert!(cpu.stats.transition_faces > 100, "{:?}", cpu.stats);
-    assert!(cpu.stats.crack_triangles > 50, "{:?}", cpu.stats);
-    assert_same_extraction(&cpu, &gpu, extent(&grid), "striped");
+    // The paper's 5 halvings, and none (linear on level-3 edges).
+    for n in [5, 0] {
+        let p = Params {
+            bisection_iterations: n,
+            ..params(0.5)
+        };
+        let grid = grid_for(&field, &p).unwrap();
+        let levels = striped_levels(&grid);
+        let cpu = adaptive::extract(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
+        let gpu = adaptive::extract_gpu(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
+        assert!(cpu.stats.transition_faces > 100, "{:?}", cpu.stats);
+        assert!(cpu.stats.crack_triangles > 50, "{:?}", cpu.stats);
+        assert_same_extraction(&cpu, &gpu, extent(&grid), &format!("striped, n = {n}"));
+    }
 }
 
 #[test]
