@@ -123,7 +123,18 @@ fn main() {
         if std::env::var("NO_HIDDEN").is_err() {
             refine::hidden_surfaces(&field, &g, &positions, &mut levels, ISO);
         }
-        let r = refine::refine(&field, &g, &counts, &mut levels, ISO, max_error);
+        let mut lattice = adaptive::lattice::Lattice::new(&g);
+        let r = refine::refine(
+            &field,
+            &g,
+            &counts,
+            &mut levels,
+            ISO,
+            max_error,
+            &mut lattice,
+            u64::MAX,
+        )
+        .expect("refine");
         grid::balance(&g, &mut levels);
         let levels_s = t.elapsed().as_secs_f64();
         let out = adaptive::extract(&field, &g, &levels, &params, &mut Progress::none())

@@ -81,7 +81,8 @@ typedef struct IsobarAdaptiveParams {
   uint32_t splash_threshold;
   // Layers of neighbour cells raised to level 3 around each splash cell (0 = paper).
   uint32_t splash_dilation;
-  // Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+  // Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1), 0..=16;
+  // 0: linear between the finest nodes, as uniform marching cubes.
   uint32_t bisection_iterations;
   // Where the work runs: `ISOBAR_BACKEND_CPU` (default), `ISOBAR_BACKEND_GPU` (wgpu;
   // `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU adapter: ..." without one) or

@@ -74,7 +74,7 @@ fn adaptive_command_refuses_bad_options() {
     for (args, expected) in [
         (vec!["--iso", "0.5,0.6"], "one isovalue"),
         (
-            vec!["--iso", "0.6", "--bisection-iterations", "0"],
+            vec!["--iso", "0.6", "--bisection-iterations", "17"],
             "bisection_iterations",
         ),
         // Marching Correctors' own options are refused, not silently ignored.

@@ -37,7 +37,7 @@ def test_adaptive_surface_is_closed_and_reports_levels():
 
 def test_adaptive_refuses_bad_input_with_the_core_message():
     with pytest.raises(isobar.InvalidArgumentError, match="bisection_iterations"):
-        isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, bisection_iterations=0)
+        isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, bisection_iterations=17)
     with pytest.raises(isobar.Cancelled):
         isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, progress=lambda f, p: False)
 

@@ -58,7 +58,9 @@ def extract_adaptive(
             takes the lowest level whose surface lies within this many finest cells of
             the finest level's there (core default in
             ``default_params().max_error``; 0 turns it off).
-        bisection_iterations: halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+        bisection_iterations: halvings n on level-3 edges (n+1 on level 2, n+2 on level 1),
+            0 to 16; 0 places level-3 points linearly between the finest nodes, as
+            uniform marching cubes does (faster; coarser edges still coincide).
         backend: "cpu", "gpu" (wgpu; raises "no GPU adapter: ..." without one) or "auto"
             (a hardware GPU when there is one, else the CPU: a software adapter such
             as lavapipe is slower than the CPU path); ``stats["backend"]`` says

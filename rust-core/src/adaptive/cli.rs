@@ -33,7 +33,8 @@ pub struct AdaptiveArgs {
     /// side of the isovalue the field at each of their particles is on).
     #[arg(long)]
     pub no_hidden_surfaces: bool,
-    /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+    /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1); 0: linear
+    /// between the finest nodes, as uniform marching cubes.
     #[arg(long, default_value_t = Params::default().bisection_iterations)]
     pub bisection_iterations: u32,
     /// Also run uniform marching cubes at the finest level (the full-grid baseline and the

@@ -297,23 +297,35 @@ pub fn balance(grid: &CoarseGrid, levels: &mut [u8]) {
 /// The level cell `i` must at least have given its neighbours' current levels.
 fn required_level(grid: &CoarseGrid, levels: &[u8], i: usize) -> u8 {
     let mut need = levels[i];
-    for n in grid.face_neighbours(i).into_iter().flatten() {
-        need = need.max(levels[n].saturating_sub(1));
+    if need == 3 {
+        return need;
     }
-    // The four cells around each of the cell's 12 edges.
     let c = grid.coords(i);
+    let stride = [
+        1,
+        grid.cells[0] as isize,
+        grid.cells[0] as isize * grid.cells[1] as isize,
+    ];
+    // Index offset of the neighbour one cell along `axis` by `d`, if inside the grid
+    // (offsets rather than coordinates: this runs for every coarse cell, more than once).
+    let step = |axis: usize, d: i64| -> Option<isize> {
+        let x = c[axis] as i64 + d;
+        (x >= 0 && x < grid.cells[axis] as i64).then_some(d as isize * stride[axis])
+    };
+    let at = |o: isize| levels[(i as isize + o) as usize];
+    for axis in 0..3 {
+        for d in [-1, 1] {
+            if let Some(o) = step(axis, d) {
+                need = need.max(at(o).saturating_sub(1));
+            }
+        }
+    }
+    // The four cells around each of the cell's 12 edges: i, i + b, i + b + d, i + d.
     for axis in 0..3 {
         let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
         for (sb, sd) in [(-1i64, -1i64), (-1, 1), (1, -1), (1, 1)] {
-            let ring = [
-                Some(i),
-                grid.offset(c, b, sb),
-                grid.offset(c, b, sb)
-                    .and_then(|n| grid.offset(grid.coords(n), d, sd)),
-                grid.offset(c, d, sd),
-            ];
-            if let [Some(_), Some(p), Some(q), Some(r)] = ring {
-                let (l0, l1, l2, l3) = (levels[i], levels[p], levels[q], levels[r]);
+            if let (Some(ob), Some(od)) = (step(b, sb), step(d, sd)) {
+                let (l0, l1, l2, l3) = (levels[i], at(ob), at(ob + od), at(od));
                 if l0 == l2 && l1 == l3 && l1 > l0 {
                     need = need.max(l1);
                 }
@@ -339,7 +351,10 @@ pub fn check_levels(grid: &CoarseGrid, levels: &[u8]) -> Result<()> {
             levels[i]
         )));
     }
-    if let Some(i) = (0..levels.len()).find(|&i| required_level(grid, levels, i) != levels[i]) {
+    if let Some(i) = (0..levels.len())
+        .into_par_iter()
+        .find_first(|&i| required_level(grid, levels, i) != levels[i])
+    {
         return Err(Error::InvalidInput(format!(
             "coarse cell {i} (level {}) needs level {} next to its neighbours",
             levels[i],

@@ -10,6 +10,7 @@
 //! coincide bit for bit. A point is named by the finest edge holding it.
 
 use super::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
+use super::lattice::Lattice;
 use crate::error::{Error, Result};
 use crate::field::ScalarField;
 use crate::mc::{case_index, case_table, corner_offset, edge_corner_axis, edge_key, VirtualGrid};
@@ -87,13 +88,15 @@ pub fn bytes_per_cell(level: u8) -> u64 {
     (k + 1).pow(3) * 8 + k.pow(3) * 5 + 4
 }
 
-/// Runs Algorithm 2 for the cells of `level`.
+/// Runs Algorithm 2 for the cells of `level`, their vertex values read from `lattice`,
+/// which must cover them (level 1: the coarse nodes; 2 and 3: the cells).
 #[allow(clippy::too_many_arguments)]
 pub fn build_level<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
     levels: &[u8],
     level: u8,
+    lattice: &Lattice,
     iso: f64,
     iterations: u32,
     normals: bool,
@@ -105,59 +108,20 @@ pub fn build_level<F: ScalarField + ?Sized>(
     let cells: Vec<u32> = (0..levels.len() as u32)
         .filter(|&i| levels[i as usize] == level)
         .collect();
-    // Step 4: vertex values, cell by cell. A node shared by several cells of this level is
-    // evaluated once, by the one of lowest index (its `node_owner`), and copied to the
-    // others; the values are those each cell would compute, bit for bit.
+    // Step 4: vertex values, cell by cell, read from the lattice (a node shared by
+    // several cells was evaluated once there).
     let nnn = n * n * n;
-    let local = |v: usize| [v % n, v / n % n, v / (n * n)].map(|x| x as u32);
     let values: Vec<f64> = chunked(&cells, progress, |part| {
         part.par_iter()
             .flat_map_iter(|&cell| {
-                let c = grid.coords(cell as usize);
-                (0..nnn).map(move |v| {
-                    let l = local(v);
-                    if node_owner(grid, levels, level, k, c, l).is_some() {
-                        return 0.0; // copied from the owner below
-                    }
-                    let sub: [i64; 3] = std::array::from_fn(|a| {
-                        ((c[a] * FINE_PER_COARSE + l[a] * step) as i64) << iterations
-                    });
-                    field.value(grid.point(sub, iterations))
-                })
+                let first = grid.coords(cell as usize).map(|x| x * FINE_PER_COARSE);
+                let mut block = [0.0; (FINE_PER_COARSE as usize + 1).pow(3)];
+                lattice.block(first, n, step, &mut block[..nnn]);
+                block.into_iter().take(nnn)
             })
             .collect()
     })?;
-    // Owners have lower slots than the cells they serve and keep their own values, so the
-    // copies read only finished entries.
-    let values: Vec<AtomicU64> = values
-        .into_iter()
-        .map(|v| AtomicU64::new(v.to_bits()))
-        .collect();
-    let copied: u64 = (0..cells.len())
-        .into_par_iter()
-        .map(|slot| {
-            let c = grid.coords(cells[slot] as usize);
-            let mut copied = 0;
-            for v in 0..nnn {
-                let l = local(v);
-                if let Some((owner, m)) = node_owner(grid, levels, level, k, c, l) {
-                    let o = cells
-                        .binary_search(&(owner as u32))
-                        .expect("a node's owner has the level");
-                    let from = o * nnn + m[0] as usize + n * (m[1] as usize + n * m[2] as usize);
-                    let bits = values[from].load(Ordering::Relaxed);
-                    values[slot * nnn + v].store(bits, Ordering::Relaxed);
-                    copied += 1;
-                }
-            }
-            copied
-        })
-        .sum();
-    let values: Vec<f64> = values
-        .into_iter()
-        .map(|v| f64::from_bits(v.into_inner()))
-        .collect();
-    let mut evaluations = values.len() as u64 - copied;
+    let mut evaluations = 0;
     // Step 5: cases and triangle counts of the sub-cells.
     let kk = (k * k * k) as usize;
     let table = case_table();
@@ -230,14 +194,19 @@ pub fn build_level<F: ScalarField + ?Sized>(
     let edges: Vec<u64> = cut.iter().map(|e| e.0).collect();
     let shift = iterations;
     let steps = iterations + (3 - level as u32);
+    let bisected = AtomicU64::new(0);
     let points: Vec<EdgePoint> = chunked(&cut, progress, |part| {
         part.par_iter()
             .map(|&(key, f0, f1)| {
-                bisect(field, grid, key, f0, f1, iso, step, shift, steps, normals)
+                let (point, made) = bisect(
+                    field, grid, lattice, key, f0, f1, iso, step, shift, steps, normals,
+                );
+                bisected.fetch_add(made, Ordering::Relaxed);
+                point
             })
             .collect()
     })?;
-    evaluations += cut.len() as u64 * (steps as u64 + normals as u64);
+    evaluations += bisected.into_inner();
     // Step 7: triangles of the active sub-cells into E.
     let triangles: Vec<[u32; 3]> = (0..cases.len())
         .into_par_iter()
@@ -271,48 +240,16 @@ pub fn build_level<F: ScalarField + ?Sized>(
     })
 }
 
-/// The cell that evaluates node `l` (local coordinates 0..=k) of coarse cell `c`: of the
-/// cells of `level` holding the node, the one of lowest index, with the node's local
-/// coordinates there; None when that is `c` itself.
-fn node_owner(
-    grid: &CoarseGrid,
-    levels: &[u8],
-    level: u8,
-    k: u32,
-    c: [u32; 3],
-    l: [u32; 3],
-) -> Option<(usize, [u32; 3])> {
-    let mut best: Option<(usize, [u32; 3])> = None;
-    let mut lowest = grid.index(c);
-    // The other cells holding the node: c moved by one along any non-empty subset of the
-    // axes where the node lies on c's faces.
-    'subsets: for d in 1..8usize {
-        let (mut n, mut m) = (c, l);
-        for a in (0..3).filter(|a| d >> a & 1 == 1) {
-            if l[a] == 0 && c[a] > 0 {
-                (n[a], m[a]) = (c[a] - 1, k);
-            } else if l[a] == k && c[a] + 1 < grid.cells[a] {
-                (n[a], m[a]) = (c[a] + 1, 0);
-            } else {
-                continue 'subsets;
-            }
-        }
-        let i = grid.index(n);
-        if i < lowest && levels[i] == level {
-            lowest = i;
-            best = Some((i, m));
-        }
-    }
-    best
-}
-
 /// Bisection on the edge `key` (length `step` finest cells, end values `f0`, `f1` on
 /// either side of `iso`) in units of 2^-`shift` finest cells, `steps` halvings, then linear
-/// interpolation in the last interval of one unit.
+/// interpolation in the last interval of one unit. Midpoints on finest nodes (the first
+/// halvings of level-1 and -2 edges) are read from `lattice` where it holds them. Also
+/// returns the field evaluations made.
 #[allow(clippy::too_many_arguments)]
 fn bisect<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
+    lattice: &Lattice,
     key: u64,
     f0: f64,
     f1: f64,
@@ -321,13 +258,27 @@ fn bisect<F: ScalarField + ?Sized>(
     shift: u32,
     steps: u32,
     normals: bool,
-) -> EdgePoint {
+) -> (EdgePoint, u64) {
     let (mut lo, mut hi) = (0i64, (step as i64) << shift);
     let (mut flo, mut fhi) = (f0, f1);
     let lo_inside = f0 > iso;
+    let (start, axis) = crate::mc::edge_node_axis(key);
+    let start = VirtualGrid::coords(start);
+    let mut evaluations = normals as u64;
     for _ in 0..steps {
         let mid = (lo + hi) / 2;
-        let fm = field.value(along(grid, key, shift, mid));
+        let on_node = (mid & ((1 << shift) - 1) == 0).then(|| {
+            let mut node = start;
+            node[axis] += (mid >> shift) as u32;
+            node
+        });
+        let fm = match on_node.and_then(|node| lattice.get(node)) {
+            Some(value) => value,
+            None => {
+                evaluations += 1;
+                field.value(along(grid, key, shift, mid))
+            }
+        };
         if (fm > iso) == lo_inside {
             lo = mid;
             flo = fm;
@@ -337,14 +288,15 @@ fn bisect<F: ScalarField + ?Sized>(
         }
     }
     debug_assert_eq!(hi - lo, 1);
-    edge_point(grid, key, shift, lo, (flo, fhi), iso, |position| {
+    let point = edge_point(grid, key, shift, lo, (flo, fhi), iso, |position| {
         if normals {
             let (_, g) = field.value_and_gradient(position);
             (-g).try_normalize().unwrap_or(DVec3::Z)
         } else {
             DVec3::ZERO
         }
-    })
+    });
+    (point, evaluations)
 }
 
 /// The point `t` bisection units (2^-`shift` finest cells) along edge `key` from its start.
@@ -422,8 +374,11 @@ mod tests {
         }
     }
 
+    /// Each cell of a level reads the field at its vertices (bit for bit), which the
+    /// lattice evaluated once each: a node shared by cells of the level, whatever the
+    /// mix of levels around it, costs one evaluation.
     #[test]
-    fn each_node_of_a_level_is_evaluated_once_and_every_cell_gets_its_value() {
+    fn every_cell_of_a_level_gets_the_field_at_its_nodes_evaluated_once() {
         let grid = CoarseGrid {
             origin: DVec3::new(0.1, -0.2, 0.3),
             fine: 0.25,
@@ -434,11 +389,16 @@ mod tests {
             .map(|i| [1, 2, 3, 2, 3, 3][i % 6])
             .collect();
         for level in 1..=3u8 {
+            let mut lattice = Lattice::new(&grid);
+            let covering = lattice
+                .cover_level(&Below, &grid, &levels, level, u64::MAX)
+                .unwrap();
             let a = build_level(
                 &Below,
                 &grid,
                 &levels,
                 level,
+                &lattice,
                 0.0,
                 5,
                 false,
@@ -464,7 +424,17 @@ mod tests {
                 }
             }
             assert!(a.edges.is_empty());
-            assert_eq!(a.evaluations, distinct.len() as u64, "level {level}");
+            assert_eq!(
+                a.evaluations, 0,
+                "level {level}: nothing cut, nothing bisected"
+            );
+            // Level 1 takes every coarse node (4 × 4 × 3 here), the others their own.
+            let want = if level == 1 {
+                48
+            } else {
+                distinct.len() as u64
+            };
+            assert_eq!(covering, want, "level {level}");
         }
     }
 }

@@ -15,6 +15,7 @@ pub mod crack_gen;
 pub mod crack_table;
 pub mod cracks;
 pub mod grid;
+pub mod lattice;
 pub mod levels;
 pub mod refine;
 
@@ -25,6 +26,7 @@ use crate::gpu::Backend;
 use crate::mesh::Mesh;
 use crate::progress::Progress;
 use grid::CoarseGrid;
+use lattice::Lattice;
 use levels::LevelArrays;
 use std::time::Instant;
 
@@ -58,7 +60,10 @@ pub struct Params {
     /// particles lies on (a droplet or bubble between the corners would otherwise vanish).
     /// Independent of `max_error`: it guards topology, not distance. On by default.
     pub hidden_surfaces: bool,
-    /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5).
+    /// n: bisection halvings on level-3 edges (n+1 on level 2, n+2 on level 1; paper: 5),
+    /// then linear interpolation. 0 places level-3 points linearly between the finest
+    /// nodes, as uniform marching cubes does, and coarser edges halve only down to the
+    /// finest lattice (values already stored): points still coincide across levels.
     pub bisection_iterations: u32,
     /// Vertex normals from the field gradient.
     pub normals: bool,
@@ -110,10 +115,10 @@ impl Params {
                 ),
             );
         }
-        if !(1..=16).contains(&self.bisection_iterations) {
+        if self.bisection_iterations > 16 {
             return bad(
                 "bisection_iterations",
-                format!("must lie in 1..=16, got {}", self.bisection_iterations),
+                format!("must lie in 0..=16, got {}", self.bisection_iterations),
             );
         }
         Ok(())
@@ -153,8 +158,8 @@ pub struct Stats {
     /// Points found on several levels whose positions differ (0 when bisection agrees).
     pub point_mismatches: u64,
     /// Bytes of the per-level arrays at their largest (values, cases, offsets, edges,
-    /// points, triangles) on the host: on the GPU back end values and cases stay on the
-    /// device.
+    /// points, triangles) on the host, with the finest-lattice values the CPU back end
+    /// keeps near the surface: on the GPU back end values and cases stay on the device.
     pub array_bytes: u64,
     pub timings: Timings,
     /// The back end that ran (`Cpu` or `Gpu`, never `Auto`).
@@ -180,19 +185,26 @@ pub fn grid_for(field: &SphField, params: &Params) -> Result<CoarseGrid> {
 
 /// Steps 1–3 on `field`'s particles: registration, splitting, level adjustment.
 pub fn levels_for(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Vec<u8>> {
-    Ok(levels_and_refined(field, grid, params)?.0)
+    Ok(levels_and_refined(field, grid, params)?.levels)
 }
 
-/// [`levels_for`] and what the error criterion did.
-fn levels_and_refined(
-    field: &SphField,
-    grid: &CoarseGrid,
-    params: &Params,
-) -> Result<(Vec<u8>, refine::Refined)> {
+/// The cell levels and what came with them.
+#[derive(Clone, Debug)]
+pub struct Levels {
+    /// Level of each coarse cell, balanced.
+    pub levels: Vec<u8>,
+    /// What the criteria did.
+    pub refined: refine::Refined,
+    /// The finest-lattice values the error criterion evaluated, for the level surfaces.
+    pub lattice: Lattice,
+}
+
+/// [`levels_for`] and what came with them.
+fn levels_and_refined(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Levels> {
     check_grid_budget(grid, params)?;
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
     let counts = grid::register(grid, &positions)?;
-    Ok(levels_from_counts(field, grid, &positions, &counts, params))
+    levels_from_counts(field, grid, &positions, &counts, params)
 }
 
 /// Refuses a coarse grid whose counts and levels (5 bytes a cell) exceed the budget.
@@ -221,7 +233,7 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     positions: &[glam::DVec3],
     counts: &[u32],
     params: &Params,
-) -> (Vec<u8>, refine::Refined) {
+) -> Result<Levels> {
     let mut levels = grid::split(counts, params.splash_threshold);
     grid::dilate(grid, &mut levels, params.splash_dilation);
     // Before the error criterion, so that its balancing rounds test the neighbours these
@@ -231,6 +243,7 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     } else {
         refine::Refined::default()
     };
+    let mut lattice = Lattice::new(grid);
     let mut refined = refine::refine(
         field,
         grid,
@@ -238,11 +251,17 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
         &mut levels,
         params.isovalue,
         params.max_error,
-    );
+        &mut lattice,
+        params.memory_budget,
+    )?;
     refined.hidden = hidden.hidden;
     refined.evaluations += hidden.evaluations;
     grid::balance(grid, &mut levels);
-    (levels, refined)
+    Ok(Levels {
+        levels,
+        refined,
+        lattice,
+    })
 }
 
 /// Adds the error criterion's work to an extraction's stats.
@@ -265,9 +284,13 @@ pub fn extract_sph(
     let mut out = match params.backend.resolve()? {
         Backend::Gpu => extract_sph_gpu(field, &grid, params, progress, start)?,
         _ => {
-            let (levels, refined) = levels_and_refined(field, &grid, params)?;
+            let Levels {
+                levels,
+                refined,
+                mut lattice,
+            } = levels_and_refined(field, &grid, params)?;
             let elapsed = start.elapsed().as_secs_f64();
-            let mut out = extract(field, &grid, &levels, params, progress)?;
+            let mut out = extract_on(field, &grid, &levels, &mut lattice, params, progress)?;
             out.stats.timings.levels = elapsed;
             add_refined(&mut out.stats, refined);
             out
@@ -296,7 +319,10 @@ fn extract_sph_gpu(
     // The error criterion's samples are evaluated on the CPU (`refine`), so the GPU
     // contours exactly the CPU's levels.
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
-    let (levels, refined) = levels_from_counts(field, grid, &positions, &registered.counts, params);
+    // The lattice the criterion filled serves only the CPU's level surfaces.
+    let Levels {
+        levels, refined, ..
+    } = levels_from_counts(field, grid, &positions, &registered.counts, params)?;
     let elapsed = start.elapsed().as_secs_f64();
     let mut out = extract_gpu_on(gpu, &on_device, grid, &levels, params, progress)?;
     out.stats.timings.levels = elapsed;
@@ -325,25 +351,52 @@ pub fn extract<F: ScalarField + ?Sized>(
     params: &Params,
     progress: &mut Progress,
 ) -> Result<Extraction> {
-    extract_with(
+    extract_on(
+        field,
+        grid,
+        levels,
+        &mut Lattice::new(grid),
+        params,
+        progress,
+    )
+}
+
+/// [`extract`] reading and adding to the finest-lattice values in `lattice`.
+fn extract_on<F: ScalarField + ?Sized>(
+    field: &F,
+    grid: &CoarseGrid,
+    levels: &[u8],
+    lattice: &mut Lattice,
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Extraction> {
+    let lattice = std::cell::RefCell::new(lattice);
+    let mut out = extract_with(
         grid,
         levels,
         params,
         progress,
         |level, progress| {
-            levels::build_level(
+            let mut lattice = lattice.borrow_mut();
+            let covering = lattice.cover_level(field, grid, levels, level, params.memory_budget)?;
+            let mut built = levels::build_level(
                 field,
                 grid,
                 levels,
                 level,
+                &lattice,
                 params.isovalue,
                 params.bisection_iterations,
                 params.normals,
                 progress,
-            )
+            )?;
+            built.evaluations += covering;
+            Ok(built)
         },
         |arrays, faces| Ok(cracks::fill(grid, levels, arrays, faces, params.isovalue)),
-    )
+    )?;
+    out.stats.array_bytes += lattice.borrow().bytes();
+    Ok(out)
 }
 
 /// [`extract_sph`]'s per-level work (`gpu::level`) and crack filling (`gpu::cracks`) on

@@ -4,7 +4,7 @@
 //! (level 3), every second (level 2) and the corners (level 1), edge points placed by
 //! bisecting the lattice values as the extractor bisects the field. The cell takes the
 //! lowest level whose surface lies within `max_error` finest cells of the level-3 one
-//! ([`surfaces_within`]); `grid::balance` runs after.
+//! ([`surfaces_within`]); `grid::balance` runs after (in `levels_from_counts`).
 //!
 //! The meshes are compared, not the fields: an interpolation error |F − F_lin| / |∇F| at
 //! the next level's nodes (this module's first estimate) misses how far a flat piece
@@ -16,7 +16,9 @@
 //! order of the cells or the thread count. The GPU back end takes its levels from the
 //! same function, its samples evaluated here on the CPU.
 
-use super::grid::{self, subdivisions, CoarseGrid, FINE_PER_COARSE};
+use super::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
+use super::lattice::Lattice;
+use crate::error::Result;
 use crate::field::ScalarField;
 use crate::mesh::hausdorff::point_triangle;
 use glam::DVec3;
@@ -134,12 +136,15 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
     out
 }
 
-/// Raises each coarse cell of `levels` (after splitting and dilation; balanced on return)
+/// Raises each coarse cell of `levels` (after splitting and dilation; to be balanced after)
 /// at or next to the surface to the lowest level whose surface lies within `max_error`
 /// finest cells of the finest one in that cell ([`needed_level`]). `counts` are the
 /// particles per coarse cell (a cell holding particles but no corner inside the fluid
 /// may hide a droplet between its corners, and its neighbours parts of that droplet's
-/// surface). `max_error` ≤ 0 leaves the levels as they are.
+/// surface). `max_error` ≤ 0 leaves the levels as they are. The finest nodes of the
+/// candidates and of every cell above level 1 are evaluated into `lattice` (within
+/// `budget` bytes), where the level surfaces read them again.
+#[allow(clippy::too_many_arguments)]
 pub fn refine<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
@@ -147,24 +152,21 @@ pub fn refine<F: ScalarField + ?Sized>(
     levels: &mut [u8],
     iso: f64,
     max_error: f64,
-) -> Refined {
+    lattice: &mut Lattice,
+    budget: u64,
+) -> Result<Refined> {
     let mut out = Refined::default();
     if max_error <= 0.0 {
-        return out;
+        return Ok(out);
     }
-    let corners = corner_values(field, grid);
-    let node = |c: [u32; 3]| {
-        c[0] as usize
-            + (grid.cells[0] as usize + 1)
-                * (c[1] as usize + (grid.cells[1] as usize + 1) * c[2] as usize)
-    };
+    out.evaluations += lattice.cover_corners(field, grid, budget)?;
     let corner_list = |c: [u32; 3]| -> [f64; 8] {
         std::array::from_fn(|v| {
-            corners[node([
+            lattice.corner([
                 c[0] + (v as u32 & 1),
                 c[1] + (v as u32 >> 1 & 1),
                 c[2] + (v as u32 >> 2 & 1),
-            ])]
+            ])
         })
     };
     // Sign of each cell's corners: bit 0 some corner inside, bit 1 some corner outside.
@@ -189,49 +191,40 @@ pub fn refine<F: ScalarField + ?Sized>(
                 && marked(grid.index(n.map(|x| x as u32)))
         })
     };
-    let needs: Vec<(usize, u8)> = (0..levels.len())
+    let candidates: Vec<usize> = (0..levels.len())
         .into_par_iter()
         .filter(|&i| levels[i] < 3 && candidate(i))
-        .map(|i| (i, needed_level(field, grid, grid.coords(i), iso, max_error)))
         .collect();
-    const LATTICE: u64 = (FINE_PER_COARSE as u64 + 1).pow(3);
-    out.evaluations += corners.len() as u64 + needs.len() as u64 * LATTICE;
+    // The cells already above level 1 are covered in the same pass: the level surfaces
+    // read their nodes, and most share tiles with the candidates (a tile's particles are
+    // gathered once per pass, whatever it evaluates).
+    let mut covered: Vec<usize> = (0..levels.len())
+        .into_par_iter()
+        .filter(|&i| levels[i] > 1)
+        .collect();
+    covered.extend(candidates.iter().filter(|&&i| levels[i] == 1));
+    out.evaluations += lattice.cover(field, grid, &covered, 1, budget)?;
+    let lattice = &*lattice;
+    let needs: Vec<(usize, u8)> = candidates
+        .into_par_iter()
+        .map(|i| (i, needed_level(lattice, grid.coords(i), iso, max_error)))
+        .collect();
     for (i, need) in needs {
         if need > levels[i] {
             levels[i] = need;
             out.raised[need as usize - 2] += 1;
         }
     }
-    grid::balance(grid, levels);
-    out
-}
-
-/// The field at every coarse-grid node, x fastest.
-fn corner_values<F: ScalarField + ?Sized>(field: &F, grid: &CoarseGrid) -> Vec<f64> {
-    let n = grid.cells.map(|c| c as usize + 1);
-    (0..n[0] * n[1] * n[2])
-        .into_par_iter()
-        .map(|v| {
-            let c = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
-            field.value(grid.point(c.map(|x| (x * FINE_PER_COARSE as usize) as i64), 0))
-        })
-        .collect()
+    Ok(out)
 }
 
 /// The lowest level whose marching-cubes surface in coarse cell `c` lies within
 /// `max_error` finest cells of the finest level's, from the field on the cell's finest
-/// lattice (one block evaluation: for SPH about four times cheaper than node by node).
-fn needed_level<F: ScalarField + ?Sized>(
-    field: &F,
-    grid: &CoarseGrid,
-    c: [u32; 3],
-    iso: f64,
-    max_error: f64,
-) -> u8 {
+/// lattice (covered in `lattice`).
+fn needed_level(lattice: &Lattice, c: [u32; 3], iso: f64, max_error: f64) -> u8 {
     const M: usize = FINE_PER_COARSE as usize + 1;
     let mut values = [0.0; M * M * M];
-    let first = c.map(|x| (x * FINE_PER_COARSE) as i64);
-    field.values_on_block(grid.origin, grid.fine, first, [M; 3], &mut values);
+    lattice.cell(c, &mut values);
     let finest = lattice_surface(&values, M, 1, iso);
     for level in 1..=2u8 {
         let stride = (FINE_PER_COARSE / subdivisions(level)) as usize;
@@ -372,7 +365,10 @@ mod tests {
             &mut levels,
             0.0,
             1e-9,
-        );
+            &mut Lattice::new(&g),
+            u64::MAX,
+        )
+        .unwrap();
         assert_eq!(r.raised, [0, 0]);
         assert!(levels.iter().all(|&l| l == 1));
     }
@@ -407,12 +403,34 @@ mod tests {
         let uniform = extract(&vec![3u8; g.cell_count()]);
         let mut levels = vec![1u8; g.cell_count()];
         assert_eq!(
-            refine(&ball, &g, &none, &mut levels, 0.0, 2.0).raised,
+            refine(
+                &ball,
+                &g,
+                &none,
+                &mut levels,
+                0.0,
+                2.0,
+                &mut Lattice::new(&g),
+                u64::MAX
+            )
+            .unwrap()
+            .raised,
             [0, 0]
         );
         for tolerance in [0.1, 0.25, 0.4] {
             let mut levels = vec![1u8; g.cell_count()];
-            let r = refine(&ball, &g, &none, &mut levels, 0.0, tolerance);
+            let r = refine(
+                &ball,
+                &g,
+                &none,
+                &mut levels,
+                0.0,
+                tolerance,
+                &mut Lattice::new(&g),
+                u64::MAX,
+            )
+            .unwrap();
+            crate::adaptive::grid::balance(&g, &mut levels);
             let out = extract(&levels);
             assert!(out.mesh.topology().is_watertight_oriented());
             let d =

@@ -203,15 +203,26 @@ fn closed_bodies_at_every_mix_of_levels_are_watertight_and_close_to_uniform() {
     assert!(topo.is_watertight_oriented(), "uniform: {topo:?}");
     let fine = base.grid_factor * h;
     let mut seen = [false; 3];
-    for (threshold, dilation) in [(0u32, 0u32), (1, 1), (1, 0), (3, 1), (u32::MAX, 0)] {
+    // The paper's 5 halvings, and 0 (linear on level-3 edges, coarser edges halved down
+    // to the finest lattice only).
+    for (threshold, dilation, n) in [
+        (0u32, 0u32, 5u32),
+        (1, 1, 5),
+        (1, 0, 5),
+        (3, 1, 5),
+        (u32::MAX, 0, 5),
+        (1, 1, 0),
+        (3, 1, 0),
+    ] {
         let params = Params {
             splash_threshold: threshold,
             splash_dilation: dilation,
+            bisection_iterations: n,
             ..base.clone()
         };
         let out = extract_sph(&field, &params, &mut Progress::none()).unwrap();
         let s = &out.stats;
-        let what = format!("threshold {threshold} dilation {dilation}: {s:?}");
+        let what = format!("threshold {threshold} dilation {dilation} n {n}: {s:?}");
         for (seen, &n) in seen.iter_mut().zip(&s.triangles_per_level) {
             *seen |= n > 0;
         }
@@ -239,6 +250,66 @@ fn closed_bodies_at_every_mix_of_levels_are_watertight_and_close_to_uniform() {
         seen.iter().all(|&s| s),
         "every level carried triangles: {seen:?}"
     );
+}
+
+/// With no bisection (n = 0) every point, whatever its cell's level, lies on a finest
+/// edge where the line between the field's values at the edge's two nodes crosses the
+/// isovalue: the vertices uniform marching cubes on the finest lattice would place,
+/// checked with values evaluated here at the nodes. The paper's n = 5 moves them.
+#[test]
+fn without_bisection_every_point_is_the_finest_edges_linear_crossing() {
+    let data = fluid(0.5, 0.1, &[DVec3::new(0.95, 0.0, 0.0)]);
+    let field = sph(&data, 0.2);
+    let params = Params {
+        isovalue: 0.5,
+        bisection_iterations: 0,
+        splash_threshold: 1,
+        ..Params::default()
+    };
+    let out = extract_sph(&field, &params, &mut Progress::none()).unwrap();
+    assert!(
+        out.stats.cells_per_level.iter().all(|&n| n > 0),
+        "{:?}",
+        out.stats
+    );
+    assert!(out.mesh.topology().is_watertight_oriented());
+    let grid = grid_for(&field, &params).unwrap();
+    let origin = grid.origin.to_array();
+    let worst = |mesh: &Mesh| -> f64 {
+        let mut worst = 0.0f64;
+        for v in &mesh.positions {
+            let l: [f64; 3] = std::array::from_fn(|a| (v[a] - origin[a]) / grid.fine);
+            let off: Vec<usize> = (0..3)
+                .filter(|&a| (l[a] - l[a].round()).abs() > 1e-9)
+                .collect();
+            assert!(off.len() <= 1, "vertex {v:?} is on no lattice edge");
+            let Some(&axis) = off.first() else { continue };
+            let lo: [i64; 3] = std::array::from_fn(|a| {
+                (if a == axis {
+                    l[a].floor()
+                } else {
+                    l[a].round()
+                }) as i64
+            });
+            let mut hi = lo;
+            hi[axis] += 1;
+            let (f0, f1) = (
+                field.value(grid.point(lo, 0)),
+                field.value(grid.point(hi, 0)),
+            );
+            let crossing = lo[axis] as f64 + (params.isovalue - f0) / (f1 - f0);
+            worst = worst.max((l[axis] - crossing).abs());
+        }
+        worst
+    };
+    let d = worst(&out.mesh);
+    assert!(d < 1e-9, "{d} finest cells off the linear crossing");
+    let bisected = Params {
+        bisection_iterations: 5,
+        ..params
+    };
+    let out = extract_sph(&field, &bisected, &mut Progress::none()).unwrap();
+    assert!(worst(&out.mesh) > 1e-3, "bisection moves the points");
 }
 
 /// Levels 2 and 3 only, and a level map with a forced checkerboard of 1|2 faces: still
@@ -311,7 +382,7 @@ fn bad_parameters_and_level_maps_are_refused() {
     let data = fluid(0.3, 0.1, &[]);
     let field = sph(&data, 0.13);
     let bad = Params {
-        bisection_iterations: 0,
+        bisection_iterations: 17,
         ..Params::default()
     };
     let e = extract_sph(&field, &bad, &mut Progress::none()).unwrap_err();
@@ -421,15 +492,17 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
         ..params.clone()
     };
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
-    let (levels, refined) = levels_from_counts(&field, &grid, &positions, &counts, &off);
-    assert_eq!(levels, splash);
-    assert_eq!(refined, refine::Refined::default());
+    let got = levels_from_counts(&field, &grid, &positions, &counts, &off).unwrap();
+    assert_eq!(got.levels, splash);
+    assert_eq!(got.refined, refine::Refined::default());
     let run = |threads| {
-        rayon::ThreadPoolBuilder::new()
+        let got = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap()
             .install(|| levels_from_counts(&field, &grid, &positions, &counts, &params))
+            .unwrap();
+        (got.levels, got.refined)
     };
     let (one, refined) = run(1);
     assert_eq!((one.clone(), refined), run(3));

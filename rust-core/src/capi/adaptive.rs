@@ -26,7 +26,8 @@ pub struct IsobarAdaptiveParams {
     pub splash_threshold: u32,
     /// Layers of neighbour cells raised to level 3 around each splash cell (0 = paper).
     pub splash_dilation: u32,
-    /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1).
+    /// Bisection halvings n on level-3 edges (n+1 on level 2, n+2 on level 1), 0..=16;
+    /// 0: linear between the finest nodes, as uniform marching cubes.
     pub bisection_iterations: u32,
     /// Where the work runs: `ISOBAR_BACKEND_CPU` (default), `ISOBAR_BACKEND_GPU` (wgpu;
     /// `ISOBAR_ERR_INVALID_ARGUMENT` "no GPU adapter: ..." without one) or

@@ -16,33 +16,37 @@ pub trait ScalarField: Sync {
     fn value(&self, x: DVec3) -> f64;
     /// (F(x), ∇F(x)).
     fn value_and_gradient(&self, x: DVec3) -> (f64, DVec3);
-    /// F at the lattice nodes `origin + spacing · (first + l)`, `l` in `0..n` per axis
-    /// (x fastest, at most [`BLOCK`] per axis), into `out`: what [`ScalarField::value`]
-    /// gives at each, to the bit. Node by node here; the SPH field evaluates the block at
-    /// once, each particle visiting the nodes its support covers.
-    fn values_on_block(
+    /// F at the nodes of a [`TILE`]³ block of the lattice `origin + spacing · (first + l)`
+    /// that `rows` marks (bit x of `rows[y + TILE · z]` for local node (x, y, z)), into
+    /// `out[x + TILE · (y + TILE · z)]`; unmarked entries are left as they are. Each
+    /// value is what [`ScalarField::value`] gives at the node, to the bit. Node by node
+    /// here; the SPH field takes the tile at once, each particle visiting the marked nodes
+    /// its support covers.
+    fn values_on_tile(
         &self,
         origin: DVec3,
         spacing: f64,
         first: [i64; 3],
-        n: [usize; 3],
-        out: &mut [f64],
+        rows: &[u8; TILE * TILE],
+        out: &mut [f64; TILE * TILE * TILE],
     ) {
-        assert!(n.iter().all(|&m| m <= BLOCK) && out.len() == n[0] * n[1] * n[2]);
-        for (v, f) in out.iter_mut().enumerate() {
-            let l = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
-            let node = DVec3::new(
-                (first[0] + l[0] as i64) as f64,
-                (first[1] + l[1] as i64) as f64,
-                (first[2] + l[2] as i64) as f64,
-            );
-            *f = self.value(origin + node * spacing);
+        for (r, &marked) in rows.iter().enumerate() {
+            for x in (0..TILE).filter(|x| marked >> x & 1 == 1) {
+                let l = [x, r % TILE, r / TILE];
+                let node = DVec3::new(
+                    (first[0] + l[0] as i64) as f64,
+                    (first[1] + l[1] as i64) as f64,
+                    (first[2] + l[2] as i64) as f64,
+                );
+                out[x + TILE * r] = self.value(origin + node * spacing);
+            }
         }
     }
 }
 
-/// Most nodes per axis of one [`ScalarField::values_on_block`] call.
-pub const BLOCK: usize = sph::nodes::TILE;
+/// Nodes per axis of one [`ScalarField::values_on_tile`] tile (a row's nodes are one
+/// byte's bits).
+pub const TILE: usize = 8;
 
 /// Default memory budget for structures sized by the data's extent (4 GiB).
 pub const DEFAULT_MEMORY_BUDGET: u64 = 4 << 30;

@@ -4,7 +4,7 @@
 use super::kernel::Kernel;
 use super::neighbours::NeighbourGrid;
 use super::particles::ParticleData;
-use super::{ScalarField, DEFAULT_MEMORY_BUDGET};
+use super::{ScalarField, DEFAULT_MEMORY_BUDGET, TILE};
 use crate::error::{Error, Result};
 use crate::progress::{chunked, Progress};
 use glam::DVec3;
@@ -578,15 +578,15 @@ impl ScalarField for SphField {
         let s = self.sample(x);
         (s.value, s.gradient)
     }
-    fn values_on_block(
+    fn values_on_tile(
         &self,
         origin: DVec3,
         spacing: f64,
         first: [i64; 3],
-        n: [usize; 3],
-        out: &mut [f64],
+        rows: &[u8; TILE * TILE],
+        out: &mut [f64; TILE * TILE * TILE],
     ) {
-        self.values_on_lattice_block(origin, spacing, first, n, out);
+        self.values_on_lattice_tile(origin, spacing, first, rows, out);
     }
 }
 

@@ -13,6 +13,7 @@ use super::device;
 use super::level::{build_level, scan};
 use super::sph::GpuField;
 use crate::adaptive::grid::{self, CoarseGrid};
+use crate::adaptive::lattice::Lattice;
 use crate::adaptive::levels::{self, LevelArrays};
 use crate::adaptive::{self, grid_for, Params};
 use crate::field::kernel::Kernel;
@@ -284,11 +285,16 @@ fn level_arrays_equal_the_cpu_ones() {
             let (mut triangles, mut skipped) = (0, 0);
             for level in 1..=3u8 {
                 let what = format!("{kernel:?} {name} level {level}");
+                let mut lattice = Lattice::new(&grid);
+                lattice
+                    .cover_level(&field, &grid, levels, level, u64::MAX)
+                    .unwrap();
                 let cpu = levels::build_level(
                     &field,
                     &grid,
                     levels,
                     level,
+                    &lattice,
                     p.isovalue,
                     p.bisection_iterations,
                     true,
@@ -514,14 +520,20 @@ fn particles_on_coarse_cell_boundaries_give_the_same_levels_and_surface() {
 fn gpu_surface_equals_cpu_surface_with_striped_levels() {
     let Some(_) = gpu() else { return };
     let field = body(Kernel::CubicSpline);
-    let p = params(0.5);
-    let grid = grid_for(&field, &p).unwrap();
-    let levels = striped_levels(&grid);
-    let cpu = adaptive::extract(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
-    let gpu = adaptive::extract_gpu(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
-    assert!(cpu.stats.transition_faces > 100, "{:?}", cpu.stats);
-    assert!(cpu.stats.crack_triangles > 50, "{:?}", cpu.stats);
-    assert_same_extraction(&cpu, &gpu, extent(&grid), "striped");
+    // The paper's 5 halvings, and none (linear on level-3 edges).
+    for n in [5, 0] {
+        let p = Params {
+            bisection_iterations: n,
+            ..params(0.5)
+        };
+        let grid = grid_for(&field, &p).unwrap();
+        let levels = striped_levels(&grid);
+        let cpu = adaptive::extract(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
+        let gpu = adaptive::extract_gpu(&field, &grid, &levels, &p, &mut Progress::none()).unwrap();
+        assert!(cpu.stats.transition_faces > 100, "{:?}", cpu.stats);
+        assert!(cpu.stats.crack_triangles > 50, "{:?}", cpu.stats);
+        assert_same_extraction(&cpu, &gpu, extent(&grid), &format!("striped, n = {n}"));
+    }
 }
 
 #[test]

@@ -13,12 +13,10 @@
 
 use super::{Kernel, SphField};
 use crate::field::neighbours::floor_i64;
+use crate::field::TILE;
 use crate::mc::VirtualGrid;
 use glam::DVec3;
 use rayon::prelude::*;
-
-/// Nodes per tile edge (a tile is `TILE`³ nodes; a row's nodes fit one byte's bits).
-pub(crate) const TILE: usize = 8;
 
 /// Nodes per tile.
 const TILE3: usize = TILE * TILE * TILE;
@@ -91,37 +89,30 @@ impl SphField {
         });
     }
 
-    /// [`ScalarField::values_on_block`](crate::field::ScalarField::values_on_block): one
-    /// tile, its first node at lattice index `first`, the block's nodes marked.
-    pub(crate) fn values_on_lattice_block(
+    /// [`ScalarField::values_on_tile`](crate::field::ScalarField::values_on_tile).
+    pub(crate) fn values_on_lattice_tile(
         &self,
         origin: DVec3,
         spacing: f64,
         first: [i64; 3],
-        n: [usize; 3],
-        out: &mut [f64],
+        rows: &[u8; TILE * TILE],
+        out: &mut [f64; TILE3],
     ) {
-        assert!(n.iter().all(|&m| m <= TILE) && out.len() == n[0] * n[1] * n[2]);
-        if out.is_empty() {
-            return;
-        }
         let grid = VirtualGrid {
             origin,
             offset: first,
             cell_size: spacing,
-            cells: n.map(|m| m.saturating_sub(1) as u32),
+            cells: [TILE as u32 - 1; 3],
         };
-        let mut rows = [0u8; TILE * TILE];
-        for z in 0..n[2] {
-            for y in 0..n[1] {
-                rows[y + TILE * z] = ((1u32 << n[0]) - 1) as u8;
-            }
-        }
         let mut tile = [(0.0, 0.0); TILE3];
-        self.fill_tile(&grid, [0; 3], &rows, &mut tile);
-        for (v, f) in out.iter_mut().enumerate() {
-            let l = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
-            *f = tile[l[0] + TILE * (l[1] + TILE * l[2])].0;
+        self.fill_tile(&grid, [0; 3], rows, &mut tile);
+        for (r, &marked) in rows.iter().enumerate() {
+            let mut bits = marked;
+            while bits != 0 {
+                let l = TILE * r + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                out[l] = tile[l].0;
+            }
         }
     }
 
@@ -351,13 +342,14 @@ mod tests {
         }
     }
 
-    /// A block anywhere on a lattice (negative indices, every size up to a tile, nodes
-    /// inside the fluid and off it) gives `ScalarField::value` at each node to the bit,
-    /// for every kernel and quantity.
+    /// A tile anywhere on a lattice (negative indices, nodes inside the fluid and off it,
+    /// all, some or none marked) gives `ScalarField::value` at each marked node to the
+    /// bit and leaves the others alone, for every kernel and quantity.
     #[test]
-    fn blocks_give_each_node_the_pointwise_value_to_the_bit() {
+    fn tiles_give_each_marked_node_the_pointwise_value_to_the_bit() {
         use crate::field::ScalarField;
         let data = particles();
+        let mut pick = crate::test_rng::unit(9);
         for (kernel, quantity, shepard) in Kernel::ALL.into_iter().flat_map(|k| {
             [
                 (k, Quantity::SumOfWeights, false),
@@ -373,19 +365,26 @@ mod tests {
             };
             let field = SphField::new(&data, &settings).unwrap();
             let origin = DVec3::new(-0.31, 0.017, -0.05);
+            let spacing = 0.037;
             let mut reached = 0;
-            for (first, n) in [
-                ([-3i64, 2, 1], [5usize, 5, 5]),
-                ([4, 7, 0], [8, 8, 8]),
-                ([20, -1, 3], [1, 3, 8]),
-                ([11, 5, 6], [7, 2, 4]),
-                ([0, 0, 0], [0, 4, 4]),
-            ] {
-                let spacing = 0.037;
-                let mut got = vec![f64::NAN; n[0] * n[1] * n[2]];
-                field.values_on_block(origin, spacing, first, n, &mut got);
+            for (t, first) in [[-3i64, 2, 1], [4, 7, 0], [20, -1, 3], [11, 5, 6]]
+                .into_iter()
+                .enumerate()
+            {
+                // All nodes, then random rows of random nodes, then none.
+                let rows: [u8; TILE * TILE] = std::array::from_fn(|_| match t {
+                    0 => 0xff,
+                    3 => 0,
+                    _ => (pick() * 256.0) as u8 & (pick() * 256.0) as u8,
+                });
+                let mut got = [f64::NAN; TILE3];
+                field.values_on_tile(origin, spacing, first, &rows, &mut got);
                 for (v, got) in got.iter().enumerate() {
-                    let l = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
+                    let l = [v % TILE, v / TILE % TILE, v / (TILE * TILE)];
+                    if rows[l[1] + TILE * l[2]] >> l[0] & 1 == 0 {
+                        assert!(got.is_nan(), "{kernel:?}: unmarked node {l:?} written");
+                        continue;
+                    }
                     let x = origin
                         + DVec3::new(
                             (first[0] + l[0] as i64) as f64,
