@@ -165,7 +165,7 @@ impl Lattice {
         touches.par_sort_unstable();
         touches.dedup();
         let groups: Vec<&[(usize, usize)]> = touches.chunk_by(|a, b| a.0 == b.0).collect();
-        let mut wanted: Vec<(usize, Rows)> = groups
+        let wanted: Vec<(usize, Rows)> = groups
             .par_iter()
             .filter_map(|g| {
                 let t = g[0].0;
@@ -198,7 +198,6 @@ impl Lattice {
         }
         self.values.resize(self.marked.len() * TILE3, f64::NAN);
         // The work by slot, so that each tile's storage is handed to one task.
-        wanted.sort_unstable_by_key(|w| self.slot[w.0]);
         let mut work: Vec<Option<(usize, Rows)>> = vec![None; self.marked.len()];
         for (t, rows) in wanted {
             work[self.slot[t] as usize] = Some((t, rows));
