@@ -14,6 +14,7 @@ pub mod highorder;
 pub mod io;
 pub mod mc;
 pub mod mesh;
+mod prefetch;
 pub mod progress;
 pub mod samples;
 pub mod slider;

@@ -8,6 +8,7 @@
 //! remembered). Memory still follows the surface: only touched bricks exist.
 
 use super::VirtualGrid;
+use crate::prefetch::prefetch;
 use rustc_hash::FxHashMap;
 
 /// Keys per brick edge (a power of two).
@@ -27,9 +28,12 @@ fn split(key: u64) -> (u64, usize) {
     (brick, local as usize)
 }
 
-/// One brick: a value and a presence bit per key.
-struct Brick<T> {
-    values: Box<[T; BRICK]>,
+/// What a brick holds besides its values: a presence bit per key, how many are present
+/// and its own key. Kept apart from the values (in [`BrickMap::meta`]) so that a lookup's
+/// presence word and value are two independent loads at addresses known from the brick
+/// slot, not a load of the brick and then of a boxed value array behind it.
+#[derive(Clone, Copy)]
+struct Meta {
     present: [u64; WORDS],
     /// Keys present (0: the brick is free, on the map's free list).
     count: u32,
@@ -51,7 +55,11 @@ const NO_BRICK: u32 = u32::MAX;
 /// A map from grid keys to `T`, stored brick by brick.
 pub struct BrickMap<T> {
     index: Index,
-    bricks: Vec<Brick<T>>,
+    /// Brick `i`'s values. Boxed one by one so that growing the map never copies (or
+    /// briefly doubles) what it holds; the pointers sit in one small array that stays
+    /// in cache, so a lookup still goes from the slot straight to the value's line.
+    values: Vec<Box<[T; BRICK]>>,
+    meta: Vec<Meta>,
     /// Bricks emptied by [`BrickMap::remove`], reused before new ones are allocated, so
     /// a map whose keys move (a sliding surface) holds the bricks of its widest extent,
     /// not of every key it ever held.
@@ -71,7 +79,8 @@ impl<T: Copy + Default> BrickMap<T> {
     fn with_index(index: Index) -> Self {
         BrickMap {
             index,
-            bricks: Vec::new(),
+            values: Vec::new(),
+            meta: Vec::new(),
             free: Vec::new(),
             len: 0,
             last: None,
@@ -99,12 +108,12 @@ impl<T: Copy + Default> BrickMap<T> {
 
     /// Bytes held by the bricks (values and presence bits) and their index.
     pub fn bytes(&self) -> u64 {
-        let brick = std::mem::size_of::<[T; BRICK]>() + std::mem::size_of::<Brick<T>>();
+        let brick = std::mem::size_of::<[T; BRICK]>() + std::mem::size_of::<Meta>();
         let index = match &self.index {
             Index::Hashed(map) => map.capacity() * 16,
             Index::Dense { slots, .. } => slots.len() * 4,
         };
-        (self.bricks.len() * brick + index) as u64
+        (self.meta.len() * brick + index) as u64
     }
 
     /// Removes every key and drops the bricks (the dense index keeps its size).
@@ -113,7 +122,8 @@ impl<T: Copy + Default> BrickMap<T> {
             Index::Hashed(map) => *map = FxHashMap::default(),
             Index::Dense { slots, .. } => slots.fill(NO_BRICK),
         }
-        self.bricks = Vec::new();
+        self.values = Vec::new();
+        self.meta = Vec::new();
         self.free = Vec::new();
         self.len = 0;
         self.last = None;
@@ -140,6 +150,25 @@ impl<T: Copy + Default> BrickMap<T> {
         }
     }
 
+    /// Whether key `local` of brick `i` is present.
+    #[inline(always)]
+    fn present(&self, i: usize, local: usize) -> bool {
+        self.meta[i].present[local / 64] >> (local % 64) & 1 == 1
+    }
+
+    /// Asks the processor to start loading the presence word and the value of `key`, so
+    /// that a loop over scattered keys can overlap the cache misses of the keys ahead
+    /// with the work on the current one. Only a hint: no effect on the map.
+    #[inline]
+    pub fn prefetch(&self, key: u64) {
+        let (brick, local) = split(key);
+        if let Some(i) = self.brick_index(brick) {
+            let i = i as usize;
+            prefetch(&self.meta[i].present[local / 64]);
+            prefetch(&self.values[i][local]);
+        }
+    }
+
     fn brick_index_or_insert(&mut self, brick: u64) -> u32 {
         if let Some((b, i)) = self.last {
             if b == brick {
@@ -148,7 +177,7 @@ impl<T: Copy + Default> BrickMap<T> {
         }
         let next = match self.free.last() {
             Some(&f) => f,
-            None => self.bricks.len() as u32,
+            None => self.meta.len() as u32,
         };
         let i = match &mut self.index {
             Index::Hashed(map) => *map.entry(brick).or_insert(next),
@@ -167,10 +196,10 @@ impl<T: Copy + Default> BrickMap<T> {
         };
         if i == next {
             if self.free.pop().is_some() {
-                self.bricks[i as usize].key = brick;
+                self.meta[i as usize].key = brick;
             } else {
-                self.bricks.push(Brick {
-                    values: Box::new([T::default(); BRICK]),
+                self.values.push(Box::new([T::default(); BRICK]));
+                self.meta.push(Meta {
                     present: [0; WORDS],
                     count: 0,
                     key: brick,
@@ -186,17 +215,17 @@ impl<T: Copy + Default> BrickMap<T> {
     pub fn remove(&mut self, key: u64) -> Option<T> {
         let (brick, local) = split(key);
         let i = self.brick_index(brick)?;
-        let b = &mut self.bricks[i as usize];
-        let word = &mut b.present[local / 64];
+        let m = &mut self.meta[i as usize];
+        let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         if *word & bit == 0 {
             return None;
         }
         *word &= !bit;
-        b.count -= 1;
+        m.count -= 1;
         self.len -= 1;
-        let value = b.values[local];
-        if b.count == 0 {
+        let value = self.values[i as usize][local];
+        if m.count == 0 {
             match &mut self.index {
                 Index::Hashed(map) => {
                     map.remove(&brick);
@@ -219,8 +248,7 @@ impl<T: Copy + Default> BrickMap<T> {
     pub fn get_mut(&mut self, key: u64) -> Option<&mut T> {
         let (brick, local) = split(key);
         let i = self.brick_index(brick)? as usize;
-        let b = &mut self.bricks[i];
-        (b.present[local / 64] >> (local % 64) & 1 == 1).then(|| &mut b.values[local])
+        self.present(i, local).then(|| &mut self.values[i][local])
     }
 
     /// The value at `key`, to change in place, inserting `value` first when absent (one
@@ -229,51 +257,56 @@ impl<T: Copy + Default> BrickMap<T> {
     pub fn get_or_insert(&mut self, key: u64, value: T) -> &mut T {
         let (brick, local) = split(key);
         let i = self.brick_index_or_insert(brick) as usize;
-        let b = &mut self.bricks[i];
-        let word = &mut b.present[local / 64];
+        let m = &mut self.meta[i];
+        let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         if *word & bit == 0 {
             *word |= bit;
-            b.count += 1;
+            m.count += 1;
             self.len += 1;
-            b.values[local] = value;
+            self.values[i][local] = value;
         }
-        &mut b.values[local]
+        &mut self.values[i][local]
     }
 
     /// Every (key, value) present, brick by brick (not in key order).
     pub fn iter(&self) -> impl Iterator<Item = (u64, T)> + '_ {
-        self.bricks.iter().filter(|b| b.count > 0).flat_map(|b| {
-            let [bx, by, bz] = VirtualGrid::coords(b.key).map(|c| c << SHIFT);
-            (0..WORDS)
-                .flat_map(move |w| {
-                    let mut bits = b.present[w];
-                    std::iter::from_fn(move || {
-                        (bits != 0).then(|| {
-                            let local = w * 64 + bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            local
+        self.meta
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.count > 0)
+            .flat_map(|(i, m)| {
+                let values = &self.values[i];
+                let [bx, by, bz] = VirtualGrid::coords(m.key).map(|c| c << SHIFT);
+                (0..WORDS)
+                    .flat_map(move |w| {
+                        let mut bits = m.present[w];
+                        std::iter::from_fn(move || {
+                            (bits != 0).then(|| {
+                                let local = w * 64 + bits.trailing_zeros() as usize;
+                                bits &= bits - 1;
+                                local
+                            })
                         })
                     })
-                })
-                .map(move |local| {
-                    let l = local as u32;
-                    let key = VirtualGrid::key(
-                        bx | (l & LOCAL),
-                        by | (l >> SHIFT & LOCAL),
-                        bz | (l >> (2 * SHIFT) & LOCAL),
-                    );
-                    (key, b.values[local])
-                })
-        })
+                    .map(move |local| {
+                        let l = local as u32;
+                        let key = VirtualGrid::key(
+                            bx | (l & LOCAL),
+                            by | (l >> SHIFT & LOCAL),
+                            bz | (l >> (2 * SHIFT) & LOCAL),
+                        );
+                        (key, values[local])
+                    })
+            })
     }
 
     /// The value at `key`, if present.
     #[inline]
     pub fn get(&self, key: u64) -> Option<T> {
         let (brick, local) = split(key);
-        let b = &self.bricks[self.brick_index(brick)? as usize];
-        (b.present[local / 64] >> (local % 64) & 1 == 1).then(|| b.values[local])
+        let i = self.brick_index(brick)? as usize;
+        self.present(i, local).then(|| self.values[i][local])
     }
 
     /// Whether `key` is present.
@@ -281,7 +314,7 @@ impl<T: Copy + Default> BrickMap<T> {
     pub fn contains(&self, key: u64) -> bool {
         let (brick, local) = split(key);
         self.brick_index(brick)
-            .is_some_and(|i| self.bricks[i as usize].present[local / 64] >> (local % 64) & 1 == 1)
+            .is_some_and(|i| self.present(i as usize, local))
     }
 
     /// Sets `key` to `value`; returns true when the key was not present before.
@@ -289,13 +322,13 @@ impl<T: Copy + Default> BrickMap<T> {
     pub fn insert(&mut self, key: u64, value: T) -> bool {
         let (brick, local) = split(key);
         let i = self.brick_index_or_insert(brick) as usize;
-        let b = &mut self.bricks[i];
-        let word = &mut b.present[local / 64];
+        let m = &mut self.meta[i];
+        let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         let new = *word & bit == 0;
         *word |= bit;
-        b.values[local] = value;
-        b.count += new as u32;
+        m.count += new as u32;
+        self.values[i][local] = value;
         self.len += new as usize;
         new
     }
@@ -306,7 +339,7 @@ impl<T: Copy + Default> BrickMap<T> {
     pub fn corners(&self, cell: u64) -> [T; 8] {
         if let Some((brick, at)) = corners_in_one_brick(cell) {
             if let Some(i) = self.brick_index(brick) {
-                let values = &self.bricks[i as usize].values;
+                let values = &self.values[i as usize];
                 return at.map(|a| values[a]);
             }
         }
@@ -324,13 +357,14 @@ impl<T: Copy + Default> BrickMap<T> {
             let Some(i) = self.brick_index(brick) else {
                 return [absent; 8];
             };
-            let b = &self.bricks[i as usize];
+            let present = &self.meta[i as usize].present;
+            let values = &self.values[i as usize];
             // A plain loop: `at.map` compiled to a fallible-map adapter costing a third
             // more instructions here.
             let mut out = [absent; 8];
             for (o, &a) in out.iter_mut().zip(&at) {
-                if b.present[a / 64] >> (a % 64) & 1 == 1 {
-                    *o = b.values[a];
+                if present[a / 64] >> (a % 64) & 1 == 1 {
+                    *o = values[a];
                 }
             }
             return out;
@@ -356,8 +390,8 @@ impl<T: Copy + Default> BrickMap<T> {
                 i
             }
         }?;
-        let b = &self.bricks[i as usize];
-        (b.present[local / 64] >> (local % 64) & 1 == 1).then(|| b.values[local])
+        self.present(i as usize, local)
+            .then(|| self.values[i as usize][local])
     }
 
     /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
@@ -368,7 +402,7 @@ impl<T: Copy + Default> BrickMap<T> {
             let Some(i) = self.brick_index(brick) else {
                 return 0;
             };
-            let present = &self.bricks[i as usize].present;
+            let present = &self.meta[i as usize].present;
             return (0..8).fold(0u8, |mask, k| {
                 mask | ((present[at[k] / 64] >> (at[k] % 64) & 1) as u8) << k
             });
@@ -537,7 +571,7 @@ mod tests {
                 assert_eq!(map.remove(VirtualGrid::key(x, 1, 2)), Some(x as u64));
             }
             map.insert(VirtualGrid::key(17, 9, 9), 4);
-            assert_eq!(map.bricks.len(), 1);
+            assert_eq!(map.meta.len(), 1);
             assert_eq!(
                 map.iter().collect::<Vec<_>>(),
                 [(VirtualGrid::key(17, 9, 9), 4)]

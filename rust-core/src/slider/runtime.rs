@@ -26,6 +26,7 @@ use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice};
 use crate::mc::bricks::BrickMap;
 use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing, radix, VirtualGrid};
+use crate::prefetch::prefetch;
 use crate::progress::Progress;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -251,6 +252,10 @@ const EDGE_CORNER_AXIS: [(u8, u8); 12] = {
     t
 };
 
+/// How many items ahead the update's loops prefetch: enough to overlap several misses,
+/// few enough that the lines are still cached when their item comes.
+const AHEAD: usize = 8;
+
 /// No vertex: the edge on that axis is off.
 const NO_VERTEX: u32 = u32::MAX;
 
@@ -305,6 +310,12 @@ impl EdgeVertices {
             self.map.remove(key);
         }
         (vertex != NO_VERTEX).then_some(vertex)
+    }
+
+    /// Starts loading edge `e`'s entry.
+    #[inline]
+    fn prefetch(&self, e: u32) {
+        self.map.prefetch(self.split(e).0);
     }
 
     /// Vertices of the edges from each corner of the cell keyed `cell` ([`NO_VERTEX`]
@@ -747,18 +758,32 @@ impl Slider {
         ascending_unique(dirty, marks);
 
         // Cells around changed edges change case: their triangles go.
-        for &cell in dirty.iter() {
+        for (k, &cell) in dirty.iter().enumerate() {
+            // Two stages: HC entries far ahead, then (their entries now cached) the
+            // triangles they point to nearer.
+            if let Some(&next) = dirty.get(k + AHEAD) {
+                self.hc.prefetch(grid_key(&lattice, next as usize));
+            }
+            if let Some(&next) = dirty.get(k + AHEAD / 2) {
+                if let Some(entry) = self.hc.get(grid_key(&lattice, next as usize)) {
+                    let b = &self.buckets[entry.bucket as usize];
+                    if let Some(t) = b.triangles.get(entry.slot as usize * b.size) {
+                        prefetch(t);
+                    }
+                }
+            }
             if let Some(entry) = self.hc.remove(grid_key(&lattice, cell as usize)) {
                 let b = &self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
-                change
-                    .removed_triangles
-                    .extend_from_slice(&b.triangles[s..s + b.size]);
+                push_each(&mut change.removed_triangles, &b.triangles[s..s + b.size]);
                 self.remove_slot(entry);
             }
         }
         // Edges out leave holes ...
-        for &e in removed.iter() {
+        for (k, &e) in removed.iter().enumerate() {
+            if let Some(&next) = removed.get(k + AHEAD) {
+                self.he.prefetch(next);
+            }
             let Some(v) = self.he.turn_off(e) else {
                 return Err(self.corrupt(format!("edge {e} turns off but is not on")));
             };
@@ -767,12 +792,21 @@ impl Slider {
         }
         // ... that edges in fill first.
         holes.sort_unstable_by(|a, b| b.cmp(a));
-        for &e in added.iter() {
+        for (k, &e) in added.iter().enumerate() {
+            if let Some(&next) = added.get(k + AHEAD) {
+                self.he.prefetch(next);
+                self.prefetch_edge_data(next);
+            }
             let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
             if node >= self.store.nodes || lattice.coords(node)[axis] + 1 >= lattice.dims[axis] {
                 return Err(self.corrupt(format!("edge {e} is not a lattice edge")));
             }
             let data = self.edge_data(e)?;
+            // Holes are taken from the end of `holes`: the one AHEAD later is written then.
+            if let Some(&h) = holes.len().checked_sub(AHEAD + 1).map(|i| &holes[i]) {
+                prefetch(&self.data[h as usize]);
+                prefetch(&self.edges[h as usize]);
+            }
             let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
             if !self.he.turn_on(e, v) {
                 return Err(self.corrupt(format!("edge {e} turns on but is already on")));
@@ -816,16 +850,19 @@ impl Slider {
             }
         }
         // Cells around changed edges come back with their new case.
-        for &cell in dirty.iter() {
+        for (k, &cell) in dirty.iter().enumerate() {
+            if let Some(&next) = dirty.get(k + AHEAD) {
+                self.prefetch_cell(next);
+            }
             let case = self.case_of(cell)?;
             if case == 0 || case == 255 {
                 continue;
             }
             let key = grid_key(&lattice, cell as usize);
             self.cell_triangles(cell, key, case, tris)?;
-            change.added_triangles.extend_from_slice(tris);
+            push_each(&mut change.added_triangles, tris);
             let b = &mut self.buckets[tris.len()];
-            b.triangles.extend_from_slice(tris);
+            push_each(&mut b.triangles, tris);
             b.cells.push(cell);
             let entry = CellEntry {
                 case,
@@ -835,6 +872,36 @@ impl Slider {
             self.hc.insert(key, entry);
         }
         Ok(())
+    }
+
+    /// Starts loading what re-triangulating `cell` reads: its corner values (four
+    /// lines: the x pairs share one), its edges' vertices in HE and its entry in HC.
+    #[inline]
+    fn prefetch_cell(&self, cell: u32) {
+        let lattice = self.store.lattice();
+        let (cell, y, z) = (cell as usize, lattice.stride(1), lattice.stride(2));
+        for node in [cell, cell + y, cell + z, cell + y + z] {
+            self.store.prefetch_value(node);
+            self.he.map.prefetch(grid_key(lattice, node));
+        }
+        self.hc.prefetch(grid_key(lattice, cell));
+    }
+
+    /// Starts loading the values [`store_edge_data`] reads for edge `e`: its two nodes
+    /// and their neighbours across the other axes (central differences).
+    #[inline]
+    fn prefetch_edge_data(&self, e: u32) {
+        let lattice = self.store.lattice();
+        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+        let up = node + lattice.stride(axis);
+        for n in [node, up] {
+            for a in 1..3 {
+                let s = lattice.stride(a);
+                self.store.prefetch_value(n.saturating_sub(s));
+                self.store.prefetch_value(n + s);
+            }
+            self.store.prefetch_value(n);
+        }
     }
 
     /// Removes a cell's triangles, filling the hole with the bucket's last cell.
@@ -856,7 +923,21 @@ impl Slider {
     }
 
     /// Case of `cell` at the current isovalue (bit c: corner c above it).
+    #[inline]
     fn case_of(&self, cell: u32) -> Result<u8> {
+        // Corners in verified chunks (all but the first read of a region): a bit test and
+        // a load each, no error plumbing.
+        let mut case = 0u8;
+        let mut verified = true;
+        for (k, &offset) in self.offsets.corners.iter().enumerate() {
+            match self.store.verified_value(cell as usize + offset) {
+                Some(v) => case |= u8::from(v as f64 > self.iso) << k,
+                None => verified = false,
+            }
+        }
+        if verified {
+            return Ok(case);
+        }
         let mut case = 0u8;
         for (k, &offset) in self.offsets.corners.iter().enumerate() {
             let v = self.store.checked_value(cell as usize + offset)?;
@@ -950,6 +1031,15 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     match failed.into_inner() {
         Some(err) => Err(err),
         None => Ok(data),
+    }
+}
+
+/// Appends a cell's few triangles one by one: `extend_from_slice` calls `memmove` for
+/// every cell's dozen to sixty bytes, which cost more than the copy.
+#[inline]
+fn push_each(out: &mut Vec<[u32; 3]>, tris: &[[u32; 3]]) {
+    for &t in tris {
+        out.push(t);
     }
 }
 

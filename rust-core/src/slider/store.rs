@@ -36,6 +36,7 @@
 
 use crate::error::{Error, Result};
 use crate::field::grid::{Lattice, ValueType};
+use crate::prefetch::prefetch;
 use glam::DVec3;
 use memmap2::Mmap;
 use std::path::{Path, PathBuf};
@@ -418,6 +419,14 @@ impl Store {
                 u16::from_le_bytes(a) as f32
             }
             ValueType::U8 => b[self.values + i] as f32,
+        }
+    }
+
+    /// Starts loading node `i`'s value into the caches (a hint: reads and checks nothing).
+    #[inline(always)]
+    pub(crate) fn prefetch_value(&self, i: usize) {
+        if let Some(b) = self.map.get(self.values + self.value_type.size() * i) {
+            prefetch(b);
         }
     }
 
