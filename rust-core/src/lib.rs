@@ -7,6 +7,7 @@ pub mod adaptive;
 pub mod baseline;
 pub mod capi;
 pub mod correctors;
+mod divisor;
 pub mod error;
 pub mod field;
 pub mod gpu;

@@ -4,6 +4,7 @@
 //! vertex normals of grid isosurfaces are interpolated from.
 
 use super::ScalarField;
+use crate::divisor::Divisor;
 use crate::error::{Error, Result};
 use glam::DVec3;
 
@@ -112,6 +113,34 @@ impl Values {
             }),
             Values::U8(v) => out(v),
         }
+    }
+}
+
+/// Coordinates of a lattice's node indices by multiplication ([`Divisor`]) instead of
+/// [`Lattice::coords`]' two `div`s: for loops that turn many indices into coordinates
+/// (the slider's map keys). Indices must be below 2³².
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct NodeCoords {
+    x: Divisor,
+    y: Divisor,
+}
+
+impl NodeCoords {
+    pub(crate) fn new(lattice: &Lattice) -> NodeCoords {
+        let axis = |a: usize| Divisor::new(u32::try_from(lattice.dims[a]).expect("dims below 2³²"));
+        NodeCoords {
+            x: axis(0),
+            y: axis(1),
+        }
+    }
+
+    /// (x, y, z) of node `i` (< 2³²), as [`Lattice::coords`] gives them.
+    #[inline(always)]
+    pub(crate) fn coords(self, i: usize) -> [usize; 3] {
+        debug_assert!(i <= u32::MAX as usize);
+        let (r, x) = self.x.div_rem(i as u32);
+        let (z, y) = self.y.div_rem(r);
+        [x as usize, y as usize, z as usize]
     }
 }
 

@@ -23,7 +23,7 @@ use super::build::node_edges;
 use super::lod::{self, LodMesh, LodParams};
 use super::store::Store;
 use crate::error::{Error, Result};
-use crate::field::grid::{node_gradient, Lattice};
+use crate::field::grid::{node_gradient, Lattice, NodeCoords};
 use crate::mc::bricks::BrickMap;
 use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing, radix, VirtualGrid};
 use crate::prefetch::prefetch;
@@ -221,8 +221,8 @@ impl CellOffsets {
 
 /// [`BrickMap`] key of lattice node or cell `i` (a cell is keyed by its lower node).
 #[inline]
-fn grid_key(lattice: &Lattice, i: usize) -> u64 {
-    let [x, y, z] = lattice.coords(i);
+fn grid_key(coords: NodeCoords, i: usize) -> u64 {
+    let [x, y, z] = coords.coords(i);
     VirtualGrid::key(x as u32, y as u32, z as u32)
 }
 
@@ -263,14 +263,14 @@ const NO_VERTEX: u32 = u32::MAX;
 /// axis, [`NO_VERTEX`] where that edge is off), so that a cell's twelve edges are read
 /// with the one brick lookup of its eight corners.
 struct EdgeVertices {
-    lattice: Lattice,
+    coords: NodeCoords,
     map: BrickMap<[u32; 3]>,
 }
 
 impl EdgeVertices {
     fn new(lattice: &Lattice) -> EdgeVertices {
         EdgeVertices {
-            lattice: *lattice,
+            coords: NodeCoords::new(lattice),
             map: lattice_map(lattice),
         }
     }
@@ -278,7 +278,7 @@ impl EdgeVertices {
     /// Node key and axis of edge `e` (`node · 3 + axis`).
     #[inline]
     fn split(&self, e: u32) -> (u64, usize) {
-        (grid_key(&self.lattice, e as usize / 3), e as usize % 3)
+        (grid_key(self.coords, e as usize / 3), e as usize % 3)
     }
 
     /// Turns edge `e` on with `vertex`; false (and nothing changed) when it was on.
@@ -681,9 +681,9 @@ impl Slider {
     }
 
     /// The (up to four) cells around edge `e`.
-    fn edge_cells(lattice: &Lattice, e: u32, out: &mut Vec<u32>) {
+    fn edge_cells(lattice: &Lattice, coords: NodeCoords, e: u32, out: &mut Vec<u32>) {
         let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-        let c = lattice.coords(node);
+        let c = coords.coords(node);
         let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
         for (sb, sd) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
             if c[b] < sb || c[d] < sd {
@@ -722,6 +722,7 @@ impl Slider {
         scratch: &mut Scratch,
     ) -> Result<()> {
         let lattice = *self.store.lattice();
+        let coords = self.store.coords;
         let Scratch {
             marks,
             removed,
@@ -753,7 +754,7 @@ impl Slider {
         change.edges_removed = removed.len() as u64;
         marks.resize(self.store.nodes.div_ceil(64), 0);
         for &e in removed.iter().chain(added.iter()) {
-            Self::edge_cells(&lattice, e, dirty);
+            Self::edge_cells(&lattice, coords, e, dirty);
         }
         ascending_unique(dirty, marks);
 
@@ -762,17 +763,17 @@ impl Slider {
             // Two stages: HC entries far ahead, then (their entries now cached) the
             // triangles they point to nearer.
             if let Some(&next) = dirty.get(k + AHEAD) {
-                self.hc.prefetch(grid_key(&lattice, next as usize));
+                self.hc.prefetch(grid_key(coords, next as usize));
             }
             if let Some(&next) = dirty.get(k + AHEAD / 2) {
-                if let Some(entry) = self.hc.get(grid_key(&lattice, next as usize)) {
+                if let Some(entry) = self.hc.get(grid_key(coords, next as usize)) {
                     let b = &self.buckets[entry.bucket as usize];
                     if let Some(t) = b.triangles.get(entry.slot as usize * b.size) {
                         prefetch(t);
                     }
                 }
             }
-            if let Some(entry) = self.hc.remove(grid_key(&lattice, cell as usize)) {
+            if let Some(entry) = self.hc.remove(grid_key(coords, cell as usize)) {
                 let b = &self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
                 push_each(&mut change.removed_triangles, &b.triangles[s..s + b.size]);
@@ -798,7 +799,7 @@ impl Slider {
                 self.prefetch_edge_data(next);
             }
             let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-            if node >= self.store.nodes || lattice.coords(node)[axis] + 1 >= lattice.dims[axis] {
+            if node >= self.store.nodes || coords.coords(node)[axis] + 1 >= lattice.dims[axis] {
                 return Err(self.corrupt(format!("edge {e} is not a lattice edge")));
             }
             let data = self.edge_data(e)?;
@@ -836,12 +837,12 @@ impl Slider {
             self.data[h as usize] = d;
             self.he.set(e, h);
             change.moved_vertices.push(((last - 1) as u32, h));
-            Self::edge_cells(&lattice, e, reindex);
+            Self::edge_cells(&lattice, coords, e, reindex);
         }
         ascending_unique(reindex, marks);
         // One scratch list for every cell's triangles, not an allocation per cell.
         for &cell in reindex.iter() {
-            let key = grid_key(&lattice, cell as usize);
+            let key = grid_key(coords, cell as usize);
             if let Some(entry) = self.hc.get(key) {
                 self.cell_triangles(cell, key, entry.case, tris)?;
                 let b = &mut self.buckets[entry.bucket as usize];
@@ -858,7 +859,7 @@ impl Slider {
             if case == 0 || case == 255 {
                 continue;
             }
-            let key = grid_key(&lattice, cell as usize);
+            let key = grid_key(coords, cell as usize);
             self.cell_triangles(cell, key, case, tris)?;
             push_each(&mut change.added_triangles, tris);
             let b = &mut self.buckets[tris.len()];
@@ -882,9 +883,9 @@ impl Slider {
         let (cell, y, z) = (cell as usize, lattice.stride(1), lattice.stride(2));
         for node in [cell, cell + y, cell + z, cell + y + z] {
             self.store.prefetch_value(node);
-            self.he.map.prefetch(grid_key(lattice, node));
+            self.he.map.prefetch(grid_key(self.store.coords, node));
         }
-        self.hc.prefetch(grid_key(lattice, cell));
+        self.hc.prefetch(grid_key(self.store.coords, cell));
     }
 
     /// Starts loading the values [`store_edge_data`] reads for edge `e`: its two nodes
@@ -914,7 +915,7 @@ impl Slider {
             b.triangles
                 .copy_within(last * b.size..(last + 1) * b.size, slot * b.size);
             b.cells[slot] = moved;
-            if let Some(m) = (self.hc).get_mut(grid_key(self.store.lattice(), moved as usize)) {
+            if let Some(m) = (self.hc).get_mut(grid_key(self.store.coords, moved as usize)) {
                 m.slot = slot as u32;
             }
         }
@@ -1002,7 +1003,7 @@ impl Slider {
 pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     let lattice = store.lattice();
     let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-    let c = lattice.coords(node);
+    let c = store.coords.coords(node);
     let mut up = c;
     up[axis] += 1;
     // Once the neighbourhood's chunks have been verified (every edge after the first few

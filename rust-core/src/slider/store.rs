@@ -35,7 +35,7 @@
 //! follows what the slider reads and a corrupt chunk is refused before its data is used.
 
 use crate::error::{Error, Result};
-use crate::field::grid::{Lattice, ValueType};
+use crate::field::grid::{Lattice, NodeCoords, ValueType};
 use crate::prefetch::prefetch;
 use glam::DVec3;
 use memmap2::Mmap;
@@ -100,6 +100,8 @@ pub struct Store {
     map: Mmap,
     path: PathBuf,
     pub(crate) lattice: Lattice,
+    /// The lattice's index-to-coordinates without `div` (every map key of an update).
+    pub(crate) coords: NodeCoords,
     pub(crate) value_type: ValueType,
     pub(crate) nodes: usize,
     /// Redundancy threshold the levels were built with.
@@ -285,6 +287,7 @@ impl Store {
         let mut store = Store {
             path: path.to_path_buf(),
             lattice,
+            coords: NodeCoords::new(&lattice),
             value_type,
             nodes,
             threshold,
