@@ -74,6 +74,7 @@ class Params:
     method: str = "CORRECTORS"  # or "ADAPTIVE"
     splash_threshold: int = 1
     max_error: float = 0.4  # the core's adaptive default (isobar.adaptive.default_params())
+    bisection_iterations: int = 5  # the core's adaptive default, as max_error's
     backend: str = "CPU"  # CPU, GPU (wgpu) or AUTO (a hardware GPU when there is one); both methods
     correct: bool = True
     trim: str = "AUTO"  # AUTO, OFF, ON, CUSTOM
@@ -260,6 +261,7 @@ def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn])
         progress=progress,
         splash_threshold=int(params.splash_threshold),
         max_error=float(params.max_error),
+        bisection_iterations=int(params.bisection_iterations),
         **kwargs,
     )
     try:

@@ -100,6 +100,7 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
         if settings.method == "ADAPTIVE":
             layout.prop(settings, "splash_threshold")
             layout.prop(settings, "max_error")
+            layout.prop(settings, "bisection_iterations")
             return
         layout.prop(settings, "correct")
         layout.prop(settings, "trim")

@@ -205,6 +205,15 @@ class IsobarSettings(bpy.types.PropertyGroup):
         soft_max=2.0,
         update=_changed,
     )
+    bisection_iterations: IntProperty(
+        name="Bisection Iterations",
+        description="Adaptive: halvings of a finest-level edge when placing its surface point (one more per coarser "
+        "level, so shared points coincide); 0 places them linearly between the finest nodes, as marching cubes does",
+        default=5,
+        min=0,
+        max=16,
+        update=_changed,
+    )
     backend: EnumProperty(
         name="Backend",
         description="Where the work runs: Marching Correctors' seed search (same surface on every back end) or the adaptive grids",

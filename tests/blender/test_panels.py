@@ -61,6 +61,11 @@ def test_panels_without_and_with_a_fluid_surface(scene, demo_sequence):
     settings.trim, settings.h_mode, settings.source_type = "CUSTOM", "ARRAY", "OBJECT"
     props = {name for kind, name in draw_all(bpy.context) if kind == "prop"}
     assert {"trim_node", "trim_vertex", "h_array", "source_object"} <= props
+    # The adaptive method shows its own settings and not Marching Correctors'.
+    settings.method = "ADAPTIVE"
+    props = {name for kind, name in draw_all(bpy.context) if kind == "prop"}
+    assert {"splash_threshold", "max_error", "bisection_iterations"} <= props
+    assert not {"correct", "trim", "trim_node"} & props
 
 
 def test_field_search_lists_the_particle_arrays(scene, addon, demo_sequence):

@@ -266,6 +266,18 @@ def test_adaptive_method(scene, isobar, demo_sequence):
     assert_mesh_equals(obj, flat)
     refined = lambda stats: sum(stats["cells_per_level"][1:])
     assert refined(flat_stats) < refined(coarse_stats) and flat.n_triangles < coarse.n_triangles
+    # Bisection Iterations reaches the core: the panel's default is the core's, and 0 gives
+    # the core's surface with linear level-3 points, a mesh whose points moved.
+    assert settings.bisection_iterations == isobar.adaptive.default_params().bisection_iterations
+    settings.bisection_iterations = 0
+    with isobar.Particles.read(str(path)) as particles:
+        linear, _ = isobar.extract_adaptive(
+            particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0, max_error=0.0, bisection_iterations=0
+        )
+    assert_mesh_equals(obj, linear)
+    assert not np.array_equal(np.sort(mesh_arrays(obj)[0], axis=0), np.sort(flat.points.astype(np.float32), axis=0))
+    settings.bisection_iterations = 5
+    assert_mesh_equals(obj, flat)
     # Backend GPU: the core's wgpu path (lavapipe in CI, installed by the test command).
     settings.backend = "GPU"
     assert not settings.status_error, settings.status

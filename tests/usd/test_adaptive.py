@@ -140,6 +140,27 @@ def test_cli_passes_max_error_to_the_core(cli, tmp_path):
     default.release()
 
 
+def test_cli_passes_bisection_iterations_to_the_core(cli, tmp_path):
+    """`--bisection-iterations` reaches isobar.extract_adaptive: the stage holds the core's
+    surface with linear level-3 points at 0, whose points differ from the default's; 17 is
+    refused with the core's message naming the parameter."""
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    out = tmp_path / "adaptive.usd"
+    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", "--bisection-iterations", "0",
+            "-o", out, "-q")
+    with isobar.Particles.read(str(FRAME_26)) as particles:
+        linear, _ = isobar.extract_adaptive(particles, ISO, bisection_iterations=0, **DAM)
+        default, _ = isobar.extract_adaptive(particles, ISO, **DAM)
+    assert_same_mesh(mesh_at(open_stage(out), 26), linear, velocity=False)
+    assert not np.array_equal(np.sort(linear.points, axis=0), np.sort(default.points, axis=0))
+    linear.release()
+    default.release()
+    proc = run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive",
+                   "--bisection-iterations", "17", "-o", tmp_path / "bad.usd", "-q", check=False)
+    assert proc.returncode != 0 and "bisection_iterations" in proc.stderr, proc.stderr
+    assert not (tmp_path / "bad.usd").exists()
+
+
 def _record(path):
     from pxr import Sdf
 

@@ -145,6 +145,7 @@ ROUND_TRIP = {
     "Method": ("Adaptive", "1"),
     "SplashThreshold": (3, "3"),
     "MaxError": (0.375, "0.375"),
+    "BisectionIterations": (0, "0"),
     "Backend": ("Auto", "2"),
     "Correct": (0, "0"),
     "ComputeNormals": (0, "0"),

@@ -138,6 +138,33 @@ def test_adaptive_max_error_equals_the_cli_option():
 
 
 @test
+def test_adaptive_bisection_iterations_equal_the_cli_option():
+    # The halvings reach the core: 0 and 2 each give the CLI's surface with the same
+    # --bisection-iterations (and differ from each other); the default is the core's,
+    # and values past 16 are clamped to what the core accepts.
+    import subprocess
+
+    points = {}
+    for n in (0, 2):
+        f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE,
+                                BisectionIterations=n)
+        f.Update()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        ref_path = os.path.join(TMP, f"adaptive_bisection_{n}.vtp")
+        subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
+                        "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR),
+                        "--bisection-iterations", str(n)], check=True, capture_output=True)
+        h.assert_same_surface(f.GetOutput(), h.read_vtp(ref_path), 1e-12, f"bisection {n}")
+        assert h.open_edges(f.GetOutput()) == 0
+        points[n] = np.sort(vtk_to_numpy(f.GetOutput().GetPoints().GetData()), axis=0)
+    assert not np.array_equal(points[0], points[2]), "bisection_iterations did not reach the core"
+    f = vtkIsobarSPHIsosurface()
+    assert f.GetBisectionIterations() == 5
+    f.SetBisectionIterations(40)
+    assert f.GetBisectionIterations() == 16
+
+
+@test
 def test_marching_correctors_backend_gpu_gives_the_cpu_surface():
     # Backend GPU (wgpu; lavapipe in CI) runs the seed cells' neighbour search on the
     # device; the exact tests stay on the CPU, so the surface is the CPU's, bit for bit.

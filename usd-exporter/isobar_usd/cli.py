@@ -80,6 +80,9 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--max-error", type=float, help="adaptive: each cell at the surface takes the lowest level whose surface lies "
                    "within this many finest cells of the finest level's there "
                    "(0: off, the splash criterion alone; default: the core's)")
+    g.add_argument("--bisection-iterations", type=int,
+                   help="adaptive: halvings of a finest-level edge when placing its surface point, one more per "
+                   "coarser level (0..16; 0: linear between the finest nodes, as marching cubes; default: the core's, 5)")
 
     u = sph.add_argument_group("USD")
     u.add_argument("--frames", help="write only these frame numbers: 10-20, 1-5,9, 100- (the other frames of the stage stay)")
@@ -158,6 +161,8 @@ def _extract_options(args) -> dict:
         options["splash_threshold"] = args.splash_threshold
     if args.max_error is not None:
         options["max_error"] = args.max_error
+    if args.bisection_iterations is not None:
+        options["bisection_iterations"] = args.bisection_iterations
     if args.backend is not None:
         # Both methods take it: isobar.extract(backend=) and isobar.extract_adaptive(backend=).
         options["backend"] = args.backend

@@ -600,6 +600,7 @@ vtkIsobarSPHIsosurface::vtkIsobarSPHIsosurface()
   isobar_adaptive_params_default(&adaptive);
   this->SplashThreshold = static_cast<int>(adaptive.splash_threshold);
   this->MaxError = adaptive.max_error;
+  this->BisectionIterations = static_cast<int>(adaptive.bisection_iterations);
   this->Backend = static_cast<int>(adaptive.backend);
   this->Correct = defaults.correct != 0;
   this->Tolerance = defaults.tolerance;
@@ -1017,6 +1018,7 @@ int vtkIsobarSPHIsosurface::RequestData(
         isobar_adaptive_params_default(&adaptive);
         adaptive.splash_threshold = static_cast<uint32_t>(this->SplashThreshold);
         adaptive.max_error = this->MaxError;
+        adaptive.bisection_iterations = static_cast<uint32_t>(this->BisectionIterations);
         adaptive.backend = static_cast<uint32_t>(this->Backend);
         call = "isobar_adaptive_extract";
         status = isobar_adaptive_extract(handle.Ptr, &params, &adaptive,
@@ -1177,6 +1179,7 @@ void vtkIsobarSPHIsosurface::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Method: " << this->Method << "\n";
   os << indent << "SplashThreshold: " << this->SplashThreshold << "\n";
   os << indent << "MaxError: " << this->MaxError << "\n";
+  os << indent << "BisectionIterations: " << this->BisectionIterations << "\n";
   os << indent << "Backend: " << this->Backend << "\n";
   os << indent << "Correct: " << this->Correct << "\n";
   os << indent << "Tolerance: " << this->Tolerance << "\n";

@@ -174,6 +174,14 @@ public:
   ///@}
 
   ///@{
+  /// Adaptive method: halvings n of a level-3 edge when placing its surface point (n+1 on
+  /// level 2, n+2 on level 1, so shared points coincide; core default 5). 0 places level-3
+  /// points linearly between the finest nodes, as marching cubes does: faster, coarser.
+  vtkSetClampMacro(BisectionIterations, int, 0, 16);
+  vtkGetMacro(BisectionIterations, int);
+  ///@}
+
+  ///@{
   /// Where the work runs, ISOBAR_BACKEND_CPU (0, default), ISOBAR_BACKEND_GPU (1, wgpu;
   /// an error when there is no adapter) or ISOBAR_BACKEND_AUTO (2, a hardware GPU when
   /// there is one): Marching Correctors' seed-cell neighbour search (same surface on
@@ -318,6 +326,7 @@ protected:
   int Method;
   int SplashThreshold;
   double MaxError;
+  int BisectionIterations;
   int Backend;
   vtkTypeBool Correct;
   double Tolerance;
