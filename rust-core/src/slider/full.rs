@@ -53,7 +53,7 @@ pub fn extract_keyed(
             let c = VirtualGrid::coords(node).map(|v| v as usize);
             let mut up = c;
             up[axis] += 1;
-            let (p, n) = edge_data_from(lattice, value, c, axis, up).vertex(lattice, iso);
+            let (p, n) = edge_data_from(lattice, value, c, up).vertex(lattice, c, axis, iso);
             (p.to_array(), n)
         })
         .unzip();

@@ -263,10 +263,13 @@ pub fn extract(store: &Store, iso: f64, active: &[u32], params: &LodParams) -> R
         .par_iter()
         .map(|&e| store_edge_data(store, e))
         .collect::<Result<Vec<_>>>()?;
+    let coords = store.coords;
     let (mut positions, mut normals): (Vec<[f32; 3]>, Vec<[f32; 3]>) = data
         .par_iter()
-        .map(|d| {
-            let (p, n) = d.vertex(&lod.lattice, iso);
+        .zip(edges.par_iter())
+        .map(|(d, &e)| {
+            let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+            let (p, n) = d.vertex(&lod.lattice, coords.coords(node), axis, iso);
             (p.as_vec3().to_array(), n)
         })
         .unzip();

@@ -33,27 +33,34 @@ use rayon::prelude::*;
 use std::cell::{Cell, OnceCell, RefCell};
 use std::time::Instant;
 
-/// What one interpolated vertex is computed from: its edge's lower node and axis, the two
-/// end values and the node gradients (f32, as normals only need f32).
+/// What one interpolated vertex is computed from besides its edge (which the caller
+/// keeps): the two end values and the node gradients (f32, as normals only need f32).
+/// 32 bytes: one per vertex of the surface is held.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct EdgeData {
-    pub(crate) node: [u32; 3],
-    pub(crate) axis: u8,
     pub(crate) s0: f32,
     pub(crate) s1: f32,
     pub(crate) g0: [f32; 3],
     pub(crate) g1: [f32; 3],
 }
 
+const _: () = assert!(std::mem::size_of::<EdgeData>() == 32);
+
 impl EdgeData {
     /// Position (f64) and unit normal (pointing down the gradient, the side the case
-    /// table's triangles face) of the vertex at isovalue `iso`. The slider and the
-    /// from-scratch extraction both place vertices with this.
+    /// table's triangles face) at isovalue `iso` of the vertex on the edge from node `c`
+    /// along `axis`. The slider and the from-scratch extraction both place vertices with
+    /// this.
     #[inline]
-    pub(crate) fn vertex(&self, lattice: &Lattice, iso: f64) -> (DVec3, [f32; 3]) {
+    pub(crate) fn vertex(
+        &self,
+        lattice: &Lattice,
+        c: [usize; 3],
+        axis: usize,
+        iso: f64,
+    ) -> (DVec3, [f32; 3]) {
         let t = linear_crossing(self.s0 as f64, self.s1 as f64, iso);
-        let c = self.node.map(|v| v as usize);
-        let p = lattice.edge_point(c, self.axis as usize, t);
+        let p = lattice.edge_point(c, axis, t);
         let (g0, g1) = (Vec3::from_array(self.g0), Vec3::from_array(self.g1));
         let g = g0 * (1.0 - t as f32) + g1 * t as f32;
         let n = (-g).normalize_or_zero();
@@ -980,6 +987,7 @@ impl Slider {
     /// Computes V and N from E into `out`, reusing its memory.
     fn compute_vertices(&self, out: &mut Vertices) {
         let lattice = *self.store.lattice();
+        let coords = self.store.coords;
         let iso = self.iso;
         let n = self.data.len();
         out.positions.resize(n, [0.0; 3]);
@@ -987,10 +995,11 @@ impl Slider {
         out.positions
             .par_iter_mut()
             .zip(out.normals.par_iter_mut())
-            .zip(self.data.par_iter())
+            .zip(self.data.par_iter().zip(self.edges.par_iter()))
             .with_min_len(4096)
-            .for_each(|((p, nrm), d)| {
-                let (q, m) = d.vertex(&lattice, iso);
+            .for_each(|((p, nrm), (d, &e))| {
+                let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+                let (q, m) = d.vertex(&lattice, coords.coords(node), axis, iso);
                 *p = q.as_vec3().to_array();
                 *nrm = m;
             });
@@ -1015,7 +1024,7 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
             0.0
         })
     };
-    let data = edge_data_from(lattice, fast, c, axis, up);
+    let data = edge_data_from(lattice, fast, c, up);
     if !unverified.get() {
         return Ok(data);
     }
@@ -1028,7 +1037,7 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
             0.0
         })
     };
-    let data = edge_data_from(lattice, value, c, axis, up);
+    let data = edge_data_from(lattice, value, c, up);
     match failed.into_inner() {
         Some(err) => Err(err),
         None => Ok(data),
@@ -1088,19 +1097,16 @@ fn ascending_unique(cells: &mut Vec<u32>, marks: &mut [u64]) {
     }
 }
 
-/// Interpolation data of the edge from node `c` to node `up` along `axis`.
+/// Interpolation data of the edge from node `c` to its neighbour `up`.
 pub(crate) fn edge_data_from(
     lattice: &Lattice,
     value: impl Fn(usize) -> f32 + Copy,
     c: [usize; 3],
-    axis: usize,
     up: [usize; 3],
 ) -> EdgeData {
     let g0 = node_gradient(lattice, value, c).as_vec3().to_array();
     let g1 = node_gradient(lattice, value, up).as_vec3().to_array();
     EdgeData {
-        node: c.map(|v| v as u32),
-        axis: axis as u8,
         s0: value(lattice.index(c[0], c[1], c[2])),
         s1: value(lattice.index(up[0], up[1], up[2])),
         g0,
