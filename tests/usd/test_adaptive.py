@@ -124,17 +124,25 @@ def test_cli_backend_gpu_applies_to_marching_correctors(cli, tmp_path):
     cpu.release()
 
 
+def _adaptive_stage_and_core(cli, tmp_path, option, value, keyword):
+    """Writes frame 26 with `isobar-usd sph --method adaptive option value`, checks the
+    stage holds the core's surface with `keyword=value`, and returns (that surface, the
+    core's default surface, the frames folder); the caller releases both surfaces."""
+    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
+    out = tmp_path / "adaptive.usd"
+    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", option, str(value),
+            "-o", out, "-q")
+    with isobar.Particles.read(str(FRAME_26)) as particles:
+        chosen, _ = isobar.extract_adaptive(particles, ISO, **{keyword: value}, **DAM)
+        default, _ = isobar.extract_adaptive(particles, ISO, **DAM)
+    assert_same_mesh(mesh_at(open_stage(out), 26), chosen, velocity=False)
+    return chosen, default, frames
+
+
 def test_cli_passes_max_error_to_the_core(cli, tmp_path):
     """`--max-error` reaches isobar.extract_adaptive: the stage holds the core's surface
     with that tolerance, and 0 (the splash criterion alone) differs from the default."""
-    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
-    out = tmp_path / "adaptive.usd"
-    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", "--max-error", "0",
-            "-o", out, "-q")
-    with isobar.Particles.read(str(FRAME_26)) as particles:
-        off, _ = isobar.extract_adaptive(particles, ISO, max_error=0.0, **DAM)
-        default, _ = isobar.extract_adaptive(particles, ISO, **DAM)
-    assert_same_mesh(mesh_at(open_stage(out), 26), off, velocity=False)
+    off, default, _ = _adaptive_stage_and_core(cli, tmp_path, "--max-error", 0.0, "max_error")
     assert off.n_triangles != default.n_triangles
     off.release()
     default.release()
@@ -144,14 +152,8 @@ def test_cli_passes_bisection_iterations_to_the_core(cli, tmp_path):
     """`--bisection-iterations` reaches isobar.extract_adaptive: the stage holds the core's
     surface with linear level-3 points at 0, whose points differ from the default's; 17 is
     refused with the core's message naming the parameter."""
-    frames = link_frames(tmp_path / "frames", {26: need(FRAME_26)})
-    out = tmp_path / "adaptive.usd"
-    run_cli(cli, "sph", frames / "frame_0026.vtk", *CLI_DAM, "--method", "adaptive", "--bisection-iterations", "0",
-            "-o", out, "-q")
-    with isobar.Particles.read(str(FRAME_26)) as particles:
-        linear, _ = isobar.extract_adaptive(particles, ISO, bisection_iterations=0, **DAM)
-        default, _ = isobar.extract_adaptive(particles, ISO, **DAM)
-    assert_same_mesh(mesh_at(open_stage(out), 26), linear, velocity=False)
+    linear, default, frames = _adaptive_stage_and_core(cli, tmp_path, "--bisection-iterations", 0,
+                                                       "bisection_iterations")
     assert not np.array_equal(np.sort(linear.points, axis=0), np.sort(default.points, axis=0))
     linear.release()
     default.release()

@@ -114,25 +114,29 @@ def test_adaptive_method_equals_the_cli_and_is_closed():
     assert any("one isovalue at a time" in m for m in errors.messages), errors.messages
 
 
+def adaptive_output_equal_to_the_cli(setting, value, option):
+    """The adaptive filter's output with `setting` = `value`, after checking it is the
+    CLI's surface with `option value` on the same frame and closed."""
+    import subprocess
+
+    f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE, **{setting: value})
+    f.Update()
+    assert f.GetErrorMessage() == "", f.GetErrorMessage()
+    ref_path = os.path.join(TMP, f"adaptive_{setting}_{value}.vtp")
+    subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
+                    "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR), option, str(value)],
+                   check=True, capture_output=True)
+    h.assert_same_surface(f.GetOutput(), h.read_vtp(ref_path), 1e-12, f"{setting} {value}")
+    assert h.open_edges(f.GetOutput()) == 0
+    return f.GetOutput()
+
+
 @test
 def test_adaptive_max_error_equals_the_cli_option():
     # The error criterion's tolerance reaches the core: each value gives the CLI's
     # surface with the same --max-error, and 0 (off) differs from the default.
-    import subprocess
-
-    cells = {}
-    for max_error in (0.0, 0.1):
-        f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE,
-                                MaxError=max_error)
-        f.Update()
-        assert f.GetErrorMessage() == "", f.GetErrorMessage()
-        ref_path = os.path.join(TMP, f"adaptive_max_error_{max_error}.vtp")
-        subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
-                        "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR),
-                        "--max-error", str(max_error)], check=True, capture_output=True)
-        h.assert_same_surface(f.GetOutput(), h.read_vtp(ref_path), 1e-12, f"max error {max_error}")
-        assert h.open_edges(f.GetOutput()) == 0
-        cells[max_error] = f.GetOutput().GetNumberOfCells()
+    cells = {e: adaptive_output_equal_to_the_cli("MaxError", e, "--max-error").GetNumberOfCells()
+             for e in (0.0, 0.1)}
     assert cells[0.1] > cells[0.0], cells
     assert vtkIsobarSPHIsosurface().GetMaxError() > 0
 
@@ -142,21 +146,10 @@ def test_adaptive_bisection_iterations_equal_the_cli_option():
     # The halvings reach the core: 0 and 2 each give the CLI's surface with the same
     # --bisection-iterations (and differ from each other); the default is the core's,
     # and values past 16 are clamped to what the core accepts.
-    import subprocess
-
     points = {}
     for n in (0, 2):
-        f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE,
-                                BisectionIterations=n)
-        f.Update()
-        assert f.GetErrorMessage() == "", f.GetErrorMessage()
-        ref_path = os.path.join(TMP, f"adaptive_bisection_{n}.vtp")
-        subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
-                        "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR),
-                        "--bisection-iterations", str(n)], check=True, capture_output=True)
-        h.assert_same_surface(f.GetOutput(), h.read_vtp(ref_path), 1e-12, f"bisection {n}")
-        assert h.open_edges(f.GetOutput()) == 0
-        points[n] = np.sort(vtk_to_numpy(f.GetOutput().GetPoints().GetData()), axis=0)
+        out = adaptive_output_equal_to_the_cli("BisectionIterations", n, "--bisection-iterations")
+        points[n] = np.sort(vtk_to_numpy(out.GetPoints().GetData()), axis=0)
     assert not np.array_equal(points[0], points[2]), "bisection_iterations did not reach the core"
     f = vtkIsobarSPHIsosurface()
     assert f.GetBisectionIterations() == 5

@@ -275,9 +275,10 @@ struct EdgeVertices {
 }
 
 impl EdgeVertices {
-    fn new(lattice: &Lattice) -> EdgeVertices {
+    /// Empty, over `lattice`, whose index-to-coordinates `coords` is (the store's).
+    fn new(lattice: &Lattice, coords: NodeCoords) -> EdgeVertices {
         EdgeVertices {
-            coords: NodeCoords::new(lattice),
+            coords,
             map: lattice_map(lattice),
         }
     }
@@ -380,7 +381,7 @@ impl Slider {
             .collect();
         let offsets = CellOffsets::new(store.lattice());
         let (he, hc) = (
-            EdgeVertices::new(store.lattice()),
+            EdgeVertices::new(store.lattice(), store.coords),
             lattice_map(store.lattice()),
         );
         let mut slider = Slider {
