@@ -3,7 +3,7 @@
 //! visited, so its size follows the surface, not the grid.
 
 use crate::field::sph::SphField;
-use crate::mc::bricks::BrickMap;
+use crate::mc::bricks::{brick_order, key_of_brick_order, BrickMap};
 use crate::mc::radix;
 use crate::mc::VirtualGrid;
 use rayon::prelude::*;
@@ -29,30 +29,37 @@ pub struct NodeCache {
 }
 
 impl NodeCache {
+    /// A cache for the nodes of `grid`, its bricks found by arithmetic when the index for
+    /// the whole grid (4 bytes per 512 nodes) stays within `index_bytes`, else by hashing.
+    pub fn for_grid(grid: &VirtualGrid, index_bytes: u64) -> Self {
+        NodeCache {
+            map: BrickMap::for_extent(grid.cells.map(|c| c + 1), index_bytes),
+            ..NodeCache::default()
+        }
+    }
+
     /// Makes sure the eight corners of every cell in `cells` are evaluated.
     pub fn ensure_corners(&mut self, field: &SphField, grid: &VirtualGrid, cells: &[u64]) {
         let map = &self.map;
+        // In brick order: neighbouring nodes are evaluated together (their particles are
+        // in cache) and each brick is then filled by one thread.
         let mut missing: Vec<u64> = cells
             .par_iter()
             .flat_map_iter(|&c| {
                 let present = map.present_corners(c);
                 (0..8)
                     .filter(move |k| present >> k & 1 == 0)
-                    .map(move |k| VirtualGrid::corner(c, k))
+                    .map(move |k| brick_order(VirtualGrid::corner(c, k)))
             })
             .collect();
-        // Sorted, neighbouring nodes are evaluated together (their particles are in
-        // cache) and stored brick by brick.
         radix::sort_unique(&mut missing);
         let samples: Vec<NodeSample> = missing
             .par_iter()
-            .map(|&n| field.value_and_weight(grid.node_position(n)))
+            .map(|&o| field.value_and_weight(grid.node_position(key_of_brick_order(o))))
             .collect();
         self.lookups += 8 * cells.len() as u64;
         self.evaluations += missing.len() as u64;
-        for (n, s) in missing.into_iter().zip(samples) {
-            self.map.insert(n, s);
-        }
+        self.map.insert_in_brick_order(&missing, &samples);
     }
 
     /// The eight corner samples of `cell`.

@@ -308,7 +308,7 @@ pub fn extract(
         virtual_cells: grid.cell_count(),
         ..Stats::default()
     };
-    let mut cache = NodeCache::default();
+    let mut cache = NodeCache::for_grid(&grid, tracking::index_bytes(params.memory_budget));
     let mut mesh = Mesh::default();
     let n = params.isovalues.len() as f64;
     progress.phase("seed cells", 0.0, 0.0)?;

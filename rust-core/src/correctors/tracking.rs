@@ -44,6 +44,13 @@ fn estimated_bytes(cache: &NodeCache, visited: &BrickSet, active: usize) -> u64 
     cache.bytes() + visited.bytes() + active as u64 * 240
 }
 
+/// The most a dense brick index (of the node cache or the visited set) may take: a
+/// small share of the memory budget, so that a grid too large for one falls back to
+/// hashing instead of allocating its index.
+pub fn index_bytes(memory_budget: u64) -> u64 {
+    memory_budget / 64
+}
+
 /// Walks the surface `iso` from `seeds` (sorted, unique), discarding cells below the
 /// node threshold of `params.trim` and stopping at `params.memory_budget`.
 pub fn track(
@@ -59,7 +66,10 @@ pub fn track(
     let memory_budget = params.memory_budget;
     let table = case_table();
     let mut out = Tracked::default();
-    let mut visited: BrickSet = seeds.iter().copied().collect();
+    let mut visited = BrickSet::for_extent(grid.cells, index_bytes(memory_budget));
+    for &s in &seeds {
+        visited.insert(s);
+    }
     let mut frontier = seeds;
     let mut is_seed_wave = true;
     while !frontier.is_empty() {
