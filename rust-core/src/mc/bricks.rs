@@ -127,7 +127,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// by arithmetic instead of hashing, at 4 bytes per brick of the box (1/128 byte per
     /// key). Inserting a key outside the box panics; looking one up finds nothing.
     pub fn within(extent: [u32; 3]) -> Self {
-        let bricks = extent.map(|n| (n as u64).div_ceil(EDGE as u64));
+        let bricks = Self::bricks_within(extent);
         let slots = vec![NO_BRICK; (bricks[0] * bricks[1] * bricks[2]) as usize];
         BrickMap::with_index(Index::Dense { bricks, slots })
     }
@@ -143,9 +143,14 @@ impl<T: Copy + Default> BrickMap<T> {
     }
 
     /// Bytes of [`BrickMap::within`]'s index for `extent`.
-    pub fn dense_index_bytes(extent: [u32; 3]) -> u64 {
-        let bricks = extent.map(|n| (n as u64).div_ceil(EDGE as u64));
-        4 * bricks[0] * bricks[1] * bricks[2]
+    fn dense_index_bytes(extent: [u32; 3]) -> u64 {
+        let [x, y, z] = Self::bricks_within(extent);
+        4 * x * y * z
+    }
+
+    /// Bricks along each axis of the box `extent`.
+    fn bricks_within(extent: [u32; 3]) -> [u64; 3] {
+        extent.map(|n| (n as u64).div_ceil(EDGE as u64))
     }
 
     /// Number of keys present.
@@ -314,15 +319,23 @@ impl<T: Copy + Default> BrickMap<T> {
             groups.push((i, start..end));
             start = end;
         }
-        let mut slots: Vec<Option<BrickMut<'_, T>>> = self
-            .meta
-            .iter_mut()
-            .zip(self.values.iter_mut())
-            .map(Some)
-            .collect();
-        let jobs: Vec<_> = groups
+        // Each group's brick borrowed mutably: in slot order, stepping the slice
+        // iterators (O(1) a step) over the bricks this batch does not touch, so the cost
+        // follows the batch, not the map.
+        groups.sort_unstable_by_key(|&(i, _)| i);
+        let (mut metas, mut boxes) = (self.meta.iter_mut(), self.values.iter_mut());
+        let mut next = 0;
+        let jobs: Vec<(BrickMut<'_, T>, std::ops::Range<usize>)> = groups
             .into_iter()
-            .map(|(i, range)| (slots[i as usize].take().expect("one group a brick"), range))
+            .map(|(i, range)| {
+                let skip = i as usize - next;
+                next = i as usize + 1;
+                let brick = (metas.nth(skip), boxes.nth(skip));
+                let (Some(meta), Some(values)) = brick else {
+                    unreachable!("brick {i} was just found or made")
+                };
+                ((meta, values), range)
+            })
             .collect();
         let added: usize = jobs
             .into_par_iter()
