@@ -1,68 +1,119 @@
-//! Sparse storage over virtual-grid keys in dense 8×8×8 bricks.
+//! Sparse storage over virtual-grid keys in dense bricks (8×8×8 unless a map chooses
+//! 4×4×4, see [`BrickShape`]).
 //!
 //! A surface touches a thin shell of nodes and cells; a hash table per key spreads that
 //! shell over memory, so every lookup is a cache miss and every growth a rehash of
 //! everything seen so far. Bricks keep neighbouring keys together: the brick table is
-//! small enough to stay in cache, a cell's eight corners lie in one brick seven times in
-//! eight, and a scan in key order walks one brick at a time (the last brick is
-//! remembered). Memory still follows the surface: only touched bricks exist.
+//! small enough to stay in cache, most of a cell's eight corners lie in one brick, and a
+//! scan in key order walks one brick at a time (the last brick is remembered). Memory
+//! still follows the surface: only touched bricks exist.
 
 use super::VirtualGrid;
 use crate::prefetch::prefetch;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-/// Keys per brick edge (a power of two).
-const EDGE: u32 = 8;
-const SHIFT: u32 = EDGE.trailing_zeros();
-const LOCAL: u32 = EDGE - 1;
-/// Keys per brick.
-pub(crate) const BRICK: usize = (EDGE * EDGE * EDGE) as usize;
-const WORDS: usize = BRICK / 64;
+/// The shape of a brick: 2^S keys along each axis, S from 1 to 3 (8³ bricks by default).
+/// Smaller bricks waste less where a surface crosses a brick at a slant (it fills about a
+/// fifth of an 8³ brick, half of a 4³ one); larger ones keep more of a cell's corners in
+/// one brick (343 cells in 512 against 27 in 64).
+pub struct BrickShape<const S: u32>;
 
-/// Brick key and index within the brick of a grid key.
-#[inline]
-fn split(key: u64) -> (u64, usize) {
-    let [x, y, z] = VirtualGrid::coords(key);
-    let brick = VirtualGrid::key(x >> SHIFT, y >> SHIFT, z >> SHIFT);
-    let local = (x & LOCAL) | (y & LOCAL) << SHIFT | (z & LOCAL) << (2 * SHIFT);
-    (brick, local as usize)
-}
+/// Presence words a brick holds, enough for the largest shape.
+const MAX_WORDS: usize = 8;
 
-/// Bits of a brick coordinate (grid coordinates have `AXIS_BITS` = 20).
-const BRICK_AXIS_BITS: u32 = 20 - SHIFT;
+impl<const S: u32> BrickShape<S> {
+    const VALID: () = assert!(S >= 1 && S <= 3, "bricks of 2³ to 8³ keys");
+    const LOCAL: u32 = (1 << S) - 1;
+    /// Keys per brick.
+    pub const KEYS: usize = 1 << (3 * S);
+    const WORDS: usize = Self::KEYS.div_ceil(64);
+    /// Bits of a brick coordinate (grid coordinates have `AXIS_BITS` = 20).
+    const BRICK_AXIS_BITS: u32 = 20 - S;
 
-/// A sort key placing grid keys brick by brick: (brick z, y, x, index in the brick), in
-/// 60 bits. [`BrickMap::insert_in_brick_order`] takes keys in this order.
-#[inline]
-pub fn brick_order(key: u64) -> u64 {
-    let [x, y, z] = VirtualGrid::coords(key).map(u64::from);
-    let brick =
-        (x >> SHIFT) | (y >> SHIFT) << BRICK_AXIS_BITS | (z >> SHIFT) << (2 * BRICK_AXIS_BITS);
-    let (_, local) = split(key);
-    brick << (3 * SHIFT) | local as u64
-}
+    /// Brick key and index within the brick of a grid key.
+    #[inline]
+    fn split(key: u64) -> (u64, usize) {
+        let [x, y, z] = VirtualGrid::coords(key);
+        let brick = VirtualGrid::key(x >> S, y >> S, z >> S);
+        (brick, Self::local(x, y, z))
+    }
 
-/// The grid key of a [`brick_order`] sort key.
-#[inline]
-pub fn key_of_brick_order(order: u64) -> u64 {
-    let local = (order & (BRICK as u64 - 1)) as u32;
-    let brick = order >> (3 * SHIFT);
-    let mask = (1u64 << BRICK_AXIS_BITS) - 1;
-    let b = [
-        brick & mask,
-        brick >> BRICK_AXIS_BITS & mask,
-        brick >> (2 * BRICK_AXIS_BITS),
-    ];
-    VirtualGrid::key(
-        (b[0] as u32) << SHIFT | (local & LOCAL),
-        (b[1] as u32) << SHIFT | (local >> SHIFT & LOCAL),
-        (b[2] as u32) << SHIFT | (local >> (2 * SHIFT)),
-    )
+    /// Index within its brick of the key at (x, y, z).
+    #[inline]
+    fn local(x: u32, y: u32, z: u32) -> usize {
+        let l = Self::LOCAL;
+        ((x & l) | (y & l) << S | (z & l) << (2 * S)) as usize
+    }
+
+    /// The grid key of index `local` in brick `brick`.
+    #[inline]
+    fn key(brick: u64, local: usize) -> u64 {
+        let [bx, by, bz] = VirtualGrid::coords(brick);
+        let (l, m) = (local as u32, Self::LOCAL);
+        VirtualGrid::key(
+            bx << S | (l & m),
+            by << S | (l >> S & m),
+            bz << S | (l >> (2 * S)),
+        )
+    }
+
+    /// A sort key placing grid keys brick by brick: (brick z, y, x, index in the brick),
+    /// in 60 bits. [`BrickMap::insert_in_brick_order`] takes keys in this order.
+    #[inline]
+    pub fn order(key: u64) -> u64 {
+        let [x, y, z] = VirtualGrid::coords(key);
+        let bits = Self::BRICK_AXIS_BITS;
+        let brick = u64::from(x >> S) | u64::from(y >> S) << bits | u64::from(z >> S) << (2 * bits);
+        brick << (3 * S) | Self::local(x, y, z) as u64
+    }
+
+    /// The grid key of an [`BrickShape::order`] sort key.
+    #[inline]
+    pub fn key_of_order(order: u64) -> u64 {
+        Self::key(Self::brick_of_order(order), Self::local_of_order(order))
+    }
+
+    /// The brick key of an [`BrickShape::order`] sort key.
+    #[inline]
+    fn brick_of_order(order: u64) -> u64 {
+        let brick = order >> (3 * S);
+        let mask = (1u64 << Self::BRICK_AXIS_BITS) - 1;
+        VirtualGrid::key(
+            (brick & mask) as u32,
+            (brick >> Self::BRICK_AXIS_BITS & mask) as u32,
+            (brick >> (2 * Self::BRICK_AXIS_BITS)) as u32,
+        )
+    }
+
+    /// The index in its brick of an [`BrickShape::order`] sort key.
+    #[inline]
+    fn local_of_order(order: u64) -> usize {
+        (order & (Self::KEYS as u64 - 1)) as usize
+    }
+
+    /// The brick holding all eight corners of `cell` and their indices in it, unless the
+    /// cell straddles a brick boundary.
+    #[inline]
+    fn corners_in_one_brick(cell: u64) -> Option<(u64, [usize; 8])> {
+        let [x, y, z] = VirtualGrid::coords(cell);
+        let l = Self::LOCAL;
+        if (x & l) == l || (y & l) == l || (z & l) == l {
+            return None;
+        }
+        let (brick, local) = Self::split(cell);
+        Some((
+            brick,
+            std::array::from_fn(|k| {
+                let [dx, dy, dz] = super::corner_offset(k);
+                local + (dx | dy << S | dz << (2 * S)) as usize
+            }),
+        ))
+    }
 }
 
 /// One brick's presence bits and values, borrowed to be filled by one thread.
-type BrickMut<'a, T> = (&'a mut Meta, &'a mut Box<[T; BRICK]>);
+type BrickMut<'a, T> = (&'a mut Meta, &'a mut Box<[T]>);
 
 /// What a brick holds besides its values: a presence bit per key, how many are present
 /// and its own key. Kept apart from the values (in [`BrickMap::meta`]) so that a lookup's
@@ -70,7 +121,7 @@ type BrickMut<'a, T> = (&'a mut Meta, &'a mut Box<[T; BRICK]>);
 /// slot, not a load of the brick and then of a boxed value array behind it.
 #[derive(Clone, Copy)]
 struct Meta {
-    present: [u64; WORDS],
+    present: [u64; MAX_WORDS],
     /// Keys present (0: the brick is free, on the map's free list).
     count: u32,
     /// The brick's own key (grid key divided by the brick edge), for iteration.
@@ -89,12 +140,12 @@ enum Index {
 const NO_BRICK: u32 = u32::MAX;
 
 /// A map from grid keys to `T`, stored brick by brick.
-pub struct BrickMap<T> {
+pub struct BrickMap<T, const S: u32 = 3> {
     index: Index,
     /// Brick `i`'s values. Boxed one by one so that growing the map never copies (or
     /// briefly doubles) what it holds; the pointers sit in one small array that stays
     /// in cache, so a lookup still goes from the slot straight to the value's line.
-    values: Vec<Box<[T; BRICK]>>,
+    values: Vec<Box<[T]>>,
     meta: Vec<Meta>,
     /// Bricks emptied by [`BrickMap::remove`], reused before new ones are allocated, so
     /// a map whose keys move (a sliding surface) holds the bricks of its widest extent,
@@ -105,14 +156,16 @@ pub struct BrickMap<T> {
     last: Option<(u64, u32)>,
 }
 
-impl<T: Copy + Default> Default for BrickMap<T> {
+impl<T: Copy + Default, const S: u32> Default for BrickMap<T, S> {
     fn default() -> Self {
         BrickMap::with_index(Index::Hashed(FxHashMap::default()))
     }
 }
 
-impl<T: Copy + Default> BrickMap<T> {
+impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     fn with_index(index: Index) -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = BrickShape::<S>::VALID;
         BrickMap {
             index,
             values: Vec::new(),
@@ -125,7 +178,8 @@ impl<T: Copy + Default> BrickMap<T> {
 
     /// A map for keys whose coordinates lie below `extent` (x, y, z), which finds bricks
     /// by arithmetic instead of hashing, at 4 bytes per brick of the box (1/128 byte per
-    /// key). Inserting a key outside the box panics; looking one up finds nothing.
+    /// key with 8³ bricks, 1/16 with 4³). Inserting a key outside the box panics; looking
+    /// one up finds nothing.
     pub fn within(extent: [u32; 3]) -> Self {
         let bricks = Self::bricks_within(extent);
         let slots = vec![NO_BRICK; (bricks[0] * bricks[1] * bricks[2]) as usize];
@@ -150,7 +204,7 @@ impl<T: Copy + Default> BrickMap<T> {
 
     /// Bricks along each axis of the box `extent`.
     fn bricks_within(extent: [u32; 3]) -> [u64; 3] {
-        extent.map(|n| (n as u64).div_ceil(EDGE as u64))
+        extent.map(|n| (n as u64).div_ceil(1 << S))
     }
 
     /// Number of keys present.
@@ -165,7 +219,7 @@ impl<T: Copy + Default> BrickMap<T> {
 
     /// Bytes held by the bricks (values and presence bits) and their index.
     pub fn bytes(&self) -> u64 {
-        let brick = std::mem::size_of::<[T; BRICK]>() + std::mem::size_of::<Meta>();
+        let brick = BrickShape::<S>::KEYS * std::mem::size_of::<T>() + std::mem::size_of::<Meta>();
         let index = match &self.index {
             Index::Hashed(map) => map.capacity() * 16,
             Index::Dense { slots, .. } => slots.len() * 4,
@@ -218,7 +272,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// with the work on the current one. Only a hint: no effect on the map.
     #[inline]
     pub fn prefetch(&self, key: u64) {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         if let Some(i) = self.brick_index(brick) {
             let i = i as usize;
             prefetch(&self.meta[i].present[local / 64]);
@@ -242,7 +296,7 @@ impl<T: Copy + Default> BrickMap<T> {
                 let s = Self::dense_slot(bricks, brick).unwrap_or_else(|| {
                     panic!(
                         "key {:?} outside the map's box",
-                        VirtualGrid::coords(brick).map(|c| c << SHIFT)
+                        VirtualGrid::coords(brick).map(|c| c << S)
                     )
                 });
                 if slots[s] == NO_BRICK {
@@ -255,9 +309,10 @@ impl<T: Copy + Default> BrickMap<T> {
             if self.free.pop().is_some() {
                 self.meta[i as usize].key = brick;
             } else {
-                self.values.push(Box::new([T::default(); BRICK]));
+                self.values
+                    .push(vec![T::default(); BrickShape::<S>::KEYS].into_boxed_slice());
                 self.meta.push(Meta {
-                    present: [0; WORDS],
+                    present: [0; MAX_WORDS],
                     count: 0,
                     key: brick,
                 });
@@ -270,7 +325,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// Removes `key`, returning its value; a brick left empty goes to the free list.
     #[inline]
     pub fn remove(&mut self, key: u64) -> Option<T> {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         let i = self.brick_index(brick)?;
         let m = &mut self.meta[i as usize];
         let word = &mut m.present[local / 64];
@@ -300,7 +355,7 @@ impl<T: Copy + Default> BrickMap<T> {
         Some(value)
     }
 
-    /// Sets each `orders[i]` ([`brick_order`] sort keys, ascending, none repeated) to
+    /// Sets each `orders[i]` ([`BrickShape::order`] sort keys, ascending, none repeated) to
     /// `values[i]`, the bricks in parallel: a big batch of new keys (a wavefront's node
     /// samples) is not held up by one thread walking them key by key.
     pub fn insert_in_brick_order(&mut self, orders: &[u64], values: &[T])
@@ -313,9 +368,9 @@ impl<T: Copy + Default> BrickMap<T> {
         let mut groups: Vec<(u32, std::ops::Range<usize>)> = Vec::new();
         let mut start = 0;
         while start < orders.len() {
-            let brick = orders[start] >> (3 * SHIFT);
-            let end = start + orders[start..].partition_point(|&o| o >> (3 * SHIFT) == brick);
-            let i = self.brick_index_or_insert(split(key_of_brick_order(orders[start])).0);
+            let brick = orders[start] >> (3 * S);
+            let end = start + orders[start..].partition_point(|&o| o >> (3 * S) == brick);
+            let i = self.brick_index_or_insert(BrickShape::<S>::brick_of_order(orders[start]));
             groups.push((i, start..end));
             start = end;
         }
@@ -342,7 +397,7 @@ impl<T: Copy + Default> BrickMap<T> {
             .map(|((meta, brick), range)| {
                 let mut added = 0;
                 for (&o, &v) in orders[range.clone()].iter().zip(&values[range]) {
-                    let local = (o & (BRICK as u64 - 1)) as usize;
+                    let local = BrickShape::<S>::local_of_order(o);
                     let word = &mut meta.present[local / 64];
                     let bit = 1u64 << (local % 64);
                     added += usize::from(*word & bit == 0);
@@ -359,7 +414,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// The value at `key`, if present, to change in place.
     #[inline]
     pub fn get_mut(&mut self, key: u64) -> Option<&mut T> {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         let i = self.brick_index(brick)? as usize;
         self.present(i, local).then(|| &mut self.values[i][local])
     }
@@ -368,7 +423,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// brick lookup either way).
     #[inline]
     pub fn get_or_insert(&mut self, key: u64, value: T) -> &mut T {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
         let word = &mut m.present[local / 64];
@@ -390,8 +445,8 @@ impl<T: Copy + Default> BrickMap<T> {
             .filter(|(_, m)| m.count > 0)
             .flat_map(|(i, m)| {
                 let values = &self.values[i];
-                let [bx, by, bz] = VirtualGrid::coords(m.key).map(|c| c << SHIFT);
-                (0..WORDS)
+                let brick = m.key;
+                (0..BrickShape::<S>::WORDS)
                     .flat_map(move |w| {
                         let mut bits = m.present[w];
                         std::iter::from_fn(move || {
@@ -403,12 +458,7 @@ impl<T: Copy + Default> BrickMap<T> {
                         })
                     })
                     .map(move |local| {
-                        let l = local as u32;
-                        let key = VirtualGrid::key(
-                            bx | (l & LOCAL),
-                            by | (l >> SHIFT & LOCAL),
-                            bz | (l >> (2 * SHIFT) & LOCAL),
-                        );
+                        let key = BrickShape::<S>::key(brick, local);
                         (key, values[local])
                     })
             })
@@ -417,7 +467,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// The value at `key`, if present.
     #[inline]
     pub fn get(&self, key: u64) -> Option<T> {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         let i = self.brick_index(brick)? as usize;
         self.present(i, local).then(|| self.values[i][local])
     }
@@ -425,7 +475,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// Whether `key` is present.
     #[inline]
     pub fn contains(&self, key: u64) -> bool {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         self.brick_index(brick)
             .is_some_and(|i| self.present(i as usize, local))
     }
@@ -433,7 +483,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// Sets `key` to `value`; returns true when the key was not present before.
     #[inline]
     pub fn insert(&mut self, key: u64, value: T) -> bool {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
         let word = &mut m.present[local / 64];
@@ -450,7 +500,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// does not straddle a brick boundary. Every corner must be present.
     #[inline]
     pub fn corners(&self, cell: u64) -> [T; 8] {
-        if let Some((brick, at)) = corners_in_one_brick(cell) {
+        if let Some((brick, at)) = BrickShape::<S>::corners_in_one_brick(cell) {
             if let Some(i) = self.brick_index(brick) {
                 let values = &self.values[i as usize];
                 return at.map(|a| values[a]);
@@ -466,7 +516,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// one brick lookup when the cell does not straddle a brick boundary.
     #[inline]
     pub fn corners_or(&self, cell: u64, absent: T) -> [T; 8] {
-        if let Some((brick, at)) = corners_in_one_brick(cell) {
+        if let Some((brick, at)) = BrickShape::<S>::corners_in_one_brick(cell) {
             let Some(i) = self.brick_index(brick) else {
                 return [absent; 8];
             };
@@ -494,7 +544,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// cell straddling one face cost two brick lookups, not eight.
     #[inline]
     fn get_near(&self, key: u64, found: &mut Option<(u64, Option<u32>)>) -> Option<T> {
-        let (brick, local) = split(key);
+        let (brick, local) = BrickShape::<S>::split(key);
         let i = match *found {
             Some((b, i)) if b == brick => i,
             _ => {
@@ -511,7 +561,7 @@ impl<T: Copy + Default> BrickMap<T> {
     /// does not straddle a brick boundary.
     #[inline]
     pub fn present_corners(&self, cell: u64) -> u8 {
-        if let Some((brick, at)) = corners_in_one_brick(cell) {
+        if let Some((brick, at)) = BrickShape::<S>::corners_in_one_brick(cell) {
             let Some(i) = self.brick_index(brick) else {
                 return 0;
             };
@@ -524,24 +574,6 @@ impl<T: Copy + Default> BrickMap<T> {
             mask | u8::from(self.contains(VirtualGrid::corner(cell, k))) << k
         })
     }
-}
-
-/// The brick holding all eight corners of `cell` and their indices in it, unless the
-/// cell straddles a brick boundary (one cell in eight along each axis).
-#[inline]
-fn corners_in_one_brick(cell: u64) -> Option<(u64, [usize; 8])> {
-    let [x, y, z] = VirtualGrid::coords(cell);
-    if (x & LOCAL) == LOCAL || (y & LOCAL) == LOCAL || (z & LOCAL) == LOCAL {
-        return None;
-    }
-    let (brick, local) = split(cell);
-    Some((
-        brick,
-        std::array::from_fn(|k| {
-            let [dx, dy, dz] = super::corner_offset(k);
-            local + (dx | dy << SHIFT | dz << (2 * SHIFT)) as usize
-        }),
-    ))
 }
 
 /// A set of grid keys, stored brick by brick.
@@ -593,9 +625,14 @@ mod tests {
 
     #[test]
     fn agrees_with_a_hash_map_across_brick_boundaries() {
+        agrees_with_a_hash_map_across_brick_boundaries_for::<2>();
+        agrees_with_a_hash_map_across_brick_boundaries_for::<3>();
+    }
+
+    fn agrees_with_a_hash_map_across_brick_boundaries_for<const S: u32>() {
         let mut next = crate::test_rng::lcg(7);
         let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
-        let mut map = BrickMap::<u64>::default();
+        let mut map = BrickMap::<u64, S>::default();
         let mut reference = HashMap::new();
         for _ in 0..20_000 {
             let key = VirtualGrid::key(rnd(40), rnd(40), rnd(40));
@@ -622,28 +659,39 @@ mod tests {
     /// at the largest coordinates too.
     #[test]
     fn inserts_in_brick_order_agree_with_single_inserts() {
+        inserts_in_brick_order_agree_with_single_inserts_for::<2>();
+        inserts_in_brick_order_agree_with_single_inserts_for::<3>();
+    }
+
+    fn inserts_in_brick_order_agree_with_single_inserts_for<const S: u32>() {
         let top = (1u32 << 20) - 1;
         for key in [
             VirtualGrid::key(top, 3, top),
             VirtualGrid::key(9, top, 17),
             0,
         ] {
-            assert_eq!(key_of_brick_order(brick_order(key)), key);
+            assert_eq!(
+                BrickShape::<S>::key_of_order(BrickShape::<S>::order(key)),
+                key
+            );
         }
         let mut next = crate::test_rng::lcg(11);
         let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
-        for mut batched in [BrickMap::<u64>::default(), BrickMap::within([40, 40, 40])] {
-            let mut single = BrickMap::<u64>::default();
+        for mut batched in [
+            BrickMap::<u64, S>::default(),
+            BrickMap::within([40, 40, 40]),
+        ] {
+            let mut single = BrickMap::<u64, S>::default();
             for batch in 0..6 {
                 let mut orders: Vec<u64> = (0..3_000)
-                    .map(|_| brick_order(VirtualGrid::key(rnd(40), rnd(40), rnd(40))))
+                    .map(|_| BrickShape::<S>::order(VirtualGrid::key(rnd(40), rnd(40), rnd(40))))
                     .collect();
                 orders.sort_unstable();
                 orders.dedup();
                 let values: Vec<u64> = orders.iter().map(|&o| o ^ batch).collect();
                 batched.insert_in_brick_order(&orders, &values);
                 for (&o, &v) in orders.iter().zip(&values) {
-                    single.insert(key_of_brick_order(o), v);
+                    single.insert(BrickShape::<S>::key_of_order(o), v);
                 }
                 assert_eq!(batched.len(), single.len());
             }
@@ -660,10 +708,15 @@ mod tests {
     /// entries, an emptied brick is reused, and `clear` empties it.
     #[test]
     fn remove_get_mut_iter_and_clear_agree_with_a_hash_map() {
+        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<2>();
+        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<3>();
+    }
+
+    fn remove_get_mut_iter_and_clear_agree_with_a_hash_map_for<const S: u32>() {
         const SIDE: u32 = 27;
         for mut map in [
-            BrickMap::<u64>::default(),
-            BrickMap::<u64>::within([SIDE, SIDE - 3, SIDE - 7]),
+            BrickMap::<u64, S>::default(),
+            BrickMap::<u64, S>::within([SIDE, SIDE - 3, SIDE - 7]),
         ] {
             let mut next = crate::test_rng::lcg(11);
             let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
@@ -722,10 +775,10 @@ mod tests {
             }
             // A brick emptied is reused for the next new brick, not added to.
             map.clear();
-            for x in 0..8 {
+            for x in 0..4 {
                 map.insert(VirtualGrid::key(x, 1, 2), x as u64);
             }
-            for x in 0..8 {
+            for x in 0..4 {
                 assert_eq!(map.remove(VirtualGrid::key(x, 1, 2)), Some(x as u64));
             }
             map.insert(VirtualGrid::key(17, 9, 9), 4);
@@ -745,7 +798,12 @@ mod tests {
 
     #[test]
     fn corners_match_single_lookups_inside_and_across_bricks() {
-        let mut map = BrickMap::<u64>::default();
+        corners_match_single_lookups_inside_and_across_bricks_for::<2>();
+        corners_match_single_lookups_inside_and_across_bricks_for::<3>();
+    }
+
+    fn corners_match_single_lookups_inside_and_across_bricks_for<const S: u32>() {
+        let mut map = BrickMap::<u64, S>::default();
         for x in 0..18 {
             for y in 0..18 {
                 for z in 0..18 {
@@ -773,8 +831,15 @@ mod tests {
 
     #[test]
     fn present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks() {
+        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<2>();
+        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<3>();
+    }
+
+    fn present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for<
+        const S: u32,
+    >() {
         // Every third key of a 20³ box, so corners are a mix of present and absent.
-        let mut map = BrickMap::<u8>::default();
+        let mut map = BrickMap::<u8, S>::default();
         for x in 0..20 {
             for y in 0..20 {
                 for z in 0..20 {

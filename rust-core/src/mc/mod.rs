@@ -236,13 +236,18 @@ pub fn triangulate(cells: &[ActiveCell], edges: &[u64]) -> Vec<[u32; 3]> {
     let table = case_table();
     // Each cut edge's vertex index, filed under the edge's lower node by axis: a cell
     // then reads all twelve of its edges with one brick lookup, where a binary search per
-    // triangle corner cost about as much as evaluating the cell's corners.
-    let mut at_node: BrickMap<[u32; 3]> = BrickMap::default();
+    // triangle corner cost about as much as evaluating the cell's corners. In 4³ bricks,
+    // which a surface fills about half of (a fifth of 8³ ones), found by arithmetic over
+    // the edges' box unless its index would take more than `INDEX_BYTES`.
+    const INDEX_BYTES: u64 = 64 << 20;
+    let extent = edges.iter().fold([0u32; 3], |top, &e| {
+        let c = VirtualGrid::coords(edge_node_axis(e).0);
+        std::array::from_fn(|a| top[a].max(c[a] + 1))
+    });
+    let mut at_node: BrickMap<[u32; 3], 2> = BrickMap::for_extent(extent, INDEX_BYTES);
     for (i, &e) in edges.iter().enumerate() {
         let (node, axis) = edge_node_axis(e);
-        let mut ids = at_node.get(node).unwrap_or([NONE; 3]);
-        ids[axis] = i as u32;
-        at_node.insert(node, ids);
+        at_node.get_or_insert(node, [NONE; 3])[axis] = i as u32;
     }
     cells
         .par_iter()
