@@ -275,7 +275,7 @@ def header(args, n: int, cfg: Settings, eval_setup_s: float, load: float) -> str
         f"r = {cfg.radius:g}, h = 2r = {2 * cfg.radius:g} (cubic spline, support 4r), "
         f"cell = {cfg.cube:g} r = {cfg.cube * cfg.radius:g}, iso = {cfg.iso:g}; "
         f"{os.cpu_count()} cores (1-min load average {load:.1f} at start); "
-        f"{versions(cfg.isobar)}; best of {args.repeat} run(s) per method."
+        f"{versions(cfg.isobar)}; best of {args.repeat} round(s) of every method."
     )
     evaluator = (
         f"Reference evaluator set-up (volumes of all particles): {eval_setup_s:.1f} s; "
@@ -305,7 +305,7 @@ def parse_args() -> argparse.Namespace:
         "--timeout", type=float, default=600.0, help="seconds per method run"
     )
     p.add_argument(
-        "--repeat", type=int, default=1, help="runs per method; the fastest counts"
+        "--repeat", type=int, default=1, help="rounds of every method; each method's fastest run counts"
     )
     p.add_argument(
         "--skip", nargs="*", default=[], choices=["isobar", "splashsurf", "vtk"]
@@ -316,13 +316,11 @@ def parse_args() -> argparse.Namespace:
     return p.parse_args()
 
 
-def best_of(repeat: int, run_once) -> Run:
-    """Runs a method `repeat` times: fastest times, largest peak RSS, first failure."""
-    runs = []
-    for _ in range(repeat):
-        runs.append(run_once())
-        if runs[-1].status != "ok":  # a crash or timeout will not get better: stop
-            return runs[-1]
+def best_of(runs: list[Run]) -> Run:
+    """One method's runs: fastest times, largest peak RSS; a failure if any failed."""
+    failed = [r for r in runs if r.status != "ok"]
+    if failed:
+        return failed[0]
     best = min(runs, key=lambda r: r.extract_s)
     best.wall_s = min(r.wall_s for r in runs)
     best.cpu_s = min(r.cpu_s for r in runs)
@@ -341,12 +339,23 @@ def jobs(args, cfg: Settings, particles_npy: Path):
 
 
 def run_all(args, cfg: Settings, particles_npy: Path) -> list[Run]:
-    runs = []
-    for label, job in jobs(args, cfg, particles_npy):
-        run = best_of(args.repeat, job)
-        print(f"{label}: {run.status}, {run.wall_s:.2f} s", file=sys.stderr, flush=True)
-        runs.append(run)
-    return runs
+    """Every method once a round, `--repeat` rounds, the best run of each method kept.
+
+    Rounds, not each method's runs back to back: a shared machine's speed drifts over
+    minutes (by up to 2x on the development machine), and methods run at different times
+    would each be timed in a different phase of it, which skews their ratios. A method
+    that failed (crash, timeout, refusal) is not run again: it would not get better.
+    """
+    methods = list(jobs(args, cfg, particles_npy))
+    runs: dict[str, list[Run]] = {label: [] for label, _ in methods}
+    for _ in range(args.repeat):
+        for label, job in methods:
+            if runs[label] and runs[label][-1].status != "ok":
+                continue
+            run = job()
+            runs[label].append(run)
+            print(f"{label}: {run.status}, {run.wall_s:.2f} s", file=sys.stderr, flush=True)
+    return [best_of(runs[label]) for label, _ in methods]
 
 
 def main() -> None:
