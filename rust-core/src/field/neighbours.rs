@@ -135,7 +135,7 @@ impl NeighbourGrid {
     #[inline]
     fn cell_block(&self, first: [i64; 3], last: [i64; 3]) -> CandidateRanges<'_> {
         let mut lo = [0usize; 3];
-        let mut hi = [0usize; 3];
+        let mut n = [0usize; 3];
         for a in 0..3 {
             let d = self.dims[a] as i64;
             let (l, h) = (first[a].max(0), last[a].min(d - 1));
@@ -143,14 +143,18 @@ impl NeighbourGrid {
                 return CandidateRanges::empty(self);
             }
             lo[a] = l as usize;
-            hi[a] = h as usize;
+            n[a] = (h - l) as usize + 1;
         }
+        let y_step = self.dims[0];
         CandidateRanges {
-            grid: self,
-            x: (lo[0], hi[0]),
-            y: (lo[1], hi[1]),
-            z_end: hi[2] + 1,
-            row: (lo[1], lo[2]),
+            offsets: &self.offsets,
+            row: self.linear(lo[0], lo[1], lo[2]),
+            width: n[0],
+            rows_per_slice: n[1],
+            left_in_slice: n[1],
+            left: n[1] * n[2],
+            y_step,
+            z_step: y_step * self.dims[1] - y_step * (n[1] - 1),
         }
     }
 
@@ -161,26 +165,37 @@ impl NeighbourGrid {
     }
 }
 
-/// The slot ranges of one neighbour query (see [`NeighbourGrid::candidate_ranges`]).
+/// The slot ranges of one neighbour query (see [`NeighbourGrid::candidate_ranges`]): the
+/// block's rows one after the other, each found by adding a stride to the last, so a row
+/// costs two offset loads, not two cell indices computed from coordinates.
 pub struct CandidateRanges<'a> {
-    grid: &'a NeighbourGrid,
-    /// First and last cell along x, the same for every row.
-    x: (usize, usize),
-    /// First and last row along y.
-    y: (usize, usize),
-    z_end: usize,
-    /// The next row's (y, z).
-    row: (usize, usize),
+    offsets: &'a [u32],
+    /// Linear index of the next row's first cell.
+    row: usize,
+    /// Cells in a row.
+    width: usize,
+    /// Rows in a z-slice of the block, and rows left in the current slice.
+    rows_per_slice: usize,
+    left_in_slice: usize,
+    /// Rows left in the block.
+    left: usize,
+    /// From a row to the next in its slice, and from a slice's last row to the next
+    /// slice's first.
+    y_step: usize,
+    z_step: usize,
 }
 
 impl<'a> CandidateRanges<'a> {
     fn empty(grid: &'a NeighbourGrid) -> Self {
         CandidateRanges {
-            grid,
-            x: (0, 0),
-            y: (0, 0),
-            z_end: 0,
-            row: (0, 0),
+            offsets: &grid.offsets,
+            row: 0,
+            width: 0,
+            rows_per_slice: 0,
+            left_in_slice: 0,
+            left: 0,
+            y_step: 0,
+            z_step: 0,
         }
     }
 }
@@ -190,16 +205,18 @@ impl Iterator for CandidateRanges<'_> {
 
     #[inline]
     fn next(&mut self) -> Option<Range<usize>> {
-        while self.row.1 < self.z_end {
-            let (y, z) = self.row;
-            self.row = if y < self.y.1 {
-                (y + 1, z)
+        while self.left > 0 {
+            self.left -= 1;
+            let row = self.row;
+            self.left_in_slice -= 1;
+            if self.left_in_slice == 0 {
+                self.left_in_slice = self.rows_per_slice;
+                self.row += self.z_step;
             } else {
-                (self.y.0, z + 1)
-            };
-            let g = self.grid;
-            let start = g.offsets[g.linear(self.x.0, y, z)] as usize;
-            let end = g.offsets[g.linear(self.x.1, y, z) + 1] as usize;
+                self.row += self.y_step;
+            }
+            let start = self.offsets[row] as usize;
+            let end = self.offsets[row + self.width] as usize;
             if start < end {
                 return Some(start..end);
             }
