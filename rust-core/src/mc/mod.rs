@@ -237,7 +237,7 @@ pub fn triangulate(cells: &[ActiveCell], edges: &[u64]) -> Vec<[u32; 3]> {
     // Each cut edge's vertex index, filed under the edge's lower node by axis: a cell
     // then reads all twelve of its edges with one brick lookup, where a binary search per
     // triangle corner cost about as much as evaluating the cell's corners. In 4³ bricks,
-    // which a surface fills about half of (a fifth of 8³ ones), found by arithmetic over
+    // which a surface fills about a third of (a fifth of 8³ ones), found by arithmetic over
     // the edges' box unless its index would take more than `INDEX_BYTES`.
     const INDEX_BYTES: u64 = 64 << 20;
     let extent = edges.iter().fold([0u32; 3], |top, &e| {
