@@ -185,7 +185,10 @@ pub struct Stats {
     /// Every SPH evaluation: grid nodes, corrections, cut points, attributes.
     pub field_evaluations: u64,
     pub node_lookups: u64,
+    /// Nodes evaluated: the missing ones and the rest of their rows of four along x,
+    /// which cost little more (`SphField::values_on_row`) and are read later or never.
     pub node_evaluations: u64,
+    /// 1 − node evaluations / node lookups.
     pub cache_hit_ratio: f64,
     /// Largest number of nodes the cache held.
     pub cached_nodes: u64,

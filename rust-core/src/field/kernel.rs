@@ -118,6 +118,43 @@ impl Kernel {
         }
     }
 
+    /// (f(q), f'(q)) for 0 <= q < support factor, equal to the bit to `shape(q)` there,
+    /// computed without branches (each piece evaluated, one selected) so that a loop over
+    /// several q at once compiles to vector instructions. Beyond the support the result
+    /// is meaningless: callers mask it.
+    #[inline(always)]
+    pub(crate) fn shape_in_support(self, q: f64) -> (f64, f64) {
+        match self {
+            Kernel::CubicSpline => {
+                let inner = (1.0 - 1.5 * q * q + 0.75 * q * q * q, q * (-3.0 + 2.25 * q));
+                let a = 2.0 - q;
+                let outer = (0.25 * a * a * a, -0.75 * a * a);
+                if q < 1.0 {
+                    inner
+                } else {
+                    outer
+                }
+            }
+            Kernel::WendlandC2 => {
+                let a = 1.0 - 0.5 * q;
+                let a3 = a * a * a;
+                (a3 * a * (2.0 * q + 1.0), -5.0 * q * a3)
+            }
+            Kernel::QuinticSpline => {
+                // A piece past its edge adds coef · 0 = ±0, which leaves each sum as it is.
+                let (mut f, mut d) = (0.0, 0.0);
+                for (edge, coef) in [(3.0, 1.0), (2.0, -6.0), (1.0, 15.0)] {
+                    let a: f64 = (edge - q).max(0.0);
+                    let a4 = a * a * a * a;
+                    f += coef * a4 * a;
+                    d -= 5.0 * coef * a4;
+                }
+                (f, d)
+            }
+            Kernel::Quadratic => (0.25 * q * q - q + 1.0, 0.5 * q - 1.0),
+        }
+    }
+
     /// W(r, h).
     #[inline(always)]
     pub fn value(self, r: f64, h: f64) -> f64 {
@@ -212,6 +249,41 @@ mod tests {
                 worst > k.linear_crossing_error() - 0.005,
                 "{k:?}: bound {worst} is loose"
             );
+        }
+    }
+
+    #[test]
+    fn the_branch_free_shape_equals_the_shape_to_the_bit_within_the_support() {
+        for k in Kernel::ALL {
+            let support = k.support_factor();
+            for i in 0..20_000 {
+                let q = support * i as f64 / 20_000.0;
+                let (f, d) = k.shape(q);
+                let (g, e) = k.shape_in_support(q);
+                assert_eq!(
+                    (f.to_bits(), d.to_bits()),
+                    (g.to_bits(), e.to_bits()),
+                    "{k:?} q={q}"
+                );
+            }
+            // The pieces' edges themselves.
+            for q in [
+                0.0,
+                1.0,
+                2.0f64.next_down(),
+                1.0f64.next_down(),
+                1.0f64.next_up(),
+            ] {
+                if q < support {
+                    let (f, d) = k.shape(q);
+                    let (g, e) = k.shape_in_support(q);
+                    assert_eq!(
+                        (f.to_bits(), d.to_bits()),
+                        (g.to_bits(), e.to_bits()),
+                        "{k:?} q={q}"
+                    );
+                }
+            }
         }
     }
 

@@ -356,8 +356,9 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
 
     /// Sets each `orders[i]` ([`BrickShape::order`] sort keys, ascending, none repeated) to
     /// `values[i]`, the bricks in parallel: a big batch of new keys (a wavefront's node
-    /// samples) is not held up by one thread walking them key by key.
-    pub fn insert_in_brick_order(&mut self, orders: &[u64], values: &[T])
+    /// samples) is not held up by one thread walking them key by key. Returns how many
+    /// keys were new.
+    pub fn insert_in_brick_order(&mut self, orders: &[u64], values: &[T]) -> usize
     where
         T: Send + Sync,
     {
@@ -408,6 +409,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             })
             .sum();
         self.len += added;
+        added
     }
 
     /// The value at `key`, if present, to change in place.

@@ -1,6 +1,7 @@
 //! The field at every node of a lattice, tile by tile: what the full-grid baseline asks
-//! for. (Surface tracking's node cache stays node by node: its wavefronts touch about 15
-//! nodes of a tile at a time, too few to pay for a tile's set-up.)
+//! for. (Surface tracking's node cache takes rows of four nodes instead,
+//! [`SphField::values_on_row`]: its wavefronts touch about 15 nodes of a tile at a time,
+//! too few to pay for a tile's set-up.)
 //!
 //! Evaluating node by node, each node scans its whole candidate block of particles and
 //! keeps about one in four (the support sphere fills a quarter of the block). Here the
