@@ -52,24 +52,22 @@ impl NodeCache {
     /// Makes sure the eight corners of every cell in `cells` are evaluated.
     pub fn ensure_corners(&mut self, field: &SphField, grid: &VirtualGrid, cells: &[u64]) {
         let map = &self.map;
-        // In brick order: neighbouring nodes are evaluated together (their particles are
-        // in cache) and each brick is then filled by one thread.
-        let mut missing: Vec<u64> = cells
+        // Each missing node's whole row of `ROW` nodes along x (a row's nodes differ in
+        // the low bits of their brick order): the row shares one neighbour scan and has
+        // no branch per node, so it costs little more than its one missing node, and
+        // three in four of a row's nodes are read sooner or later (demo frame). In brick
+        // order: neighbouring rows are evaluated together (their particles are in cache)
+        // and each brick is then filled by one thread.
+        let mut rows: Vec<u64> = cells
             .par_iter()
             .flat_map_iter(|&c| {
                 let present = map.present_corners(c);
                 (0..8)
                     .filter(move |k| present >> k & 1 == 0)
-                    .map(move |k| Shape::order(VirtualGrid::corner(c, k)))
+                    .map(move |k| Shape::order(VirtualGrid::corner(c, k)) >> ROW_BITS)
             })
             .collect();
-        radix::sort_unique(&mut missing);
-        // Whole rows of `ROW` nodes along x (a row's nodes differ in the low bits of
-        // their brick order): the row shares one neighbour scan and its lanes run as
-        // vector instructions, so the row costs little more than its one missing node,
-        // and three in four of a row's nodes are read sooner or later (demo frame).
-        let mut rows: Vec<u64> = missing.iter().map(|&o| o >> ROW_BITS).collect();
-        rows.dedup();
+        radix::sort_unique(&mut rows);
         let last = grid.cells;
         let (orders, samples): (Vec<u64>, Vec<NodeSample>) = rows
             .par_iter()

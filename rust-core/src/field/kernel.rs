@@ -72,56 +72,21 @@ impl Kernel {
         }
     }
 
-    /// Shape f(q) and its derivative f'(q), without normalisation, for q = r/h >= 0.
+    /// Shape f(q) and its derivative f'(q), without normalisation, for q = r/h >= 0;
+    /// zero from the support on.
     #[inline(always)]
     pub(crate) fn shape(self, q: f64) -> (f64, f64) {
-        match self {
-            Kernel::CubicSpline => {
-                if q < 1.0 {
-                    (1.0 - 1.5 * q * q + 0.75 * q * q * q, q * (-3.0 + 2.25 * q))
-                } else if q < 2.0 {
-                    let a = 2.0 - q;
-                    (0.25 * a * a * a, -0.75 * a * a)
-                } else {
-                    (0.0, 0.0)
-                }
-            }
-            Kernel::WendlandC2 => {
-                if q < 2.0 {
-                    let a = 1.0 - 0.5 * q;
-                    let a3 = a * a * a;
-                    (a3 * a * (2.0 * q + 1.0), -5.0 * q * a3)
-                } else {
-                    (0.0, 0.0)
-                }
-            }
-            Kernel::QuinticSpline => {
-                let mut f = 0.0;
-                let mut d = 0.0;
-                for (edge, coef) in [(3.0, 1.0), (2.0, -6.0), (1.0, 15.0)] {
-                    if q < edge {
-                        let a: f64 = edge - q;
-                        let a4 = a * a * a * a;
-                        f += coef * a4 * a;
-                        d -= 5.0 * coef * a4;
-                    }
-                }
-                (f, d)
-            }
-            Kernel::Quadratic => {
-                if q < 2.0 {
-                    (0.25 * q * q - q + 1.0, 0.5 * q - 1.0)
-                } else {
-                    (0.0, 0.0)
-                }
-            }
+        if q < self.support_factor() {
+            self.shape_in_support(q)
+        } else {
+            (0.0, 0.0)
         }
     }
 
-    /// (f(q), f'(q)) for 0 <= q < support factor, equal to the bit to `shape(q)` there,
-    /// computed without branches (each piece evaluated, one selected) so that a loop over
-    /// several q at once compiles to vector instructions. Beyond the support the result
-    /// is meaningless: callers mask it.
+    /// (f(q), f'(q)) for 0 <= q < support factor, every piece evaluated and one selected
+    /// (a past piece of the quintic contributes coef · 0): no branch on q, which in the
+    /// SPH sums falls on either side of a piece's edge at random. Beyond the support the
+    /// result is meaningless: [`Kernel::shape`] and the row lanes mask it.
     #[inline(always)]
     pub(crate) fn shape_in_support(self, q: f64) -> (f64, f64) {
         match self {
@@ -141,7 +106,6 @@ impl Kernel {
                 (a3 * a * (2.0 * q + 1.0), -5.0 * q * a3)
             }
             Kernel::QuinticSpline => {
-                // A piece past its edge adds coef · 0 = ±0, which leaves each sum as it is.
                 let (mut f, mut d) = (0.0, 0.0);
                 for (edge, coef) in [(3.0, 1.0), (2.0, -6.0), (1.0, 15.0)] {
                     let a: f64 = (edge - q).max(0.0);
@@ -249,41 +213,6 @@ mod tests {
                 worst > k.linear_crossing_error() - 0.005,
                 "{k:?}: bound {worst} is loose"
             );
-        }
-    }
-
-    #[test]
-    fn the_branch_free_shape_equals_the_shape_to_the_bit_within_the_support() {
-        for k in Kernel::ALL {
-            let support = k.support_factor();
-            for i in 0..20_000 {
-                let q = support * i as f64 / 20_000.0;
-                let (f, d) = k.shape(q);
-                let (g, e) = k.shape_in_support(q);
-                assert_eq!(
-                    (f.to_bits(), d.to_bits()),
-                    (g.to_bits(), e.to_bits()),
-                    "{k:?} q={q}"
-                );
-            }
-            // The pieces' edges themselves.
-            for q in [
-                0.0,
-                1.0,
-                2.0f64.next_down(),
-                1.0f64.next_down(),
-                1.0f64.next_up(),
-            ] {
-                if q < support {
-                    let (f, d) = k.shape(q);
-                    let (g, e) = k.shape_in_support(q);
-                    assert_eq!(
-                        (f.to_bits(), d.to_bits()),
-                        (g.to_bits(), e.to_bits()),
-                        "{k:?} q={q}"
-                    );
-                }
-            }
         }
     }
 

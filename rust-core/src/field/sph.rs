@@ -510,12 +510,6 @@ impl SphField {
         if UNIT {
             (a, ga) = (s, gs);
         }
-        self.finish_sample(a, ga, s, gs)
-    }
-
-    /// The sample from its sums: Σ V_j A_j W, its gradient, S and its gradient.
-    #[inline(always)]
-    fn finish_sample(&self, mut a: f64, mut ga: DVec3, s: f64, gs: DVec3) -> Sample {
         if self.shepard {
             if s > 0.0 {
                 let v = a / s;
