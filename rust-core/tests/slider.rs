@@ -369,6 +369,54 @@ fn same_store_bytes_for_any_thread_count() {
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
 }
 
+/// Large changes re-triangulate their cells and interpolate their edges on several
+/// threads: the arrays a host reads are the same, in the same order, as on one thread,
+/// and the surface is marching cubes' at every step.
+#[test]
+fn large_updates_give_the_same_arrays_on_any_thread_count() {
+    let volume = blobs([64, 60, 56], 0.3);
+    let path = store_of(
+        &volume,
+        "threads.isoslider",
+        BuildParams::default().threshold,
+    );
+    let (lo, hi) = volume.range();
+    let isos: Vec<f64> = [0.45, 0.5, 0.3, 0.9, 0.31, 0.0, 0.45]
+        .iter()
+        .map(|f| lo as f64 + f * (hi - lo) as f64)
+        .collect();
+    let slide = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut s = Slider::open(&path).unwrap();
+            let mut most = 0;
+            let steps: Vec<(Raw, Canon)> = isos
+                .iter()
+                .map(|&iso| {
+                    let c = s.set_isovalue(iso).unwrap();
+                    most = most.max(c.added_triangles.len() + c.removed_triangles.len());
+                    (raw(&s), slider_canon(&s))
+                })
+                .collect();
+            (steps, most)
+        })
+    };
+    let (one, most) = slide(1);
+    let (four, _) = slide(4);
+    // A cell adds and removes at most 5 triangles each: this many changed triangles
+    // means over 4,000 changed cells, past the size where the update goes parallel.
+    assert!(
+        most > 40_000,
+        "changes too small to run in parallel: {most}"
+    );
+    for ((iso, (a, ca)), (b, _)) in isos.iter().zip(&one).zip(&four) {
+        assert!(a == b, "at {iso}: arrays differ between 1 and 4 threads");
+        assert_same(ca, &reference_canon(&volume, *iso).0, &format!("at {iso}"));
+    }
+}
 #[test]
 fn damaged_or_foreign_stores_are_refused_clearly() {
     let volume = blobs([10, 9, 8], 0.1);

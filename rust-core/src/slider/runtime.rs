@@ -10,6 +10,9 @@
 //! collecting the net edge changes; removed edges leave holes that added edges fill,
 //! leftovers are compacted from the end; only cells around changed edges are
 //! re-triangulated, cells around moved vertices get their indices rewritten in place.
+//! What only reads (added edges' interpolation data, dirty cells' cases and triangles) is
+//! computed on all threads first; what writes the shared lists runs in order on one, so
+//! the arrays are the same for any thread count.
 //!
 //! An update costs what changed, not the surface: the full arrays (every vertex moves
 //! when the isovalue does, so V and N are O(surface); I is gathered from the buckets)
@@ -36,7 +39,7 @@ use std::time::Instant;
 /// What one interpolated vertex is computed from besides its edge (which the caller
 /// keeps): the two end values and the node gradients (f32, as normals only need f32).
 /// 32 bytes: one per vertex of the surface is held.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct EdgeData {
     pub(crate) s0: f32,
     pub(crate) s1: f32,
@@ -196,6 +199,12 @@ struct Scratch {
     holes: Vec<u32>,
     reindex: Vec<u32>,
     tris: Vec<[u32; 3]>,
+    /// Interpolation data of each added edge, computed in parallel before the edges go in.
+    added_data: Vec<EdgeData>,
+    /// Each dirty cell's new case and triangle count, and its triangles in as many slots
+    /// as a case has at most, computed in parallel before the cells go in.
+    dirty_cases: Vec<(u8, u8)>,
+    dirty_tris: Vec<[u32; 3]>,
 }
 
 /// Index steps from a cell (its lower corner's node index) to its eight corners and, in
@@ -707,10 +716,17 @@ impl Slider {
     }
 
     fn corrupt(&self, what: String) -> Error {
-        Error::format(
-            self.store.path(),
-            format!("the store's edge lists are inconsistent ({what}); rebuild it"),
-        )
+        inconsistent(&self.store, what)
+    }
+
+    /// What re-triangulating cells reads, shareable across threads.
+    fn cells_reader(&self) -> CellReader<'_> {
+        CellReader {
+            store: &self.store,
+            he: &self.he,
+            offsets: &self.offsets,
+            iso: self.iso,
+        }
     }
 
     /// Applies the net edge changes: cells first out, edges out (holes), edges in (filling
@@ -739,6 +755,9 @@ impl Slider {
             holes,
             reindex,
             tris,
+            added_data,
+            dirty_cases,
+            dirty_tris,
             ..
         } = scratch;
         for v in [
@@ -799,18 +818,23 @@ impl Slider {
             self.edges[v as usize] = u32::MAX;
             holes.push(v);
         }
-        // ... that edges in fill first.
+        // ... that edges in fill first. What they interpolate from only reads the store:
+        // computed for all of them first, in parallel.
+        added_data.clear();
+        added_data.resize(added.len(), EdgeData::default());
+        if added.len() < PARALLEL_MIN {
+            edges_data(&self.store, added, added_data)?;
+        } else {
+            (added
+                .par_chunks(CHUNK)
+                .zip(added_data.par_chunks_mut(CHUNK)))
+            .try_for_each(|(e, d)| edges_data(&self.store, e, d))?;
+        }
         holes.sort_unstable_by(|a, b| b.cmp(a));
-        for (k, &e) in added.iter().enumerate() {
+        for (k, (&e, &data)) in added.iter().zip(added_data.iter()).enumerate() {
             if let Some(&next) = added.get(k + AHEAD) {
                 self.he.prefetch(next);
-                self.prefetch_edge_data(next);
             }
-            let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-            if node >= self.store.nodes || coords.coords(node)[axis] + 1 >= lattice.dims[axis] {
-                return Err(self.corrupt(format!("edge {e} is not a lattice edge")));
-            }
-            let data = self.edge_data(e)?;
             // Holes are taken from the end of `holes`: the one AHEAD later is written then.
             if let Some(&h) = holes.len().checked_sub(AHEAD + 1).map(|i| &holes[i]) {
                 prefetch(&self.data[h as usize]);
@@ -849,68 +873,54 @@ impl Slider {
         }
         ascending_unique(reindex, marks);
         // One scratch list for every cell's triangles, not an allocation per cell.
+        let most = self.buckets.len() - 1;
+        tris.resize(most, [0; 3]);
         for &cell in reindex.iter() {
             let key = grid_key(coords, cell as usize);
             if let Some(entry) = self.hc.get(key) {
-                self.cell_triangles(cell, key, entry.case, tris)?;
+                let n = (self.cells_reader()).triangles(cell, key, entry.case, tris)?;
                 let b = &mut self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
-                b.triangles[s..s + b.size].copy_from_slice(tris);
+                b.triangles[s..s + b.size].copy_from_slice(&tris[..n]);
             }
         }
-        // Cells around changed edges come back with their new case.
-        for (k, &cell) in dirty.iter().enumerate() {
+        // Cells around changed edges come back with their new case. Cases and triangles
+        // only read the store and HE (final by now): computed first, in parallel; then
+        // the cells go into the buckets and HC in ascending order, one thread.
+        dirty_cases.clear();
+        dirty_cases.resize(dirty.len(), (0, 0));
+        dirty_tris.clear();
+        dirty_tris.resize(dirty.len() * most, [0; 3]);
+        let reader = self.cells_reader();
+        if dirty.len() < PARALLEL_MIN {
+            reader.retriangulate(dirty, dirty_cases, dirty_tris)?;
+        } else {
+            (dirty
+                .par_chunks(CHUNK)
+                .zip(dirty_cases.par_chunks_mut(CHUNK)))
+            .zip(dirty_tris.par_chunks_mut(CHUNK * most))
+            .try_for_each(|((cells, cases), t)| reader.retriangulate(cells, cases, t))?;
+        }
+        for (k, (&cell, &(case, n))) in dirty.iter().zip(dirty_cases.iter()).enumerate() {
             if let Some(&next) = dirty.get(k + AHEAD) {
-                self.prefetch_cell(next);
+                self.hc.prefetch(grid_key(coords, next as usize));
             }
-            let case = self.case_of(cell)?;
-            if case == 0 || case == 255 {
+            if n == 0 {
                 continue;
             }
-            let key = grid_key(coords, cell as usize);
-            self.cell_triangles(cell, key, case, tris)?;
-            push_each(&mut change.added_triangles, tris);
-            let b = &mut self.buckets[tris.len()];
-            push_each(&mut b.triangles, tris);
+            let t = &dirty_tris[k * most..k * most + n as usize];
+            push_each(&mut change.added_triangles, t);
+            let b = &mut self.buckets[n as usize];
+            push_each(&mut b.triangles, t);
             b.cells.push(cell);
             let entry = CellEntry {
                 case,
-                bucket: tris.len() as u8,
+                bucket: n,
                 slot: (b.cells.len() - 1) as u32,
             };
-            self.hc.insert(key, entry);
+            self.hc.insert(grid_key(coords, cell as usize), entry);
         }
         Ok(())
-    }
-
-    /// Starts loading what re-triangulating `cell` reads: its corner values (four
-    /// lines: the x pairs share one), its edges' vertices in HE and its entry in HC.
-    #[inline]
-    fn prefetch_cell(&self, cell: u32) {
-        let lattice = self.store.lattice();
-        let (cell, y, z) = (cell as usize, lattice.stride(1), lattice.stride(2));
-        for node in [cell, cell + y, cell + z, cell + y + z] {
-            self.store.prefetch_value(node);
-            self.he.map.prefetch(grid_key(self.store.coords, node));
-        }
-        self.hc.prefetch(grid_key(self.store.coords, cell));
-    }
-
-    /// Starts loading the values [`store_edge_data`] reads for edge `e`: its two nodes
-    /// and their neighbours across the other axes (central differences).
-    #[inline]
-    fn prefetch_edge_data(&self, e: u32) {
-        let lattice = self.store.lattice();
-        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-        let up = node + lattice.stride(axis);
-        for n in [node, up] {
-            for a in 1..3 {
-                let s = lattice.stride(a);
-                self.store.prefetch_value(n.saturating_sub(s));
-                self.store.prefetch_value(n + s);
-            }
-            self.store.prefetch_value(n);
-        }
     }
 
     /// Removes a cell's triangles, filling the hole with the bucket's last cell.
@@ -929,6 +939,90 @@ impl Slider {
         }
         b.cells.pop();
         b.triangles.truncate(last * b.size);
+    }
+
+    /// Computes V and N from E into `out`, reusing its memory.
+    fn compute_vertices(&self, out: &mut Vertices) {
+        let lattice = *self.store.lattice();
+        let coords = self.store.coords;
+        let iso = self.iso;
+        let n = self.data.len();
+        out.positions.resize(n, [0.0; 3]);
+        out.normals.resize(n, [0.0; 3]);
+        out.positions
+            .par_iter_mut()
+            .zip(out.normals.par_iter_mut())
+            .zip(self.data.par_iter().zip(self.edges.par_iter()))
+            .with_min_len(4096)
+            .for_each(|((p, nrm), (d, &e))| {
+                let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+                let (q, m) = d.vertex(&lattice, coords.coords(node), axis, iso);
+                *p = q.as_vec3().to_array();
+                *nrm = m;
+            });
+    }
+}
+
+/// The error for a store whose edge lists contradict themselves or the lattice.
+fn inconsistent(store: &Store, what: String) -> Error {
+    Error::format(
+        store.path(),
+        format!("the store's edge lists are inconsistent ({what}); rebuild it"),
+    )
+}
+
+/// Below this many items an update's parallel phases run on the calling thread: waking
+/// rayon's workers costs more than a few hundred cells' work.
+const PARALLEL_MIN: usize = 1024;
+/// Items per parallel task.
+const CHUNK: usize = 512;
+
+/// What re-triangulating a cell reads (the store's values, HE, the isovalue): shared by
+/// the threads of an update's parallel phase.
+#[derive(Clone, Copy)]
+struct CellReader<'a> {
+    store: &'a Store,
+    he: &'a EdgeVertices,
+    offsets: &'a CellOffsets,
+    iso: f64,
+}
+
+impl CellReader<'_> {
+    /// Each of `cells`' case and triangle count into `cases` and its triangles into
+    /// `tris`, `tris.len() / cells.len()` slots per cell.
+    fn retriangulate(
+        &self,
+        cells: &[u32],
+        cases: &mut [(u8, u8)],
+        tris: &mut [[u32; 3]],
+    ) -> Result<()> {
+        let most = tris.len() / cells.len().max(1);
+        for (k, (&cell, out)) in cells.iter().zip(cases.iter_mut()).enumerate() {
+            if let Some(&next) = cells.get(k + AHEAD) {
+                self.prefetch(next);
+            }
+            let case = self.case_of(cell)?;
+            let n = if case == 0 || case == 255 {
+                0
+            } else {
+                let key = grid_key(self.store.coords, cell as usize);
+                self.triangles(cell, key, case, &mut tris[k * most..(k + 1) * most])?
+            };
+            *out = (case, n as u8);
+        }
+        Ok(())
+    }
+
+    /// Starts loading what re-triangulating `cell` reads: its corner values (four
+    /// lines: the x pairs share one) and its edges' vertices in HE.
+    #[inline]
+    fn prefetch(&self, cell: u32) {
+        let lattice = self.store.lattice();
+        let (cell, y, z) = (cell as usize, lattice.stride(1), lattice.stride(2));
+        for node in [cell, cell + y, cell + z, cell + y + z] {
+            self.store.prefetch_value(node);
+            self.he.map.prefetch(grid_key(self.store.coords, node));
+        }
     }
 
     /// Case of `cell` at the current isovalue (bit c: corner c above it).
@@ -958,52 +1052,61 @@ impl Slider {
     }
 
     /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE, into
-    /// `out` (cleared). The cell's edges come from one HE brick lookup (eight where the
-    /// cell straddles bricks).
-    fn cell_triangles(&self, cell: u32, key: u64, case: u8, out: &mut Vec<[u32; 3]>) -> Result<()> {
+    /// the first slots of `out`; returns how many. The cell's edges come from one HE
+    /// brick lookup (eight where the cell straddles bricks).
+    fn triangles(&self, cell: u32, key: u64, case: u8, out: &mut [[u32; 3]]) -> Result<usize> {
         let around = self.he.around(key);
-        out.clear();
-        for tri in &case_table().triangles[case as usize] {
-            let mut t = [0u32; 3];
+        let table = &case_table().triangles[case as usize];
+        for (tri, slot) in table.iter().zip(out.iter_mut()) {
             for (k, &local) in tri.iter().enumerate() {
                 let (corner, axis) = EDGE_CORNER_AXIS[local as usize];
-                t[k] = around[corner as usize][axis as usize];
-                if t[k] == NO_VERTEX {
+                slot[k] = around[corner as usize][axis as usize];
+                if slot[k] == NO_VERTEX {
                     let e = 3 * cell as usize + self.offsets.edges[local as usize];
-                    return Err(
-                        self.corrupt(format!("cell {cell} in case {case} needs edge {e}, not on"))
-                    );
+                    return Err(inconsistent(
+                        self.store,
+                        format!("cell {cell} in case {case} needs edge {e}, not on"),
+                    ));
                 }
             }
-            out.push(t);
         }
-        Ok(())
+        Ok(table.len())
     }
+}
 
-    /// Interpolation data of edge `e` from the mapped values.
-    fn edge_data(&self, e: u32) -> Result<EdgeData> {
-        store_edge_data(&self.store, e)
+/// Interpolation data of each of `edges` into `out`, checking that each is a lattice edge.
+fn edges_data(store: &Store, edges: &[u32], out: &mut [EdgeData]) -> Result<()> {
+    let lattice = store.lattice();
+    for (k, (&e, d)) in edges.iter().zip(out.iter_mut()).enumerate() {
+        if let Some(&next) = edges.get(k + AHEAD) {
+            prefetch_edge_data(store, next);
+        }
+        let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+        if node >= store.nodes || store.coords.coords(node)[axis] + 1 >= lattice.dims[axis] {
+            return Err(inconsistent(
+                store,
+                format!("edge {e} is not a lattice edge"),
+            ));
+        }
+        *d = store_edge_data(store, e)?;
     }
+    Ok(())
+}
 
-    /// Computes V and N from E into `out`, reusing its memory.
-    fn compute_vertices(&self, out: &mut Vertices) {
-        let lattice = *self.store.lattice();
-        let coords = self.store.coords;
-        let iso = self.iso;
-        let n = self.data.len();
-        out.positions.resize(n, [0.0; 3]);
-        out.normals.resize(n, [0.0; 3]);
-        out.positions
-            .par_iter_mut()
-            .zip(out.normals.par_iter_mut())
-            .zip(self.data.par_iter().zip(self.edges.par_iter()))
-            .with_min_len(4096)
-            .for_each(|((p, nrm), (d, &e))| {
-                let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-                let (q, m) = d.vertex(&lattice, coords.coords(node), axis, iso);
-                *p = q.as_vec3().to_array();
-                *nrm = m;
-            });
+/// Starts loading the values [`store_edge_data`] reads for edge `e`: its two nodes and
+/// their neighbours across the other axes (central differences).
+#[inline]
+fn prefetch_edge_data(store: &Store, e: u32) {
+    let lattice = store.lattice();
+    let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+    let up = node + lattice.stride(axis);
+    for n in [node, up] {
+        for a in 1..3 {
+            let s = lattice.stride(a);
+            store.prefetch_value(n.saturating_sub(s));
+            store.prefetch_value(n + s);
+        }
+        store.prefetch_value(n);
     }
 }
 
