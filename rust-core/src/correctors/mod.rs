@@ -351,7 +351,17 @@ pub fn extract(
             Placement::Linear
         };
         let span = (at(0.5), at(1.0));
-        let cut = surface::cut_edges(&cache, &tracked.active, progress, span, &mut stats)?;
+        // Tracking visits every cell around a cut edge of a cell it keeps (the faces that
+        // edge lies on are crossed), so the list is complete unless cells were dropped.
+        let complete = (tracked.discarded == 0 && params.clip.is_none()).then_some(grid.cells);
+        let cut = surface::cut_edges(
+            &cache,
+            &tracked.active,
+            complete,
+            progress,
+            span,
+            &mut stats,
+        )?;
         if k + 1 == params.isovalues.len() {
             // No node is read again: the cache's bricks (more bytes than the finished mesh on
             // large frames) are freed before the mesh's arrays are allocated.

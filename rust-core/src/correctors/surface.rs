@@ -115,17 +115,23 @@ impl Corrections {
 /// First step of a surface: lists the edges of `active` that the surface `iso` cuts and
 /// reads their end nodes, reporting the start of the "vertices" phase within `span`. This
 /// is the last step that reads `nodes`: the caller may free them before
-/// [`place_vertices`] and [`finish`] allocate the mesh's arrays.
+/// [`place_vertices`] and [`finish`] allocate the mesh's arrays. `complete` is the grid's
+/// cells per axis when every grid cell around a cut edge of `active` is in it (nothing
+/// discarded or clipped), which lets each edge be listed once ([`mc::cut_edges_complete`]).
 pub fn cut_edges(
     nodes: &impl NodeValues,
     active: &[ActiveCell],
+    complete: Option<[u32; 3]>,
     progress: &mut Progress,
     span: (f64, f64),
     stats: &mut Stats,
 ) -> Result<CutEdges> {
     progress.phase("vertices", span.0, span.0 + 0.6 * (span.1 - span.0))?;
     let t = Instant::now();
-    let edges = mc::cut_edges(active);
+    let edges = match complete {
+        Some(cells) => mc::cut_edges_complete(active, cells),
+        None => mc::cut_edges(active),
+    };
     let ends = edges
         .par_iter()
         .map(|&e| {

@@ -94,8 +94,11 @@ pub fn track(
             .collect();
         out.visited += frontier.len() as u64;
         // The next wavefront: every face neighbour the surface crosses into, once, unless
-        // visited. Listed and sorted in parallel; only the new cells are then marked
-        // visited, in key order, which keeps the brick set's last-brick shortcut hot.
+        // visited. Listed, filtered and sorted in parallel; only the new cells are then
+        // marked visited, in key order, which keeps the brick set's last-brick shortcut
+        // hot. Filtering before sorting: over half the neighbours listed lie behind the
+        // wave, already visited (demo frame: 1.1 M listed, 0.27 M new).
+        let seen = &visited;
         let mut next: Vec<u64> = visits
             .par_iter()
             .flat_map_iter(|v| {
@@ -108,15 +111,11 @@ pub fn track(
                     (0..6)
                         .filter(move |f| faces >> f & 1 == 1)
                         .filter_map(move |f| grid.face_neighbour(cell.key, f / 2, f % 2))
+                        .filter(|&n| !seen.contains(n))
                 })
             })
             .collect();
         radix::sort_unique(&mut next);
-        let seen = &visited;
-        next = next
-            .into_par_iter()
-            .filter(|&n| !seen.contains(n))
-            .collect();
         for &n in &next {
             visited.insert(n);
         }

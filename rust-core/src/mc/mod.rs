@@ -230,6 +230,44 @@ pub fn cut_edges(cells: &[ActiveCell]) -> Vec<u64> {
     edges
 }
 
+/// [`cut_edges`] of a complete surface: every cell of the grid (`cells` per axis) that
+/// holds a cut edge of `active` is itself in `active`, as when tracking discarded and
+/// clipped nothing. Each edge is then listed by one cell only, the one whose lower corner
+/// is the edge's lower node (on the grid's upper faces, where that cell does not exist,
+/// the nearest one inside): a quarter of the keys to sort and nothing to deduplicate.
+pub fn cut_edges_complete(active: &[ActiveCell], cells: [u32; 3]) -> Vec<u64> {
+    let table = case_table();
+    // Local edges a cell lists, by which axes it is the grid's last cell along (bit a):
+    // an edge whose corner is offset along another axis b belongs to the next cell along
+    // b, unless there is none.
+    let listed: [u16; 8] = std::array::from_fn(|last| {
+        (0..12).fold(0u16, |mask, e| {
+            let (corner, axis) = edge_corner_axis(e);
+            let offset = corner_offset(corner);
+            let own = (0..3).all(|b| b == axis || offset[b] == 0 || last >> b & 1 == 1);
+            mask | u16::from(own) << e
+        })
+    });
+    let mut edges: Vec<u64> = active
+        .par_iter()
+        .flat_map_iter(|cell| {
+            let c = VirtualGrid::coords(cell.key);
+            let last = (0..3).fold(0, |m, a| m | usize::from(c[a] + 1 == cells[a]) << a);
+            let cut = table.edges_cut[cell.case as usize] & listed[last];
+            (0..12).filter(move |e| cut >> e & 1 == 1).map(move |e| {
+                let (corner, axis) = edge_corner_axis(e);
+                edge_key(VirtualGrid::corner(cell.key, corner), axis)
+            })
+        })
+        .collect();
+    radix::sort_by_key(&mut edges, |&e| e);
+    debug_assert!(
+        edges.windows(2).all(|w| w[0] < w[1]),
+        "an edge listed twice"
+    );
+    edges
+}
+
 /// Triangles of the active cells, in cell order, indexing `edges` (from [`cut_edges`]).
 pub fn triangulate(cells: &[ActiveCell], edges: &[u64]) -> Vec<[u32; 3]> {
     const NONE: u32 = u32::MAX;
@@ -273,5 +311,60 @@ pub fn linear_crossing(f0: f64, f1: f64, iso: f64) -> f64 {
         0.5
     } else {
         ((iso - f0) / d).clamp(0.0, 1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_rng::unit;
+
+    /// Every cell of a lattice of values whose case is not empty: a complete surface.
+    fn active_cells(values: &[f64], nodes: [u32; 3], iso: f64) -> Vec<ActiveCell> {
+        let at = |[x, y, z]: [u32; 3]| values[(x + nodes[0] * (y + nodes[1] * z)) as usize];
+        let mut out = Vec::new();
+        for z in 0..nodes[2] - 1 {
+            for y in 0..nodes[1] - 1 {
+                for x in 0..nodes[0] - 1 {
+                    let corners: [f64; 8] = std::array::from_fn(|c| {
+                        let o = corner_offset(c);
+                        at([x + o[0], y + o[1], z + o[2]])
+                    });
+                    let case = case_index(&corners, iso);
+                    if case != 0 && case != 255 {
+                        out.push(ActiveCell {
+                            key: VirtualGrid::key(x, y, z),
+                            case,
+                        });
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Listing each edge from one designated cell gives every cut edge once, on surfaces
+    /// that run through the grid's faces, edges and corners (noise) and on thin grids
+    /// (one cell thick along an axis: every cell is the last along it).
+    #[test]
+    fn complete_cut_edges_are_all_cut_edges_once() {
+        let mut next = unit(0x5eed);
+        let mut compared = 0;
+        for nodes in [[9u32, 8, 7], [2, 6, 5], [5, 2, 2], [2, 2, 2], [12, 11, 3]] {
+            let n = (nodes[0] * nodes[1] * nodes[2]) as usize;
+            for iso in [0.2, 0.5, 0.8] {
+                let values: Vec<f64> = (0..n).map(|_| next()).collect();
+                let active = active_cells(&values, nodes, iso);
+                let cells = nodes.map(|n| n - 1);
+                let all = cut_edges(&active);
+                assert_eq!(
+                    cut_edges_complete(&active, cells),
+                    all,
+                    "{nodes:?} at {iso}"
+                );
+                compared += all.len();
+            }
+        }
+        assert!(compared > 1000, "too few edges to compare: {compared}");
     }
 }

@@ -5,7 +5,9 @@
 use super::runtime::edge_data_from;
 use crate::error::Result;
 use crate::field::grid::Volume;
-use crate::mc::{case_index, cut_edges, edge_node_axis, triangulate, ActiveCell, VirtualGrid};
+use crate::mc::{
+    case_index, cut_edges_complete, edge_node_axis, triangulate, ActiveCell, VirtualGrid,
+};
 use crate::mesh::Mesh;
 use crate::progress::Progress;
 use rayon::prelude::*;
@@ -44,7 +46,8 @@ pub fn extract_keyed(
         })
         .collect();
     progress.phase("triangles", 0.5, 1.0)?;
-    let edges = cut_edges(&cells);
+    // Every cell with a cut edge is listed: each edge comes from one cell.
+    let edges = cut_edges_complete(&cells, [nx, ny, nz].map(|n| n as u32 - 1));
     let triangles = triangulate(&cells, &edges);
     let (positions, normals): (Vec<[f64; 3]>, Vec<[f32; 3]>) = edges
         .par_iter()
