@@ -6,6 +6,7 @@ pub mod bricks;
 pub mod radix;
 pub mod table;
 
+pub(crate) use table::MOST_TRIANGLES;
 pub use table::{case_table, corner_offset, edge_corner_axis, face_segments, CaseTable};
 
 use crate::error::{Error, Result};
@@ -215,19 +216,25 @@ pub struct ActiveCell {
 /// Global keys of the edges cut in each active cell, sorted and unique: the index of an
 /// edge in this list is its vertex index, one vertex per crossed grid edge.
 pub fn cut_edges(cells: &[ActiveCell]) -> Vec<u64> {
+    let mut edges = listed_edges(cells, |_| u16::MAX);
+    radix::sort_unique(&mut edges);
+    edges
+}
+
+/// Keys of the cut edges of each cell among the local edges `listed(cell)` (a bit each),
+/// unsorted.
+fn listed_edges(cells: &[ActiveCell], listed: impl Fn(&ActiveCell) -> u16 + Sync) -> Vec<u64> {
     let table = case_table();
-    let mut edges: Vec<u64> = cells
+    cells
         .par_iter()
         .flat_map_iter(|cell| {
-            let cut = table.edges_cut[cell.case as usize];
+            let cut = table.edges_cut[cell.case as usize] & listed(cell);
             (0..12).filter(move |e| cut >> e & 1 == 1).map(move |e| {
                 let (corner, axis) = edge_corner_axis(e);
                 edge_key(VirtualGrid::corner(cell.key, corner), axis)
             })
         })
-        .collect();
-    radix::sort_unique(&mut edges);
-    edges
+        .collect()
 }
 
 /// [`cut_edges`] of a complete surface: every cell of the grid (`cells` per axis) that
@@ -236,7 +243,6 @@ pub fn cut_edges(cells: &[ActiveCell]) -> Vec<u64> {
 /// is the edge's lower node (on the grid's upper faces, where that cell does not exist,
 /// the nearest one inside): a quarter of the keys to sort and nothing to deduplicate.
 pub fn cut_edges_complete(active: &[ActiveCell], cells: [u32; 3]) -> Vec<u64> {
-    let table = case_table();
     // Local edges a cell lists, by which axes it is the grid's last cell along (bit a):
     // an edge whose corner is offset along another axis b belongs to the next cell along
     // b, unless there is none.
@@ -248,18 +254,10 @@ pub fn cut_edges_complete(active: &[ActiveCell], cells: [u32; 3]) -> Vec<u64> {
             mask | u16::from(own) << e
         })
     });
-    let mut edges: Vec<u64> = active
-        .par_iter()
-        .flat_map_iter(|cell| {
-            let c = VirtualGrid::coords(cell.key);
-            let last = (0..3).fold(0, |m, a| m | usize::from(c[a] + 1 == cells[a]) << a);
-            let cut = table.edges_cut[cell.case as usize] & listed[last];
-            (0..12).filter(move |e| cut >> e & 1 == 1).map(move |e| {
-                let (corner, axis) = edge_corner_axis(e);
-                edge_key(VirtualGrid::corner(cell.key, corner), axis)
-            })
-        })
-        .collect();
+    let mut edges = listed_edges(active, |cell| {
+        let c = VirtualGrid::coords(cell.key);
+        listed[(0..3).fold(0, |m, a| m | usize::from(c[a] + 1 == cells[a]) << a)]
+    });
     radix::sort_by_key(&mut edges, |&e| e);
     debug_assert!(
         edges.windows(2).all(|w| w[0] < w[1]),

@@ -19,6 +19,10 @@
 
 use std::sync::OnceLock;
 
+/// Most triangles any case has (the table test checks it is reached): what a consumer
+/// that stores a cell's triangles in fixed slots sizes them by.
+pub(crate) const MOST_TRIANGLES: usize = 5;
+
 /// Offset of corner `c` in cell units.
 pub const fn corner_offset(c: usize) -> [u32; 3] {
     [(c & 1) as u32, ((c >> 1) & 1) as u32, ((c >> 2) & 1) as u32]
@@ -279,10 +283,17 @@ mod tests {
             }
             assert_eq!(used, t.edges_cut[case], "case {case}");
             // At most 12 triangles a case (the loops' orientation and closure are checked
-            // by triangles_keep_the_loop_orientation).
+            // by triangles_keep_the_loop_orientation), and at most MOST_TRIANGLES.
             let tris = &t.triangles[case];
             assert!(tris.len() <= 12, "case {case}: {} triangles", tris.len());
+            assert!(
+                tris.len() <= MOST_TRIANGLES,
+                "case {case}: {} triangles",
+                tris.len()
+            );
         }
+        let most = t.triangles.iter().map(Vec::len).max();
+        assert_eq!(most, Some(MOST_TRIANGLES), "MOST_TRIANGLES is reached");
     }
 
     #[test]

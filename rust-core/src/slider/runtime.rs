@@ -28,7 +28,10 @@ use super::store::Store;
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice, NodeCoords};
 use crate::mc::bricks::BrickMap;
-use crate::mc::{case_table, corner_offset, edge_corner_axis, linear_crossing, radix, VirtualGrid};
+use crate::mc::{
+    case_table, corner_offset, edge_corner_axis, linear_crossing, radix, VirtualGrid,
+    MOST_TRIANGLES,
+};
 use crate::prefetch::prefetch;
 use crate::progress::Progress;
 use glam::{DVec3, Vec3};
@@ -198,13 +201,24 @@ struct Scratch {
     dirty: Vec<u32>,
     holes: Vec<u32>,
     reindex: Vec<u32>,
-    tris: Vec<[u32; 3]>,
     /// Interpolation data of each added edge, computed in parallel before the edges go in.
     added_data: Vec<EdgeData>,
-    /// Each dirty cell's new case and triangle count, and its triangles in as many slots
-    /// as a case has at most, computed in parallel before the cells go in.
-    dirty_cases: Vec<(u8, u8)>,
-    dirty_tris: Vec<[u32; 3]>,
+    /// Each dirty cell's new case and triangles, computed in parallel before the cells go in.
+    retriangulated: Vec<CellTriangles>,
+}
+
+/// A cell's case and its triangles as vertex indices.
+#[derive(Clone, Copy, Debug, Default)]
+struct CellTriangles {
+    case: u8,
+    count: u8,
+    triangles: [[u32; 3]; MOST_TRIANGLES],
+}
+
+impl CellTriangles {
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles[..self.count as usize]
+    }
 }
 
 /// Index steps from a cell (its lower corner's node index) to its eight corners and, in
@@ -380,9 +394,7 @@ pub struct Slider {
 impl Slider {
     /// An empty surface below every value of the store's volume.
     pub fn new(store: Store) -> Slider {
-        let table = case_table();
-        let most = table.triangles.iter().map(Vec::len).max().unwrap_or(0);
-        let buckets = (0..=most)
+        let buckets = (0..=MOST_TRIANGLES)
             .map(|size| Bucket {
                 size,
                 ..Bucket::default()
@@ -627,7 +639,10 @@ impl Slider {
         let limit = 3 * store.nodes as u32;
         let mut bump = |e: u32, d: i32| -> Result<()> {
             if e >= limit {
-                return Err(self.corrupt(format!("edge {e} is out of range")));
+                return Err(inconsistent(
+                    &self.store,
+                    format!("edge {e} is out of range"),
+                ));
             }
             delta.bump(e, d);
             Ok(())
@@ -715,10 +730,6 @@ impl Slider {
         }
     }
 
-    fn corrupt(&self, what: String) -> Error {
-        inconsistent(&self.store, what)
-    }
-
     /// What re-triangulating cells reads, shareable across threads.
     fn cells_reader(&self) -> CellReader<'_> {
         CellReader {
@@ -754,10 +765,8 @@ impl Slider {
             dirty,
             holes,
             reindex,
-            tris,
             added_data,
-            dirty_cases,
-            dirty_tris,
+            retriangulated,
             ..
         } = scratch;
         for v in [
@@ -774,7 +783,12 @@ impl Slider {
             match d {
                 1 => added.push(e),
                 -1 => removed.push(e),
-                _ => return Err(self.corrupt(format!("edge {e} changes {d} times"))),
+                _ => {
+                    return Err(inconsistent(
+                        &self.store,
+                        format!("edge {e} changes {d} times"),
+                    ))
+                }
             }
         }
         change.edges_added = added.len() as u64;
@@ -813,7 +827,10 @@ impl Slider {
                 self.he.prefetch(next);
             }
             let Some(v) = self.he.turn_off(e) else {
-                return Err(self.corrupt(format!("edge {e} turns off but is not on")));
+                return Err(inconsistent(
+                    &self.store,
+                    format!("edge {e} turns off but is not on"),
+                ));
             };
             self.edges[v as usize] = u32::MAX;
             holes.push(v);
@@ -822,14 +839,7 @@ impl Slider {
         // computed for all of them first, in parallel.
         added_data.clear();
         added_data.resize(added.len(), EdgeData::default());
-        if added.len() < PARALLEL_MIN {
-            edges_data(&self.store, added, added_data)?;
-        } else {
-            (added
-                .par_chunks(CHUNK)
-                .zip(added_data.par_chunks_mut(CHUNK)))
-            .try_for_each(|(e, d)| edges_data(&self.store, e, d))?;
-        }
+        in_chunks(added, added_data, |e, d| edges_data(&self.store, e, d))?;
         holes.sort_unstable_by(|a, b| b.cmp(a));
         for (k, (&e, &data)) in added.iter().zip(added_data.iter()).enumerate() {
             if let Some(&next) = added.get(k + AHEAD) {
@@ -842,7 +852,10 @@ impl Slider {
             }
             let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
             if !self.he.turn_on(e, v) {
-                return Err(self.corrupt(format!("edge {e} turns on but is already on")));
+                return Err(inconsistent(
+                    &self.store,
+                    format!("edge {e} turns on but is already on"),
+                ));
             }
             if holes.pop().is_some() {
                 self.edges[v as usize] = e;
@@ -872,50 +885,38 @@ impl Slider {
             Self::edge_cells(&lattice, coords, e, reindex);
         }
         ascending_unique(reindex, marks);
-        // One scratch list for every cell's triangles, not an allocation per cell.
-        let most = self.buckets.len() - 1;
-        tris.resize(most, [0; 3]);
         for &cell in reindex.iter() {
             let key = grid_key(coords, cell as usize);
             if let Some(entry) = self.hc.get(key) {
-                let n = (self.cells_reader()).triangles(cell, key, entry.case, tris)?;
+                let t = (self.cells_reader()).triangles(cell, key, entry.case)?;
                 let b = &mut self.buckets[entry.bucket as usize];
                 let s = entry.slot as usize * b.size;
-                b.triangles[s..s + b.size].copy_from_slice(&tris[..n]);
+                b.triangles[s..s + b.size].copy_from_slice(t.triangles());
             }
         }
         // Cells around changed edges come back with their new case. Cases and triangles
         // only read the store and HE (final by now): computed first, in parallel; then
         // the cells go into the buckets and HC in ascending order, one thread.
-        dirty_cases.clear();
-        dirty_cases.resize(dirty.len(), (0, 0));
-        dirty_tris.clear();
-        dirty_tris.resize(dirty.len() * most, [0; 3]);
+        retriangulated.clear();
+        retriangulated.resize(dirty.len(), CellTriangles::default());
         let reader = self.cells_reader();
-        if dirty.len() < PARALLEL_MIN {
-            reader.retriangulate(dirty, dirty_cases, dirty_tris)?;
-        } else {
-            (dirty
-                .par_chunks(CHUNK)
-                .zip(dirty_cases.par_chunks_mut(CHUNK)))
-            .zip(dirty_tris.par_chunks_mut(CHUNK * most))
-            .try_for_each(|((cells, cases), t)| reader.retriangulate(cells, cases, t))?;
-        }
-        for (k, (&cell, &(case, n))) in dirty.iter().zip(dirty_cases.iter()).enumerate() {
+        in_chunks(dirty, retriangulated, |cells, out| {
+            reader.retriangulate(cells, out)
+        })?;
+        for (k, (&cell, new)) in dirty.iter().zip(retriangulated.iter()).enumerate() {
             if let Some(&next) = dirty.get(k + AHEAD) {
                 self.hc.prefetch(grid_key(coords, next as usize));
             }
-            if n == 0 {
+            if new.count == 0 {
                 continue;
             }
-            let t = &dirty_tris[k * most..k * most + n as usize];
-            push_each(&mut change.added_triangles, t);
-            let b = &mut self.buckets[n as usize];
-            push_each(&mut b.triangles, t);
+            push_each(&mut change.added_triangles, new.triangles());
+            let b = &mut self.buckets[new.count as usize];
+            push_each(&mut b.triangles, new.triangles());
             b.cells.push(cell);
             let entry = CellEntry {
-                case,
-                bucket: n,
+                case: new.case,
+                bucket: new.count,
                 slot: (b.cells.len() - 1) as u32,
             };
             self.hc.insert(grid_key(coords, cell as usize), entry);
@@ -977,6 +978,19 @@ const PARALLEL_MIN: usize = 1024;
 /// Items per parallel task.
 const CHUNK: usize = 512;
 
+/// Runs `f` over matching chunks of `items` and `out` (one output per item): on rayon's
+/// threads when there are at least [`PARALLEL_MIN`] items, else once on this thread.
+fn in_chunks<I: Sync, O: Send>(
+    items: &[I],
+    out: &mut [O],
+    f: impl Fn(&[I], &mut [O]) -> Result<()> + Sync,
+) -> Result<()> {
+    if items.len() < PARALLEL_MIN {
+        return f(items, out);
+    }
+    (items.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK))).try_for_each(|(i, o)| f(i, o))
+}
+
 /// What re-triangulating a cell reads (the store's values, HE, the isovalue): shared by
 /// the threads of an update's parallel phase.
 #[derive(Clone, Copy)]
@@ -988,27 +1002,15 @@ struct CellReader<'a> {
 }
 
 impl CellReader<'_> {
-    /// Each of `cells`' case and triangle count into `cases` and its triangles into
-    /// `tris`, `tris.len() / cells.len()` slots per cell.
-    fn retriangulate(
-        &self,
-        cells: &[u32],
-        cases: &mut [(u8, u8)],
-        tris: &mut [[u32; 3]],
-    ) -> Result<()> {
-        let most = tris.len() / cells.len().max(1);
-        for (k, (&cell, out)) in cells.iter().zip(cases.iter_mut()).enumerate() {
+    /// Each of `cells`' case and triangles at the current isovalue into `out`.
+    fn retriangulate(&self, cells: &[u32], out: &mut [CellTriangles]) -> Result<()> {
+        for (k, (&cell, new)) in cells.iter().zip(out.iter_mut()).enumerate() {
             if let Some(&next) = cells.get(k + AHEAD) {
                 self.prefetch(next);
             }
             let case = self.case_of(cell)?;
-            let n = if case == 0 || case == 255 {
-                0
-            } else {
-                let key = grid_key(self.store.coords, cell as usize);
-                self.triangles(cell, key, case, &mut tris[k * most..(k + 1) * most])?
-            };
-            *out = (case, n as u8);
+            let key = grid_key(self.store.coords, cell as usize);
+            *new = self.triangles(cell, key, case)?;
         }
         Ok(())
     }
@@ -1051,13 +1053,20 @@ impl CellReader<'_> {
         Ok(case)
     }
 
-    /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE, into
-    /// the first slots of `out`; returns how many. The cell's edges come from one HE
-    /// brick lookup (eight where the cell straddles bricks).
-    fn triangles(&self, cell: u32, key: u64, case: u8, out: &mut [[u32; 3]]) -> Result<usize> {
-        let around = self.he.around(key);
+    /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE. The
+    /// cell's edges come from one HE brick lookup (eight where the cell straddles bricks).
+    fn triangles(&self, cell: u32, key: u64, case: u8) -> Result<CellTriangles> {
         let table = &case_table().triangles[case as usize];
-        for (tri, slot) in table.iter().zip(out.iter_mut()) {
+        let mut out = CellTriangles {
+            case,
+            count: table.len() as u8,
+            ..CellTriangles::default()
+        };
+        if table.is_empty() {
+            return Ok(out);
+        }
+        let around = self.he.around(key);
+        for (tri, slot) in table.iter().zip(out.triangles.iter_mut()) {
             for (k, &local) in tri.iter().enumerate() {
                 let (corner, axis) = EDGE_CORNER_AXIS[local as usize];
                 slot[k] = around[corner as usize][axis as usize];
@@ -1070,7 +1079,7 @@ impl CellReader<'_> {
                 }
             }
         }
-        Ok(table.len())
+        Ok(out)
     }
 }
 
