@@ -392,31 +392,83 @@ fn large_updates_give_the_same_arrays_on_any_thread_count() {
             .unwrap();
         pool.install(|| {
             let mut s = Slider::open(&path).unwrap();
-            let mut most = 0;
+            let (mut most, mut most_edges) = (0, 0);
             let steps: Vec<(Raw, Canon)> = isos
                 .iter()
                 .map(|&iso| {
                     let c = s.set_isovalue(iso).unwrap();
                     most = most.max(c.added_triangles.len() + c.removed_triangles.len());
+                    most_edges = most_edges.max(c.edges_added);
                     (raw(&s), slider_canon(&s))
                 })
                 .collect();
-            (steps, most)
+            (steps, most, most_edges)
         })
     };
-    let (one, most) = slide(1);
-    let (four, _) = slide(4);
+    let (one, most, most_edges) = slide(1);
+    let (four, _, _) = slide(4);
     // A cell adds and removes at most 5 triangles each: this many changed triangles
     // means over 4,000 changed cells, past the size where the update goes parallel.
     assert!(
         most > 40_000,
         "changes too small to run in parallel: {most}"
     );
+    // Over 16,384 added edges (and more dirty cells, four around each) are computed in
+    // several batches of 8,192.
+    assert!(
+        most_edges > 16_384,
+        "changes too small for several batches: {most_edges}"
+    );
     for ((iso, (a, ca)), (b, _)) in isos.iter().zip(&one).zip(&four) {
         assert!(a == b, "at {iso}: arrays differ between 1 and 4 threads");
         assert_same(ca, &reference_canon(&volume, *iso).0, &format!("at {iso}"));
     }
 }
+/// After a jump from a large surface to a small one, the slider holds memory for the
+/// small one, not what the large one needed (its lists and bricks are given back).
+#[test]
+fn held_memory_follows_the_surface_after_a_jump() {
+    let volume = blobs([128, 120, 112], 0.3);
+    let path = store_of(&volume, "held.isoslider", BuildParams::default().threshold);
+    let (lo, hi) = volume.range();
+    let at = |f: f64| lo as f64 + f * (hi - lo) as f64;
+    // What a host does after each update: read the full arrays.
+    let show = |s: &mut Slider, iso: f64| {
+        s.set_isovalue(iso).unwrap();
+        assert!(!s.positions().is_empty() && !s.triangle_array().is_empty());
+        s.held_bytes()
+    };
+    // The jump itself needs lists as long as the large surface; the small steps after
+    // it need short ones.
+    let mut jumped = Slider::open(&path).unwrap();
+    let large = show(&mut jumped, at(0.45));
+    for f in [0.9, 0.901, 0.9] {
+        show(&mut jumped, at(f));
+    }
+    let after = jumped.held_bytes();
+    let mut direct = Slider::open(&path).unwrap();
+    for f in [0.9, 0.901, 0.9] {
+        show(&mut direct, at(f));
+    }
+    let small = direct.held_bytes();
+    assert!(
+        jumped.triangles() == direct.triangles(),
+        "same surface either way"
+    );
+    // Lists are cut to at most four times what they use (none below 64 KiB: about 20
+    // lists), bricks to about twice those in use.
+    let bound = 4 * small + (2 << 20);
+    assert!(
+        large > 2 * bound,
+        "the large surface should need far more: {large} vs small {small}"
+    );
+    assert!(
+        after <= bound,
+        "after the jump {after} bytes held; the small surface alone holds {small} \
+         (large {large})"
+    );
+}
+
 #[test]
 fn damaged_or_foreign_stores_are_refused_clearly() {
     let volume = blobs([10, 9, 8], 0.1);

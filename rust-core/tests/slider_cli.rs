@@ -112,6 +112,7 @@ fn build_then_slide_from_stdin_matches_marching_cubes() {
         );
         assert!(line.starts_with(&want), "{line} vs {want}");
         assert!(line.contains("update_ms"), "{line}");
+        assert!(line.contains("held_mib"), "{line}");
         assert!(!line.contains("lod_"), "{line}");
     }
 

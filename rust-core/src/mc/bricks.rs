@@ -151,6 +151,9 @@ pub struct BrickMap<T, const S: u32 = 3> {
     /// a map whose keys move (a sliding surface) holds the bricks of its widest extent,
     /// not of every key it ever held.
     free: Vec<u32>,
+    /// How many bricks at the start of `free` have had their values freed
+    /// ([`BrickMap::release_free`]).
+    released: usize,
     len: usize,
     /// (brick key, brick index) of the last brick found, for scans in key order.
     last: Option<(u64, u32)>,
@@ -170,6 +173,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             values: Vec::new(),
             meta: Vec::new(),
             free: Vec::new(),
+            released: 0,
             len: 0,
             last: None,
         }
@@ -218,12 +222,30 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
 
     /// Bytes held by the bricks (values and presence bits) and their index.
     pub fn bytes(&self) -> u64 {
-        let brick = BrickShape::<S>::KEYS * std::mem::size_of::<T>() + std::mem::size_of::<Meta>();
+        let values: usize = self.values.iter().map(|b| b.len()).sum();
         let index = match &self.index {
             Index::Hashed(map) => map.capacity() * 16,
             Index::Dense { slots, .. } => slots.len() * 4,
         };
-        (self.meta.len() * brick + index) as u64
+        (values * std::mem::size_of::<T>() + self.meta.len() * std::mem::size_of::<Meta>() + index)
+            as u64
+    }
+
+    /// Frees the values of emptied bricks beyond as many as are in use: a map whose keys
+    /// shrank to a few (a surface after a jump) then holds about twice its bricks, not
+    /// those of its widest extent, while one whose keys move at a steady size keeps
+    /// reusing its free bricks without allocating.
+    pub fn release_free(&mut self) {
+        let in_use = self.meta.len() - self.free.len();
+        let holding = self.free.len() - self.released;
+        let extra = holding.saturating_sub(in_use.max(1));
+        // Bricks are reused from the end of the free list: release those nearest its
+        // start, after the ones already released.
+        let start = self.released;
+        for &i in &self.free[start..start + extra] {
+            self.values[i as usize] = Box::default();
+        }
+        self.released += extra;
     }
 
     /// Removes every key and drops the bricks (the dense index keeps its size).
@@ -235,6 +257,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
         self.values = Vec::new();
         self.meta = Vec::new();
         self.free = Vec::new();
+        self.released = 0;
         self.len = 0;
         self.last = None;
     }
@@ -306,7 +329,12 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
         };
         if i == next {
             if self.free.pop().is_some() {
+                self.released = self.released.min(self.free.len());
                 self.meta[i as usize].key = brick;
+                let values = &mut self.values[i as usize];
+                if values.is_empty() {
+                    *values = vec![T::default(); BrickShape::<S>::KEYS].into_boxed_slice();
+                }
             } else {
                 self.values
                     .push(vec![T::default(); BrickShape::<S>::KEYS].into_boxed_slice());
@@ -759,6 +787,10 @@ mod tests {
                 for k in old {
                     assert_eq!(map.remove(k), reference.remove(&k));
                 }
+                if round % 2 == 1 {
+                    // Released bricks get their values again when reused.
+                    map.release_free();
+                }
                 assert_eq!(map.len(), reference.len());
                 let mut listed: Vec<(u64, u64)> = map.iter().collect();
                 listed.sort_unstable();
@@ -787,6 +819,22 @@ mod tests {
             assert_eq!(
                 map.iter().collect::<Vec<_>>(),
                 [(VirtualGrid::key(17, 9, 9), 4)]
+            );
+            // Emptied bricks beyond those in use give their values back.
+            let side = 1u32 << S;
+            for b in 0..3 {
+                map.insert(VirtualGrid::key(b * side, 1, 2), b as u64);
+            }
+            let full = map.bytes();
+            for b in 0..3 {
+                map.remove(VirtualGrid::key(b * side, 1, 2));
+            }
+            map.release_free();
+            let brick = BrickShape::<S>::KEYS * 8;
+            assert!(
+                map.bytes() + 2 * brick as u64 <= full,
+                "{} of {full}",
+                map.bytes()
             );
             map.clear();
             assert!(map.is_empty());

@@ -154,7 +154,8 @@ pub fn run_slide(args: &SlideArgs) -> Result<()> {
     }
 }
 
-/// One line per isovalue read from stdin: iso, triangles, vertices, update time (and,
+/// One line per isovalue read from stdin: iso, triangles, vertices, update time,
+/// triangles added and removed, the slider's own memory ([`Slider::held_bytes`]) (and,
 /// with `lod`, the LOD mesh's triangles, vertices and build time).
 fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
     let stdin = std::io::stdin();
@@ -172,12 +173,13 @@ fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
         let change = slider.set_isovalue(iso)?;
         write!(
             out,
-            "iso {iso} triangles {} vertices {} update_ms {:.3} added {} removed {}",
+            "iso {iso} triangles {} vertices {} update_ms {:.3} added {} removed {} held_mib {:.1}",
             slider.triangle_count(),
             slider.vertex_count(),
             change.seconds * 1e3,
             change.added_triangles.len(),
-            change.removed_triangles.len()
+            change.removed_triangles.len(),
+            slider.held_bytes() as f64 / (1u64 << 20) as f64
         )
         .map_err(|e| Error::io("<stdout>", e))?;
         if lod {

@@ -20,7 +20,10 @@
 //! [`Slider::normals`], [`Slider::triangle_array`]), into the previous arrays' memory.
 //! Scratch lists and the walk's edge pairs live in the slider and keep their capacity, so
 //! a steady slide allocates nothing that grows with the surface but the returned
-//! [`Change`] (the radix sort's passes take a 16 KiB digit table each).
+//! [`Change`] (the radix sort's passes take a 16 KiB digit table each); what a larger
+//! update (the first surface, a jump) needed is cut back after it ([`trim`]), and large
+//! updates precompute in batches, so memory follows the surface shown
+//! ([`Slider::held_bytes`]).
 
 use super::build::node_edges;
 use super::lod::{self, LodMesh, LodParams};
@@ -139,6 +142,8 @@ struct Delta {
     /// Length after the last netting: pairs are netted again once as many have been
     /// added, so a long walk holds at most about twice its distinct edges.
     netted: usize,
+    /// Pairs bumped since the walk began (before netting): what the walk read.
+    bumped: usize,
     /// The radix sort's second buffer, kept for its capacity.
     spare: Vec<(u32, i32)>,
 }
@@ -148,11 +153,13 @@ impl Delta {
     fn clear(&mut self) {
         self.pairs.clear();
         self.netted = 0;
+        self.bumped = 0;
     }
 
     #[inline]
     fn bump(&mut self, e: u32, d: i32) {
         self.pairs.push((e, d));
+        self.bumped += 1;
         if self.pairs.len() >= 2 * self.netted.max(4096) {
             self.net();
         }
@@ -206,6 +213,70 @@ struct Scratch {
     /// Each dirty cell's new case and triangles, computed in parallel before the cells go in.
     retriangulated: Vec<CellTriangles>,
 }
+
+impl Scratch {
+    /// Gives back what a large update left in the lists (see [`trim`]); true when any
+    /// list was cut.
+    fn trim(&mut self) -> bool {
+        let used = self.delta.pairs.len();
+        let mut cut = trim(&mut self.delta.pairs, used);
+        // What the sort left in its second buffer is not needed.
+        self.delta.spare.clear();
+        cut |= trim(&mut self.delta.spare, used);
+        for v in [
+            &mut self.removed,
+            &mut self.added,
+            &mut self.dirty,
+            &mut self.holes,
+            &mut self.reindex,
+        ] {
+            let used = v.len();
+            cut |= trim(v, used);
+        }
+        let used = self.added_data.len();
+        cut |= trim(&mut self.added_data, used);
+        let used = self.retriangulated.len();
+        cut | trim(&mut self.retriangulated, used)
+    }
+}
+
+/// Capacity a list keeps whatever it held: below this many bytes [`trim`] leaves it.
+const TRIM_FLOOR_BYTES: usize = 1 << 16;
+
+/// Cuts `v`'s capacity to twice `used` when it is above four times `used` and
+/// [`TRIM_FLOOR_BYTES`]: after a large update (the first surface, a jump) its lists
+/// would otherwise hold their peak for the rest of the session, while steady updates
+/// of one size never reallocate (a list grows twice its size before it is cut again).
+fn trim<T>(v: &mut Vec<T>, used: usize) -> bool {
+    let bytes = v.capacity() * std::mem::size_of::<T>();
+    let cut = bytes > TRIM_FLOOR_BYTES && v.capacity() > 4 * used;
+    if cut {
+        v.shrink_to(2 * used);
+    }
+    cut
+}
+
+/// Asks the allocator to return freed memory to the system. glibc keeps freed blocks
+/// below its (self-raising) mmap threshold in its heap, so lists cut after a large
+/// update would still count as resident; `malloc_trim` hands their pages back. Called
+/// only after an update that freed megabytes (the call walks the allocator's free
+/// lists); elsewhere the allocator's own policy stands.
+fn return_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only releases free memory; no pointer is involved.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
+/// Items of an update's parallel phases computed per batch before they are written: the
+/// precomputed data of a large update (the first surface: every cell) is then a few
+/// megabytes, not tens.
+const BATCH: usize = 1 << 13;
+
+/// Pairs a walk bumps (about its bytes of edge lists read) above which the walked
+/// sections' pages are handed back once it ends.
+const RELEASE_AFTER_PAIRS: usize = 1 << 16;
 
 /// A cell's case and its triangles as vertex indices.
 #[derive(Clone, Copy, Debug, Default)]
@@ -534,6 +605,42 @@ impl Slider {
         v
     }
 
+    /// Bytes the slider holds in its own memory (HE, HC, E and its interpolation data,
+    /// the buckets, the scratch lists, the full arrays last read; not the LOD mesh); the
+    /// store's mapped pages are not counted. After an update it follows the surface: what a larger
+    /// surface left behind is given back (at most about twice what is in use stays).
+    pub fn held_bytes(&self) -> u64 {
+        fn cap<T>(v: &Vec<T>) -> u64 {
+            (v.capacity() * std::mem::size_of::<T>()) as u64
+        }
+        let s = &self.scratch;
+        let lists = cap(&s.delta.pairs)
+            + cap(&s.delta.spare)
+            + cap(&s.marks)
+            + [&s.removed, &s.added, &s.dirty, &s.holes, &s.reindex]
+                .into_iter()
+                .map(cap)
+                .sum::<u64>()
+            + cap(&s.added_data)
+            + cap(&s.retriangulated);
+        let buckets: u64 = (self.buckets.iter())
+            .map(|b| cap(&b.triangles) + cap(&b.cells))
+            .sum();
+        let arrays = |v: Option<&Vertices>| v.map_or(0, |v| cap(&v.positions) + cap(&v.normals));
+        let spare = self.spare_vertices.borrow();
+        let triangles =
+            self.all_triangles.get().map_or(0, cap) + cap(&self.spare_triangles.borrow());
+        self.he.map.bytes()
+            + self.hc.bytes()
+            + cap(&self.edges)
+            + cap(&self.data)
+            + buckets
+            + lists
+            + arrays(self.vertices.get())
+            + arrays(Some(&spare))
+            + triangles
+    }
+
     /// Running totals.
     pub fn stats(&self) -> &SliderStats {
         &self.stats
@@ -604,12 +711,27 @@ impl Slider {
         let walked = self
             .walk(target, &mut delta, &mut change, progress)
             .map(|()| delta.net());
+        let long_walk = delta.bumped >= RELEASE_AFTER_PAIRS;
+        if long_walk {
+            // A long walk read megabytes of edge lists that the next small steps will
+            // not read again (they read the few blocks around the new rank), and its
+            // pairs needed room for twice its distinct edges and a sort buffer as long:
+            // given back before the surface grows.
+            self.store.release_lists();
+            delta.spare = Vec::new();
+            let used = delta.pairs.len();
+            trim(&mut delta.pairs, used);
+        }
         let applied = walked.and_then(|()| {
             self.rank = target;
             self.iso = iso;
             self.apply(&delta, &mut change)
         });
         self.scratch.delta = delta;
+        let cut = self.scratch.trim() | self.trim_surface_lists();
+        if long_walk || cut {
+            return_freed_memory();
+        }
         if applied.is_err() {
             // A chunk found corrupt while applying leaves cells, edges and buckets half
             // updated; the empty surface is the one state known to be right, so the next
@@ -836,33 +958,15 @@ impl Slider {
             holes.push(v);
         }
         // ... that edges in fill first. What they interpolate from only reads the store:
-        // computed for all of them first, in parallel.
-        added_data.clear();
-        added_data.resize(added.len(), EdgeData::default());
-        in_chunks(added, added_data, |e, d| edges_data(&self.store, e, d))?;
+        // computed a batch at a time, in parallel.
         holes.sort_unstable_by(|a, b| b.cmp(a));
-        for (k, (&e, &data)) in added.iter().zip(added_data.iter()).enumerate() {
-            if let Some(&next) = added.get(k + AHEAD) {
-                self.he.prefetch(next);
-            }
-            // Holes are taken from the end of `holes`: the one AHEAD later is written then.
-            if let Some(&h) = holes.len().checked_sub(AHEAD + 1).map(|i| &holes[i]) {
-                prefetch(&self.data[h as usize]);
-                prefetch(&self.edges[h as usize]);
-            }
-            let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
-            if !self.he.turn_on(e, v) {
-                return Err(inconsistent(
-                    &self.store,
-                    format!("edge {e} turns on but is already on"),
-                ));
-            }
-            if holes.pop().is_some() {
-                self.edges[v as usize] = e;
-                self.data[v as usize] = data;
-            } else {
-                self.edges.push(e);
-                self.data.push(data);
+        added_data.clear();
+        added_data.resize(added.len().min(BATCH), EdgeData::default());
+        for (first, batch) in (0..).step_by(BATCH).zip(added.chunks(BATCH)) {
+            let batch_data = &mut added_data[..batch.len()];
+            in_chunks(batch, batch_data, |e, d| edges_data(&self.store, e, d))?;
+            for (k, (&e, &data)) in (first..).zip(batch.iter().zip(batch_data.iter())) {
+                self.add_edge(added, holes, k, e, data)?;
             }
         }
         // Leftover holes: move vertices from the end into them.
@@ -895,33 +999,115 @@ impl Slider {
             }
         }
         // Cells around changed edges come back with their new case. Cases and triangles
-        // only read the store and HE (final by now): computed first, in parallel; then
-        // the cells go into the buckets and HC in ascending order, one thread.
+        // only read the store and HE (final by now): computed a batch at a time, in
+        // parallel; then the batch's cells go into the buckets and HC in ascending
+        // order, one thread.
         retriangulated.clear();
-        retriangulated.resize(dirty.len(), CellTriangles::default());
-        let reader = self.cells_reader();
-        in_chunks(dirty, retriangulated, |cells, out| {
-            reader.retriangulate(cells, out)
-        })?;
-        for (k, (&cell, new)) in dirty.iter().zip(retriangulated.iter()).enumerate() {
-            if let Some(&next) = dirty.get(k + AHEAD) {
-                self.hc.prefetch(grid_key(coords, next as usize));
+        retriangulated.resize(dirty.len().min(BATCH), CellTriangles::default());
+        for (first, batch) in (0..).step_by(BATCH).zip(dirty.chunks(BATCH)) {
+            let batch_out = &mut retriangulated[..batch.len()];
+            let reader = self.cells_reader();
+            in_chunks(batch, batch_out, |cells, out| {
+                reader.retriangulate(cells, out)
+            })?;
+            for (k, (&cell, new)) in (first..).zip(batch.iter().zip(batch_out.iter())) {
+                self.add_cell(dirty, k, cell, new, change);
             }
-            if new.count == 0 {
-                continue;
-            }
-            push_each(&mut change.added_triangles, new.triangles());
-            let b = &mut self.buckets[new.count as usize];
-            push_each(&mut b.triangles, new.triangles());
-            b.cells.push(cell);
-            let entry = CellEntry {
-                case: new.case,
-                bucket: new.count,
-                slot: (b.cells.len() - 1) as u32,
-            };
-            self.hc.insert(grid_key(coords, cell as usize), entry);
         }
         Ok(())
+    }
+
+    /// Turns on edge `e`, the `k`-th of `added`, whose interpolation data is `data`: its
+    /// vertex fills the hole at the end of `holes`, or is appended.
+    #[inline]
+    fn add_edge(
+        &mut self,
+        added: &[u32],
+        holes: &mut Vec<u32>,
+        k: usize,
+        e: u32,
+        data: EdgeData,
+    ) -> Result<()> {
+        if let Some(&next) = added.get(k + AHEAD) {
+            self.he.prefetch(next);
+        }
+        // Holes are taken from the end of `holes`: the one AHEAD later is written then.
+        if let Some(&h) = holes.len().checked_sub(AHEAD + 1).map(|i| &holes[i]) {
+            prefetch(&self.data[h as usize]);
+            prefetch(&self.edges[h as usize]);
+        }
+        let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
+        if !self.he.turn_on(e, v) {
+            return Err(inconsistent(
+                &self.store,
+                format!("edge {e} turns on but is already on"),
+            ));
+        }
+        if holes.pop().is_some() {
+            self.edges[v as usize] = e;
+            self.data[v as usize] = data;
+        } else {
+            self.edges.push(e);
+            self.data.push(data);
+        }
+        Ok(())
+    }
+
+    /// Puts dirty cell `cell`, the `k`-th of `dirty`, back with its new case and
+    /// triangles `new` (nothing when it has none).
+    #[inline]
+    fn add_cell(
+        &mut self,
+        dirty: &[u32],
+        k: usize,
+        cell: u32,
+        new: &CellTriangles,
+        change: &mut Change,
+    ) {
+        let coords = self.store.coords;
+        if let Some(&next) = dirty.get(k + AHEAD) {
+            self.hc.prefetch(grid_key(coords, next as usize));
+        }
+        if new.count == 0 {
+            return;
+        }
+        push_each(&mut change.added_triangles, new.triangles());
+        let b = &mut self.buckets[new.count as usize];
+        push_each(&mut b.triangles, new.triangles());
+        b.cells.push(cell);
+        let entry = CellEntry {
+            case: new.case,
+            bucket: new.count,
+            slot: (b.cells.len() - 1) as u32,
+        };
+        self.hc.insert(grid_key(coords, cell as usize), entry);
+    }
+
+    /// Cuts the surface's own lists and maps after it shrank a lot (see [`trim`],
+    /// [`BrickMap::release_free`]); true when any list was cut.
+    fn trim_surface_lists(&mut self) -> bool {
+        self.he.map.release_free();
+        self.hc.release_free();
+        let used = self.edges.len();
+        let mut cut = trim(&mut self.edges, used);
+        cut |= trim(&mut self.data, used);
+        let vertices = used;
+        for b in &mut self.buckets {
+            let used = b.triangles.len();
+            cut |= trim(&mut b.triangles, used);
+            let used = b.cells.len();
+            cut |= trim(&mut b.cells, used);
+        }
+        // The full arrays a host read before: the next read refills them.
+        let spare = self.spare_vertices.get_mut();
+        for v in [&mut spare.positions, &mut spare.normals] {
+            v.clear();
+            cut |= trim(v, vertices);
+        }
+        let triangles = self.triangle_count();
+        let spare = self.spare_triangles.get_mut();
+        spare.clear();
+        cut | trim(spare, triangles)
     }
 
     /// Removes a cell's triangles, filling the hole with the bucket's last cell.

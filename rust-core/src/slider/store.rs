@@ -376,6 +376,20 @@ impl Store {
         Ok(())
     }
 
+    /// Hands back the pages of ORDER, MASK and the levels (what a walk reads), keeping
+    /// those of VALUES (what the surface around the isovalue reads again).
+    pub(crate) fn release_lists(&self) {
+        // SAFETY: as in `verify`: the map is read-only and file-backed, and the file is
+        // not written while mapped, so dropped pages read back the same.
+        let _ = unsafe {
+            self.map.unchecked_advise_range(
+                memmap2::UncheckedAdvice::DontNeed,
+                self.order,
+                self.body_end - self.order,
+            )
+        };
+    }
+
     /// The file this store was opened from.
     pub fn path(&self) -> &Path {
         &self.path
