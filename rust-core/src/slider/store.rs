@@ -365,27 +365,28 @@ impl Store {
     pub fn verify(&self) -> Result<()> {
         self.ensure(self.body, self.body_end)?;
         // Verifying read every page; hand them back so that resident memory follows
-        // what the slider touches. The map is read-only and file-backed, so dropped
-        // pages are read again from the file when needed.
-        // SAFETY: no reference into the map's pages is held across this call that could
-        // observe different contents: the file is not written while mapped (see `open`).
-        let _ = unsafe {
-            self.map
-                .unchecked_advise(memmap2::UncheckedAdvice::DontNeed)
-        };
+        // what the slider touches.
+        self.release(0..self.map.len());
         Ok(())
     }
 
-    /// Hands back the pages of ORDER, MASK and the levels (what a walk reads), keeping
-    /// those of VALUES (what the surface around the isovalue reads again).
+    /// Hands back the pages of ORDER, MASK and the levels (what a walk reads).
     pub(crate) fn release_lists(&self) {
-        // SAFETY: as in `verify`: the map is read-only and file-backed, and the file is
-        // not written while mapped, so dropped pages read back the same.
+        self.release(self.order..self.body_end);
+    }
+
+    /// Drops the mapped pages of `bytes` from this process's resident memory (they stay
+    /// in the page cache and are read back on the next touch); the page holding the
+    /// range's first byte goes too.
+    fn release(&self, bytes: std::ops::Range<usize>) {
+        // SAFETY: the map is read-only and file-backed, and the file is not written
+        // while mapped (see `open`): no reference into the pages held across this call
+        // can observe different contents, as dropped pages are read back from the file.
         let _ = unsafe {
             self.map.unchecked_advise_range(
                 memmap2::UncheckedAdvice::DontNeed,
-                self.order,
-                self.body_end - self.order,
+                bytes.start,
+                bytes.len(),
             )
         };
     }
