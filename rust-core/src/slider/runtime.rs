@@ -200,7 +200,7 @@ struct Scratch {
     delta: Delta,
     /// One bit per cell, set while the cell is in `dirty` (or `reindex`): removes
     /// repeats and, read in order, gives the cells ascending without sorting (see
-    /// [`ascending_unique`]); cleared after each use. Cells/8 bytes, 1/32 of an f32
+    /// [`push_unique`], [`ascending`]); cleared after each use. Cells/8 bytes, 1/32 of an f32
     /// volume.
     marks: Vec<u64>,
     removed: Vec<u32>,
@@ -834,8 +834,9 @@ impl Slider {
         Ok(())
     }
 
-    /// The (up to four) cells around edge `e`.
-    fn edge_cells(lattice: &Lattice, coords: NodeCoords, e: u32, out: &mut Vec<u32>) {
+    /// Calls `each` with the (up to four) cells around edge `e`.
+    #[inline]
+    fn edge_cells(lattice: &Lattice, coords: NodeCoords, e: u32, mut each: impl FnMut(u32)) {
         let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
         let c = coords.coords(node);
         let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
@@ -847,7 +848,7 @@ impl Slider {
             cell[b] -= sb;
             cell[d] -= sd;
             if (0..3).all(|a| cell[a] + 1 < lattice.dims[a]) {
-                out.push(lattice.index(cell[0], cell[1], cell[2]) as u32);
+                each(lattice.index(cell[0], cell[1], cell[2]) as u32);
             }
         }
     }
@@ -917,9 +918,9 @@ impl Slider {
         change.edges_removed = removed.len() as u64;
         marks.resize(self.store.nodes.div_ceil(64), 0);
         for &e in removed.iter().chain(added.iter()) {
-            Self::edge_cells(&lattice, coords, e, dirty);
+            Self::edge_cells(&lattice, coords, e, |c| push_unique(dirty, marks, c));
         }
-        ascending_unique(dirty, marks);
+        ascending(dirty, marks);
 
         // Cells around changed edges change case: their triangles go.
         for (k, &cell) in dirty.iter().enumerate() {
@@ -986,9 +987,9 @@ impl Slider {
             self.data[h as usize] = d;
             self.he.set(e, h);
             change.moved_vertices.push(((last - 1) as u32, h));
-            Self::edge_cells(&lattice, coords, e, reindex);
+            Self::edge_cells(&lattice, coords, e, |c| push_unique(reindex, marks, c));
         }
-        ascending_unique(reindex, marks);
+        ascending(reindex, marks);
         for &cell in reindex.iter() {
             let key = grid_key(coords, cell as usize);
             if let Some(entry) = self.hc.get(key) {
@@ -1356,8 +1357,20 @@ fn push_each(out: &mut Vec<[u32; 3]>, tris: &[[u32; 3]]) {
 /// while the marked words' span is at most this many words per cell.
 const SCAN_WORDS_PER_CELL: usize = 8;
 
-/// Removes repeated cells from `cells` and leaves the rest in ascending order, using
-/// `marks` (one bit per cell, all clear on entry and on return).
+/// Appends `cell` to `cells` unless it is marked in `marks`, marking it: a cell around
+/// several changed edges is listed once, so the list is as long as the cells, not four
+/// times the edges.
+#[inline]
+fn push_unique(cells: &mut Vec<u32>, marks: &mut [u64], cell: u32) {
+    let (w, bit) = (cell as usize / 64, 1u64 << (cell % 64));
+    if marks[w] & bit == 0 {
+        marks[w] |= bit;
+        cells.push(cell);
+    }
+}
+
+/// Puts `cells` (listed by [`push_unique`]: each once, each marked in `marks`) in
+/// ascending order and clears their marks.
 ///
 /// The order is part of the output: dirty cells leave and re-enter their buckets in this
 /// order, so it decides the order of I. Ascending cell id (as the sort it replaces gave)
@@ -1366,19 +1379,13 @@ const SCAN_WORDS_PER_CELL: usize = 8;
 /// the changed cells are dense, the marked words are read in order (no sort); where they
 /// are sparse in a large volume, the unique cells are sorted instead, so the cost stays
 /// with the change and not the volume.
-fn ascending_unique(cells: &mut Vec<u32>, marks: &mut [u64]) {
-    let (mut first, mut last) = (usize::MAX, 0);
-    cells.retain(|&c| {
-        let (w, bit) = (c as usize / 64, 1u64 << (c % 64));
-        let new = marks[w] & bit == 0;
-        marks[w] |= bit;
-        first = first.min(w);
-        last = last.max(w);
-        new
-    });
-    if cells.is_empty() {
+fn ascending(cells: &mut Vec<u32>, marks: &mut [u64]) {
+    let Some((first, last)) = cells.iter().fold(None, |span, &c| {
+        let w = c as usize / 64;
+        Some(span.map_or((w, w), |(lo, hi): (usize, usize)| (lo.min(w), hi.max(w))))
+    }) else {
         return;
-    }
+    };
     if last - first < SCAN_WORDS_PER_CELL * cells.len() {
         cells.clear();
         for (w, word) in marks[first..=last].iter_mut().enumerate() {
@@ -1459,7 +1466,7 @@ mod tests {
     /// Unique cells in ascending order (what sort + dedup gives), by the bit scan when
     /// the cells are dense and by sorting when sparse, with every mark clear afterwards.
     #[test]
-    fn ascending_unique_is_sort_and_dedup() {
+    fn unique_then_ascending_is_sort_and_dedup() {
         let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let cells = 1usize << 20;
         let mut marks = vec![0u64; cells / 64];
@@ -1473,11 +1480,16 @@ mod tests {
             (top, 1, 1),
             (0, 1, 0),
         ] {
-            let mut list: Vec<u32> = (0..n).map(|_| (base + next() % span) as u32).collect();
-            let mut want = list.clone();
+            let drawn: Vec<u32> = (0..n).map(|_| (base + next() % span) as u32).collect();
+            let mut want = drawn.clone();
             want.sort_unstable();
             want.dedup();
-            ascending_unique(&mut list, &mut marks);
+            let mut list = Vec::new();
+            for &c in &drawn {
+                push_unique(&mut list, &mut marks, c);
+            }
+            assert_eq!(list.len(), want.len(), "each cell listed once");
+            ascending(&mut list, &mut marks);
             assert_eq!(list, want, "{n} cells from {base} on");
             assert!(marks.iter().all(|&w| w == 0), "marks left set");
         }
