@@ -234,8 +234,8 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// Frees the values of emptied bricks beyond as many as are in use: a map whose keys
     /// shrank to a few (a surface after a jump) then holds about twice its bricks, not
     /// those of its widest extent, while one whose keys move at a steady size keeps
-    /// reusing its free bricks without allocating.
-    pub fn release_free(&mut self) {
+    /// reusing its free bricks without allocating. Returns how many bricks it freed.
+    pub fn release_free(&mut self) -> usize {
         let in_use = self.meta.len() - self.free.len();
         let holding = self.free.len() - self.released;
         let extra = holding.saturating_sub(in_use.max(1));
@@ -246,6 +246,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             self.values[i as usize] = Box::default();
         }
         self.released += extra;
+        extra
     }
 
     /// Removes every key and drops the bricks (the dense index keeps its size).
@@ -829,7 +830,9 @@ mod tests {
             for b in 0..3 {
                 map.remove(VirtualGrid::key(b * side, 1, 2));
             }
-            map.release_free();
+            // Three emptied, one in use: two freed, and nothing more on a second call.
+            assert_eq!(map.release_free(), 2);
+            assert_eq!(map.release_free(), 0);
             let brick = BrickShape::<S>::KEYS * 8;
             assert!(
                 map.bytes() + 2 * brick as u64 <= full,

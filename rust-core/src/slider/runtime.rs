@@ -77,8 +77,11 @@ impl EdgeData {
     }
 }
 
-/// The triangles of one cell: where they sit in the bucketed lists.
+/// The triangles of one cell: where they sit in the bucketed lists. Packed: 6 bytes,
+/// not 8, for each of the lattice's 512 cells of every brick HC holds (the surface
+/// crosses about a tenth of a brick's cells, so HC is mostly unused entries).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(C, packed)]
 struct CellEntry {
     case: u8,
     /// Triangles per cell of the bucket (0 never stored).
@@ -431,6 +434,8 @@ impl EdgeVertices {
 /// HC: case and bucket slot of each active cell, keyed by the cell's lower node
 /// ([`grid_key`]).
 type CellTable = BrickMap<CellEntry>;
+
+const _: () = assert!(std::mem::size_of::<CellEntry>() == 6);
 
 /// An isosurface that slides: open a store, set isovalues, read the arrays.
 ///
@@ -1085,12 +1090,11 @@ impl Slider {
     }
 
     /// Cuts the surface's own lists and maps after it shrank a lot (see [`trim`],
-    /// [`BrickMap::release_free`]); true when any list was cut.
+    /// [`BrickMap::release_free`]); true when any list was cut or brick freed.
     fn trim_surface_lists(&mut self) -> bool {
-        self.he.map.release_free();
-        self.hc.release_free();
+        let mut cut = self.he.map.release_free() + self.hc.release_free() > 0;
         let used = self.edges.len();
-        let mut cut = trim(&mut self.edges, used);
+        cut |= trim(&mut self.edges, used);
         cut |= trim(&mut self.data, used);
         let vertices = used;
         for b in &mut self.buckets {
