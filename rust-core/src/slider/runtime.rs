@@ -613,7 +613,8 @@ impl Slider {
     /// Bytes the slider holds in its own memory (HE, HC, E and its interpolation data,
     /// the buckets, the scratch lists, the full arrays last read; not the LOD mesh); the
     /// store's mapped pages are not counted. After an update it follows the surface: what a larger
-    /// surface left behind is given back (at most about twice what is in use stays).
+    /// surface left behind is given back (a list keeps at most four times what the last
+    /// update used, or 64 KiB; the brick maps about twice the bricks in use).
     pub fn held_bytes(&self) -> u64 {
         fn cap<T>(v: &Vec<T>) -> u64 {
             (v.capacity() * std::mem::size_of::<T>()) as u64
