@@ -17,6 +17,12 @@ const DIGIT_BITS: u32 = 11;
 /// Below this many items a comparison sort is as quick and allocates nothing.
 const SMALL: usize = 512;
 
+/// Below this many items the passes run on the calling thread: handing a pass to rayon's
+/// workers and waiting for them costs tens of microseconds (the slider's 5,000-pair
+/// updates spent 200 µs of 1,600 in those round trips), more than counting a few
+/// thousand items.
+const PARALLEL_FROM: usize = 1 << 16;
+
 /// Sorts `items` ascending by `key(item)` (stable).
 pub fn sort_by_key<T, F>(items: &mut Vec<T>, key: F)
 where
@@ -38,10 +44,14 @@ where
         return;
     }
     let first = key(&items[0]);
-    let varying = items
-        .par_iter()
-        .fold(|| 0u64, |m, t| m | (key(t) ^ first))
-        .reduce(|| 0, |a, b| a | b);
+    let varying = if items.len() < PARALLEL_FROM {
+        items.iter().fold(0u64, |m, t| m | (key(t) ^ first))
+    } else {
+        items
+            .par_iter()
+            .fold(|| 0u64, |m, t| m | (key(t) ^ first))
+            .reduce(|| 0, |a, b| a | b)
+    };
     let mut from = std::mem::take(items);
     let mut to = std::mem::take(spare);
     let mut rest = varying;
@@ -74,18 +84,25 @@ where
     F: Fn(&T) -> usize + Sync,
 {
     const BUCKETS: usize = 1 << DIGIT_BITS;
-    let chunk = from.len().div_ceil(rayon::current_num_threads()).max(SMALL);
+    let count = |part: &[T]| {
+        let mut counts = Box::new([0usize; BUCKETS]);
+        for t in part {
+            counts[digit(t) & (BUCKETS - 1)] += 1;
+        }
+        counts
+    };
+    let parallel = from.len() >= PARALLEL_FROM;
+    let chunk = if parallel {
+        from.len().div_ceil(rayon::current_num_threads()).max(SMALL)
+    } else {
+        from.len()
+    };
     // Digits are masked to BUCKETS - 1 at each use, so no index needs a bounds check.
-    let mut starts: Vec<Box<[usize; BUCKETS]>> = from
-        .par_chunks(chunk)
-        .map(|part| {
-            let mut counts = Box::new([0usize; BUCKETS]);
-            for t in part {
-                counts[digit(t) & (BUCKETS - 1)] += 1;
-            }
-            counts
-        })
-        .collect();
+    let mut starts: Vec<Box<[usize; BUCKETS]>> = if parallel {
+        from.par_chunks(chunk).map(count).collect()
+    } else {
+        vec![count(from)]
+    };
     let mut total = 0;
     for d in 0..BUCKETS {
         for counts in starts.iter_mut() {
@@ -97,20 +114,25 @@ where
     to.clear();
     to.reserve(from.len());
     let out = Out(to.as_mut_ptr());
-    from.par_chunks(chunk)
-        .zip(starts.par_iter())
-        .for_each(|(part, first)| {
-            // A local copy of the cursors: the compiler then knows the writes through
-            // `out` cannot change them, and keeps them out of memory round trips.
-            let mut next = **first;
-            for t in part {
-                let d = digit(t) & (BUCKETS - 1);
-                // SAFETY: `next[d]` walks this chunk's own slots for digit d, which no
-                // other chunk writes, and every slot is below from.len() <= capacity.
-                unsafe { out.at(next[d]).write(*t) };
-                next[d] += 1;
-            }
-        });
+    let place = |part: &[T], first: &[usize; BUCKETS]| {
+        // A local copy of the cursors: the compiler then knows the writes through
+        // `out` cannot change them, and keeps them out of memory round trips.
+        let mut next = *first;
+        for t in part {
+            let d = digit(t) & (BUCKETS - 1);
+            // SAFETY: `next[d]` walks this chunk's own slots for digit d, which no
+            // other chunk writes, and every slot is below from.len() <= capacity.
+            unsafe { out.at(next[d]).write(*t) };
+            next[d] += 1;
+        }
+    };
+    if parallel {
+        from.par_chunks(chunk)
+            .zip(starts.par_iter())
+            .for_each(|(part, first)| place(part, first));
+    } else {
+        place(from, &starts[0]);
+    }
     // SAFETY: the counts give each item of `from` exactly one distinct slot, so every
     // index of 0..from.len() was written above.
     unsafe { to.set_len(from.len()) };
@@ -168,22 +190,24 @@ mod tests {
     fn is_stable_and_keeps_every_item() {
         // Items with equal keys keep their input order: the payload is the input index.
         let mut next = crate::test_rng::lcg(3);
-        let mut items: Vec<(u64, u32)> = (0..10_000)
-            .map(|i| (VirtualGrid::key(0, (next() % 40) as u32, 9), i))
-            .collect();
-        let mut expected = items.clone();
-        expected.sort_by_key(|t| t.0);
-        // Uneven chunks across three threads: each chunk's share of a digit must land
-        // after the earlier chunks' share.
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(3)
-            .build()
-            .unwrap();
-        let mut threaded = items.clone();
-        pool.install(|| sort_by_key(&mut threaded, |t| t.0));
-        assert_eq!(threaded, expected);
-        sort_by_key(&mut items, |t| t.0);
-        assert_eq!(items, expected);
+        for n in [10_000, PARALLEL_FROM + 1_000] {
+            let mut items: Vec<(u64, u32)> = (0..n)
+                .map(|i| (VirtualGrid::key(0, (next() % 40) as u32, 9), i as u32))
+                .collect();
+            let mut expected = items.clone();
+            expected.sort_by_key(|t| t.0);
+            // Uneven chunks across three threads (the long list): each chunk's share of
+            // a digit must land after the earlier chunks' share.
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(3)
+                .build()
+                .unwrap();
+            let mut threaded = items.clone();
+            pool.install(|| sort_by_key(&mut threaded, |t| t.0));
+            assert_eq!(threaded, expected);
+            sort_by_key(&mut items, |t| t.0);
+            assert_eq!(items, expected);
+        }
     }
 
     #[test]

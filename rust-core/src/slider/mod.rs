@@ -17,6 +17,7 @@ pub mod full;
 pub mod lod;
 pub mod runtime;
 pub mod store;
+mod window;
 
 pub use build::{build_store, BuildParams, BuildStats};
 pub use lod::{LodMesh, LodParams};

@@ -28,6 +28,7 @@
 use super::build::node_edges;
 use super::lod::{self, LodMesh, LodParams};
 use super::store::Store;
+use super::window::CellWindow;
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice, NodeCoords};
 use crate::mc::bricks::BrickMap;
@@ -201,11 +202,13 @@ impl Delta {
 #[derive(Default)]
 struct Scratch {
     delta: Delta,
-    /// One bit per cell, set while the cell is in `dirty` (or `reindex`): removes
-    /// repeats and, read in order, gives the cells ascending without sorting (see
-    /// [`push_unique`], [`ascending`]); cleared after each use. Cells/8 bytes, 1/32 of an f32
-    /// volume.
+    /// One bit per cell, set while the cell is in `reindex`: removes repeats and, read
+    /// in order, gives the cells ascending without sorting (see [`push_unique`],
+    /// [`ascending`]); cleared after each use. Cells/8 bytes, 1/32 of an f32 volume,
+    /// allocated when some vertex first moves.
     marks: Vec<u64>,
+    /// Lists `dirty` from the changed edges, once each and ascending.
+    window: CellWindow,
     removed: Vec<u32>,
     added: Vec<u32>,
     dirty: Vec<u32>,
@@ -295,13 +298,11 @@ impl CellTriangles {
     }
 }
 
-/// Index steps from a cell (its lower corner's node index) to its eight corners and, in
-/// edge ids (`node · 3 + axis`), to its twelve edges: computed once per lattice, so the
-/// per-cell work of an update (cases of dirty cells, HE lookups of their triangles) adds
-/// one offset instead of rebuilding each corner from the case table's bits and strides.
+/// Steps in edge ids (`node · 3 + axis`) from a cell (its lower corner's node index) to
+/// its twelve edges, computed once per lattice: an inconsistent store's error names the
+/// missing edge.
 #[derive(Clone, Copy, Debug)]
 struct CellOffsets {
-    corners: [usize; 8],
     edges: [usize; 12],
 }
 
@@ -314,7 +315,6 @@ impl CellOffsets {
                 .sum::<usize>()
         };
         CellOffsets {
-            corners: std::array::from_fn(corner),
             edges: std::array::from_fn(|local| {
                 let (k, axis) = edge_corner_axis(local);
                 3 * corner(k) + axis
@@ -458,7 +458,7 @@ pub struct Slider {
     all_triangles: OnceCell<Vec<[u32; 3]>>,
     spare_triangles: RefCell<Vec<[u32; 3]>>,
     scratch: Scratch,
-    /// Index steps from a cell to its corners and edges, fixed by the lattice.
+    /// Steps from a cell to its edges' ids, fixed by the lattice.
     offsets: CellOffsets,
     stats: SliderStats,
     /// Level of detail asked for (error bound 0: off, the LOD mesh is the exact one).
@@ -623,6 +623,7 @@ impl Slider {
         let lists = cap(&s.delta.pairs)
             + cap(&s.delta.spare)
             + cap(&s.marks)
+            + s.window.held_bytes()
             + [&s.removed, &s.added, &s.dirty, &s.holes, &s.reindex]
                 .into_iter()
                 .map(cap)
@@ -731,7 +732,13 @@ impl Slider {
         let applied = walked.and_then(|()| {
             self.rank = target;
             self.iso = iso;
-            self.apply(&delta, &mut change)
+            if delta.pairs.len() >= PARALLEL_MIN {
+                // On one of rayon's threads: its parallel phases then wake one worker
+                // each, not two plus this thread.
+                rayon::scope(|_| self.apply(&delta, &mut change))
+            } else {
+                self.apply(&delta, &mut change)
+            }
         });
         self.scratch.delta = delta;
         let cut = self.scratch.trim() | self.trim_surface_lists();
@@ -889,6 +896,7 @@ impl Slider {
         let coords = self.store.coords;
         let Scratch {
             marks,
+            window,
             removed,
             added,
             dirty,
@@ -922,62 +930,78 @@ impl Slider {
         }
         change.edges_added = added.len() as u64;
         change.edges_removed = removed.len() as u64;
-        marks.resize(self.store.nodes.div_ceil(64), 0);
-        for &e in removed.iter().chain(added.iter()) {
-            Self::edge_cells(&lattice, coords, e, |c| push_unique(dirty, marks, c));
-        }
-        ascending(dirty, marks);
-
-        // Cells around changed edges change case: their triangles go.
-        for (k, &cell) in dirty.iter().enumerate() {
-            // Two stages: HC entries far ahead, then (their entries now cached) the
-            // triangles they point to nearer.
-            if let Some(&next) = dirty.get(k + AHEAD) {
-                self.hc.prefetch(grid_key(coords, next as usize));
+        // Two chains that share nothing but the store, side by side: the cells around
+        // changed edges leave HC and the buckets (their triangles go), while the edges
+        // out leave holes in E that the edges in fill (their interpolation data computed
+        // a batch at a time, in parallel: it only reads the store).
+        let Slider {
+            store,
+            edges,
+            data,
+            he,
+            hc,
+            buckets,
+            ..
+        } = &mut *self;
+        let store = &*store;
+        let removed_triangles = &mut change.removed_triangles;
+        let mut cells = CellSide {
+            coords,
+            hc,
+            buckets,
+        };
+        let cells_out = || {
+            // `removed` and `added` are ascending and disjoint: merged, the edges come
+            // ascending, and their cells at most a slab and a row below their nodes.
+            window.start(lattice.stride(1) + lattice.stride(2));
+            let (mut r, mut a) = (removed.iter().peekable(), added.iter().peekable());
+            while let Some(e) = match (r.peek(), a.peek()) {
+                (Some(&&x), Some(&&y)) if x < y => r.next(),
+                (_, Some(_)) => a.next(),
+                _ => r.next(),
+            } {
+                window.advance(*e as usize / 3, dirty);
+                Self::edge_cells(&lattice, coords, *e, |c| window.mark(c));
             }
-            if let Some(&next) = dirty.get(k + AHEAD / 2) {
-                if let Some(entry) = self.hc.get(grid_key(coords, next as usize)) {
-                    let b = &self.buckets[entry.bucket as usize];
-                    if let Some(t) = b.triangles.get(entry.slot as usize * b.size) {
-                        prefetch(t);
-                    }
+            window.finish(dirty);
+            for (k, &cell) in dirty.iter().enumerate() {
+                cells.take_out(dirty, k, cell, removed_triangles);
+            }
+        };
+        let mut vertices = EdgeSide {
+            store,
+            edges,
+            data,
+            he,
+        };
+        let edges_out_in = || -> Result<()> {
+            for (k, &e) in removed.iter().enumerate() {
+                if let Some(&next) = removed.get(k + AHEAD) {
+                    vertices.he.prefetch(next);
+                }
+                holes.push(vertices.turn_off(e)?);
+            }
+            holes.sort_unstable_by(|a, b| b.cmp(a));
+            added_data.clear();
+            added_data.resize(added.len().min(BATCH), EdgeData::default());
+            for (first, batch) in (0..).step_by(BATCH).zip(added.chunks(BATCH)) {
+                let batch_data = &mut added_data[..batch.len()];
+                in_chunks(batch, batch_data, |e, d| edges_data(store, e, d))?;
+                for (k, (&e, &d)) in (first..).zip(batch.iter().zip(batch_data.iter())) {
+                    vertices.turn_on(added, holes, k, e, d)?;
                 }
             }
-            if let Some(entry) = self.hc.remove(grid_key(coords, cell as usize)) {
-                let b = &self.buckets[entry.bucket as usize];
-                let s = entry.slot as usize * b.size;
-                push_each(&mut change.removed_triangles, &b.triangles[s..s + b.size]);
-                self.remove_slot(entry);
-            }
-        }
-        // Edges out leave holes ...
-        for (k, &e) in removed.iter().enumerate() {
-            if let Some(&next) = removed.get(k + AHEAD) {
-                self.he.prefetch(next);
-            }
-            let Some(v) = self.he.turn_off(e) else {
-                return Err(inconsistent(
-                    &self.store,
-                    format!("edge {e} turns off but is not on"),
-                ));
-            };
-            self.edges[v as usize] = u32::MAX;
-            holes.push(v);
-        }
-        // ... that edges in fill first. What they interpolate from only reads the store:
-        // computed a batch at a time, in parallel.
-        holes.sort_unstable_by(|a, b| b.cmp(a));
-        added_data.clear();
-        added_data.resize(added.len().min(BATCH), EdgeData::default());
-        for (first, batch) in (0..).step_by(BATCH).zip(added.chunks(BATCH)) {
-            let batch_data = &mut added_data[..batch.len()];
-            in_chunks(batch, batch_data, |e, d| edges_data(&self.store, e, d))?;
-            for (k, (&e, &data)) in (first..).zip(batch.iter().zip(batch_data.iter())) {
-                self.add_edge(added, holes, k, e, data)?;
-            }
-        }
+            Ok(())
+        };
+        let ((), edges_done) = both(
+            added.len() + removed.len() >= PARALLEL_MIN,
+            cells_out,
+            edges_out_in,
+        );
+        edges_done?;
         // Leftover holes: move vertices from the end into them.
         holes.sort_unstable();
+        marks.resize(self.store.nodes.div_ceil(64), 0);
         for &h in holes.iter() {
             while self.edges.last() == Some(&u32::MAX) {
                 self.edges.pop();
@@ -1009,85 +1033,36 @@ impl Slider {
         // only read the store and HE (final by now): computed a batch at a time, in
         // parallel; then the batch's cells go into the buckets and HC in ascending
         // order, one thread.
+        let Slider {
+            store,
+            he,
+            hc,
+            buckets,
+            offsets,
+            iso,
+            ..
+        } = &mut *self;
+        let reader = CellReader {
+            store: &*store,
+            he: &*he,
+            offsets: &*offsets,
+            iso: *iso,
+        };
+        let mut cells = CellSide {
+            coords,
+            hc,
+            buckets,
+        };
         retriangulated.clear();
         retriangulated.resize(dirty.len().min(BATCH), CellTriangles::default());
         for (first, batch) in (0..).step_by(BATCH).zip(dirty.chunks(BATCH)) {
             let batch_out = &mut retriangulated[..batch.len()];
-            let reader = self.cells_reader();
-            in_chunks(batch, batch_out, |cells, out| {
-                reader.retriangulate(cells, out)
-            })?;
+            in_chunks(batch, batch_out, |c, out| reader.retriangulate(c, out))?;
             for (k, (&cell, new)) in (first..).zip(batch.iter().zip(batch_out.iter())) {
-                self.add_cell(dirty, k, cell, new, change);
+                cells.put_back(dirty, k, cell, new, &mut change.added_triangles);
             }
         }
         Ok(())
-    }
-
-    /// Turns on edge `e`, the `k`-th of `added`, whose interpolation data is `data`: its
-    /// vertex fills the hole at the end of `holes`, or is appended.
-    #[inline]
-    fn add_edge(
-        &mut self,
-        added: &[u32],
-        holes: &mut Vec<u32>,
-        k: usize,
-        e: u32,
-        data: EdgeData,
-    ) -> Result<()> {
-        if let Some(&next) = added.get(k + AHEAD) {
-            self.he.prefetch(next);
-        }
-        // Holes are taken from the end of `holes`: the one AHEAD later is written then.
-        if let Some(&h) = holes.len().checked_sub(AHEAD + 1).map(|i| &holes[i]) {
-            prefetch(&self.data[h as usize]);
-            prefetch(&self.edges[h as usize]);
-        }
-        let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
-        if !self.he.turn_on(e, v) {
-            return Err(inconsistent(
-                &self.store,
-                format!("edge {e} turns on but is already on"),
-            ));
-        }
-        if holes.pop().is_some() {
-            self.edges[v as usize] = e;
-            self.data[v as usize] = data;
-        } else {
-            self.edges.push(e);
-            self.data.push(data);
-        }
-        Ok(())
-    }
-
-    /// Puts dirty cell `cell`, the `k`-th of `dirty`, back with its new case and
-    /// triangles `new` (nothing when it has none).
-    #[inline]
-    fn add_cell(
-        &mut self,
-        dirty: &[u32],
-        k: usize,
-        cell: u32,
-        new: &CellTriangles,
-        change: &mut Change,
-    ) {
-        let coords = self.store.coords;
-        if let Some(&next) = dirty.get(k + AHEAD) {
-            self.hc.prefetch(grid_key(coords, next as usize));
-        }
-        if new.count == 0 {
-            return;
-        }
-        push_each(&mut change.added_triangles, new.triangles());
-        let b = &mut self.buckets[new.count as usize];
-        push_each(&mut b.triangles, new.triangles());
-        b.cells.push(cell);
-        let entry = CellEntry {
-            case: new.case,
-            bucket: new.count,
-            slot: (b.cells.len() - 1) as u32,
-        };
-        self.hc.insert(grid_key(coords, cell as usize), entry);
     }
 
     /// Cuts the surface's own lists and maps after it shrank a lot (see [`trim`],
@@ -1116,24 +1091,6 @@ impl Slider {
         cut | trim(spare, triangles)
     }
 
-    /// Removes a cell's triangles, filling the hole with the bucket's last cell.
-    fn remove_slot(&mut self, entry: CellEntry) {
-        let b = &mut self.buckets[entry.bucket as usize];
-        let last = b.cells.len() - 1;
-        let slot = entry.slot as usize;
-        if slot != last {
-            let moved = b.cells[last];
-            b.triangles
-                .copy_within(last * b.size..(last + 1) * b.size, slot * b.size);
-            b.cells[slot] = moved;
-            if let Some(m) = (self.hc).get_mut(grid_key(self.store.coords, moved as usize)) {
-                m.slot = slot as u32;
-            }
-        }
-        b.cells.pop();
-        b.triangles.truncate(last * b.size);
-    }
-
     /// Computes V and N from E into `out`, reusing its memory.
     fn compute_vertices(&self, out: &mut Vertices) {
         let lattice = *self.store.lattice();
@@ -1153,6 +1110,151 @@ impl Slider {
                 *p = q.as_vec3().to_array();
                 *nrm = m;
             });
+    }
+}
+
+/// The surface's cells, borrowed apart from its vertices so that edges and cells can
+/// change side by side: HC and the buckets of triangles.
+struct CellSide<'a> {
+    coords: NodeCoords,
+    hc: &'a mut CellTable,
+    buckets: &'a mut [Bucket],
+}
+
+impl CellSide<'_> {
+    /// Takes dirty cell `cell`, the `k`-th of `dirty`, out of HC and its bucket (if it
+    /// had triangles), its triangles appended to `removed`.
+    #[inline]
+    fn take_out(&mut self, dirty: &[u32], k: usize, cell: u32, removed: &mut Vec<[u32; 3]>) {
+        let coords = self.coords;
+        // Two stages: HC entries far ahead, then (their entries now cached) the
+        // triangles they point to nearer.
+        if let Some(&next) = dirty.get(k + AHEAD) {
+            self.hc.prefetch(grid_key(coords, next as usize));
+        }
+        if let Some(&next) = dirty.get(k + AHEAD / 2) {
+            if let Some(entry) = self.hc.get(grid_key(coords, next as usize)) {
+                let b = &self.buckets[entry.bucket as usize];
+                if let Some(t) = b.triangles.get(entry.slot as usize * b.size) {
+                    prefetch(t);
+                }
+            }
+        }
+        if let Some(entry) = self.hc.remove(grid_key(coords, cell as usize)) {
+            let b = &self.buckets[entry.bucket as usize];
+            let s = entry.slot as usize * b.size;
+            push_each(removed, &b.triangles[s..s + b.size]);
+            self.remove_slot(entry);
+        }
+    }
+
+    /// Removes a cell's triangles (its HC entry `entry`, already taken out of HC),
+    /// filling the hole with the bucket's last cell.
+    fn remove_slot(&mut self, entry: CellEntry) {
+        let b = &mut self.buckets[entry.bucket as usize];
+        let last = b.cells.len() - 1;
+        let slot = entry.slot as usize;
+        if slot != last {
+            let moved = b.cells[last];
+            b.triangles
+                .copy_within(last * b.size..(last + 1) * b.size, slot * b.size);
+            b.cells[slot] = moved;
+            if let Some(m) = self.hc.get_mut(grid_key(self.coords, moved as usize)) {
+                m.slot = slot as u32;
+            }
+        }
+        b.cells.pop();
+        b.triangles.truncate(last * b.size);
+    }
+
+    /// Puts dirty cell `cell`, the `k`-th of `dirty`, back with its new case and
+    /// triangles `new` (nothing when it has none), its triangles appended to `added`.
+    #[inline]
+    fn put_back(
+        &mut self,
+        dirty: &[u32],
+        k: usize,
+        cell: u32,
+        new: &CellTriangles,
+        added: &mut Vec<[u32; 3]>,
+    ) {
+        let coords = self.coords;
+        if let Some(&next) = dirty.get(k + AHEAD) {
+            self.hc.prefetch(grid_key(coords, next as usize));
+        }
+        if new.count == 0 {
+            return;
+        }
+        push_each(added, new.triangles());
+        let b = &mut self.buckets[new.count as usize];
+        push_each(&mut b.triangles, new.triangles());
+        b.cells.push(cell);
+        let entry = CellEntry {
+            case: new.case,
+            bucket: new.count,
+            slot: (b.cells.len() - 1) as u32,
+        };
+        self.hc.insert(grid_key(coords, cell as usize), entry);
+    }
+}
+
+/// The surface's vertices, borrowed apart from its cells so that edges and cells can
+/// change side by side: E, the interpolation data parallel to it, and HE.
+struct EdgeSide<'a> {
+    store: &'a Store,
+    edges: &'a mut Vec<u32>,
+    data: &'a mut Vec<EdgeData>,
+    he: &'a mut EdgeVertices,
+}
+
+impl EdgeSide<'_> {
+    /// Turns edge `e` off, returning the vertex it leaves free (a hole in E).
+    #[inline]
+    fn turn_off(&mut self, e: u32) -> Result<u32> {
+        let Some(v) = self.he.turn_off(e) else {
+            return Err(inconsistent(
+                self.store,
+                format!("edge {e} turns off but is not on"),
+            ));
+        };
+        self.edges[v as usize] = u32::MAX;
+        Ok(v)
+    }
+
+    /// Turns on edge `e`, the `k`-th of `added`, whose interpolation data is `data`: its
+    /// vertex fills the hole at the end of `holes`, or is appended.
+    #[inline]
+    fn turn_on(
+        &mut self,
+        added: &[u32],
+        holes: &mut Vec<u32>,
+        k: usize,
+        e: u32,
+        data: EdgeData,
+    ) -> Result<()> {
+        if let Some(&next) = added.get(k + AHEAD) {
+            self.he.prefetch(next);
+        }
+        // Holes are taken from the end of `holes`: the one AHEAD later is written then.
+        if let Some(&h) = holes.len().checked_sub(AHEAD + 1).map(|i| &holes[i]) {
+            prefetch(&self.data[h as usize]);
+            prefetch(&self.edges[h as usize]);
+        }
+        let v = holes.last().copied().unwrap_or(self.edges.len() as u32);
+        if !self.he.turn_on(e, v) {
+            return Err(inconsistent(
+                self.store,
+                format!("edge {e} turns on but is already on"),
+            ));
+        }
+        if holes.pop().is_some() {
+            self.edges[v as usize] = e;
+            self.data[v as usize] = data;
+        } else {
+            self.edges.push(e);
+            self.data.push(data);
+        }
+        Ok(())
     }
 }
 
@@ -1183,6 +1285,20 @@ fn in_chunks<I: Sync, O: Send>(
     (items.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK))).try_for_each(|(i, o)| f(i, o))
 }
 
+/// Runs `a` and `b`, side by side on rayon's threads when `parallel` (waking them costs
+/// more than a small update's work), else one after the other here.
+fn both<A: Send, B: Send>(
+    parallel: bool,
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    if parallel {
+        rayon::join(a, b)
+    } else {
+        (a(), b())
+    }
+}
+
 /// What re-triangulating a cell reads (the store's values, HE, the isovalue): shared by
 /// the threads of an update's parallel phase.
 #[derive(Clone, Copy)]
@@ -1200,64 +1316,66 @@ impl CellReader<'_> {
             if let Some(&next) = cells.get(k + AHEAD) {
                 self.prefetch(next);
             }
-            let case = self.case_of(cell)?;
             let key = grid_key(self.store.coords, cell as usize);
-            *new = self.triangles(cell, key, case)?;
+            let around = self.he.around(key);
+            if around == [[NO_VERTEX; 3]; 8] {
+                // No edge on: the cell is all above or all below, and has no triangles.
+                *new = CellTriangles::default();
+                continue;
+            }
+            let case =
+                case_from_edges(&around, self.lower_corner_above(cell)?).ok_or_else(|| {
+                    inconsistent(
+                        self.store,
+                        format!("the edges on in cell {cell} do not split its corners"),
+                    )
+                })?;
+            *new = self.triangles_around(cell, &around, case)?;
         }
         Ok(())
     }
 
-    /// Starts loading what re-triangulating `cell` reads: its corner values (four
-    /// lines: the x pairs share one) and its edges' vertices in HE.
+    /// Starts loading what re-triangulating `cell` reads: its lower corner's value and
+    /// its edges' vertices in HE.
     #[inline]
     fn prefetch(&self, cell: u32) {
         let lattice = self.store.lattice();
         let (cell, y, z) = (cell as usize, lattice.stride(1), lattice.stride(2));
+        self.store.prefetch_value(cell);
         for node in [cell, cell + y, cell + z, cell + y + z] {
-            self.store.prefetch_value(node);
             self.he.map.prefetch(grid_key(self.store.coords, node));
         }
     }
 
-    /// Case of `cell` at the current isovalue (bit c: corner c above it).
+    /// Whether `cell`'s lower corner lies above the current isovalue.
     #[inline]
-    fn case_of(&self, cell: u32) -> Result<u8> {
-        // Corners in verified chunks (all but the first read of a region): a bit test and
-        // a load each, no error plumbing.
-        let mut case = 0u8;
-        let mut verified = true;
-        for (k, &offset) in self.offsets.corners.iter().enumerate() {
-            match self.store.verified_value(cell as usize + offset) {
-                Some(v) => case |= u8::from(v as f64 > self.iso) << k,
-                None => verified = false,
-            }
-        }
-        if verified {
-            return Ok(case);
-        }
-        let mut case = 0u8;
-        for (k, &offset) in self.offsets.corners.iter().enumerate() {
-            let v = self.store.checked_value(cell as usize + offset)?;
-            if v as f64 > self.iso {
-                case |= 1 << k;
-            }
-        }
-        Ok(case)
+    fn lower_corner_above(&self, cell: u32) -> Result<bool> {
+        let v = match self.store.verified_value(cell as usize) {
+            Some(v) => v,
+            None => self.store.checked_value(cell as usize)?,
+        };
+        Ok(v as f64 > self.iso)
     }
 
-    /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE. The
-    /// cell's edges come from one HE brick lookup (eight where the cell straddles bricks).
+    /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE.
     fn triangles(&self, cell: u32, key: u64, case: u8) -> Result<CellTriangles> {
+        self.triangles_around(cell, &self.he.around(key), case)
+    }
+
+    /// Triangles of `cell` in `case` from its edges' vertices `around` (one HE brick
+    /// lookup, eight where the cell straddles bricks).
+    fn triangles_around(
+        &self,
+        cell: u32,
+        around: &[[u32; 3]; 8],
+        case: u8,
+    ) -> Result<CellTriangles> {
         let table = &case_table().triangles[case as usize];
         let mut out = CellTriangles {
             case,
             count: table.len() as u8,
             ..CellTriangles::default()
         };
-        if table.is_empty() {
-            return Ok(out);
-        }
-        let around = self.he.around(key);
         for (tri, slot) in table.iter().zip(out.triangles.iter_mut()) {
             for (k, &local) in tri.iter().enumerate() {
                 let (corner, axis) = EDGE_CORNER_AXIS[local as usize];
@@ -1273,6 +1391,32 @@ impl CellReader<'_> {
         }
         Ok(out)
     }
+}
+
+/// Case of a cell (bit c: corner c above the isovalue) from which of its twelve edges are
+/// on (`around`, [`EdgeVertices::around`]) and whether its lower corner is above: each
+/// corner differs from the one before it along its highest axis exactly where that edge
+/// is on. One value read where reading the eight corners took four lines of the volume;
+/// `None` when some edge contradicts the corners so found (a corrupt store).
+fn case_from_edges(around: &[[u32; 3]; 8], lower_above: bool) -> Option<u8> {
+    let on = |corner: usize, axis: usize| around[corner][axis] != NO_VERTEX;
+    let mut above = [lower_above; 8];
+    for c in 1..8usize {
+        let axis = c.ilog2() as usize;
+        let from = c ^ 1 << axis;
+        above[c] = above[from] ^ on(from, axis);
+    }
+    let mut case = 0u8;
+    for (c, &a) in above.iter().enumerate() {
+        case |= u8::from(a) << c;
+    }
+    EDGE_CORNER_AXIS
+        .iter()
+        .all(|&(c, axis)| {
+            let (c, axis) = (c as usize, axis as usize);
+            on(c, axis) == (above[c] != above[c | 1 << axis])
+        })
+        .then_some(case)
 }
 
 /// Interpolation data of each of `edges` into `out`, checking that each is a lattice edge.
@@ -1404,7 +1548,7 @@ fn ascending(cells: &mut Vec<u32>, marks: &mut [u64]) {
         for &c in cells.iter() {
             marks[c as usize / 64] &= !(1u64 << (c % 64));
         }
-        cells.sort_unstable();
+        radix::sort_by_key(cells, |&c| c as u64);
     }
 }
 
@@ -1437,6 +1581,34 @@ mod tests {
             state ^= state >> 7;
             state ^= state << 17;
             state
+        }
+    }
+
+    /// The case found from a cell's edges and its lower corner is the case of the
+    /// corners' signs, for all 256; an edge switched against the corners (a corrupt
+    /// store) is caught, whichever edge it is.
+    #[test]
+    fn cases_from_edges_are_the_corners_cases() {
+        for case in 0..=255u8 {
+            let above = |c: usize| case >> c & 1 == 1;
+            let mut around = [[NO_VERTEX; 3]; 8];
+            for &(c, axis) in &EDGE_CORNER_AXIS {
+                let (c, axis) = (c as usize, axis as usize);
+                if above(c) != above(c | 1 << axis) {
+                    around[c][axis] = (3 * c + axis) as u32;
+                }
+            }
+            assert_eq!(
+                case_from_edges(&around, above(0)),
+                Some(case),
+                "case {case}"
+            );
+            for &(c, axis) in &EDGE_CORNER_AXIS {
+                let mut wrong = around;
+                let v = &mut wrong[c as usize][axis as usize];
+                *v = if *v == NO_VERTEX { 7 } else { NO_VERTEX };
+                assert_eq!(case_from_edges(&wrong, above(0)), None, "case {case}");
+            }
         }
     }
 
