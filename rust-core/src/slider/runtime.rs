@@ -1318,7 +1318,8 @@ impl CellReader<'_> {
             }
             let key = grid_key(self.store.coords, cell as usize);
             let around = self.he.around(key);
-            if around == [[NO_VERTEX; 3]; 8] {
+            // (Element by element: comparing the arrays whole calls `memcmp`.)
+            if around.as_flattened().iter().all(|&v| v == NO_VERTEX) {
                 // No edge on: the cell is all above or all below, and has no triangles.
                 *new = CellTriangles::default();
                 continue;
