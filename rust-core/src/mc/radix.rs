@@ -92,11 +92,7 @@ where
         counts
     };
     let parallel = from.len() >= PARALLEL_FROM;
-    let chunk = if parallel {
-        from.len().div_ceil(rayon::current_num_threads()).max(SMALL)
-    } else {
-        from.len()
-    };
+    let chunk = from.len().div_ceil(rayon::current_num_threads()).max(SMALL);
     // Digits are masked to BUCKETS - 1 at each use, so no index needs a bounds check.
     let mut starts: Vec<Box<[usize; BUCKETS]>> = if parallel {
         from.par_chunks(chunk).map(count).collect()

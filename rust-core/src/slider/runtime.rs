@@ -32,6 +32,7 @@ use super::window::CellWindow;
 use crate::error::{Error, Result};
 use crate::field::grid::{node_gradient, Lattice, NodeCoords};
 use crate::mc::bricks::BrickMap;
+use crate::mc::table::edge_index;
 use crate::mc::{
     case_table, corner_offset, edge_corner_axis, linear_crossing, radix, VirtualGrid,
     MOST_TRIANGLES,
@@ -298,31 +299,6 @@ impl CellTriangles {
     }
 }
 
-/// Steps in edge ids (`node · 3 + axis`) from a cell (its lower corner's node index) to
-/// its twelve edges, computed once per lattice: an inconsistent store's error names the
-/// missing edge.
-#[derive(Clone, Copy, Debug)]
-struct CellOffsets {
-    edges: [usize; 12],
-}
-
-impl CellOffsets {
-    fn new(lattice: &Lattice) -> CellOffsets {
-        let corner = |k: usize| {
-            let d = corner_offset(k);
-            (0..3)
-                .map(|a| d[a] as usize * lattice.stride(a))
-                .sum::<usize>()
-        };
-        CellOffsets {
-            edges: std::array::from_fn(|local| {
-                let (k, axis) = edge_corner_axis(local);
-                3 * corner(k) + axis
-            }),
-        }
-    }
-}
-
 /// [`BrickMap`] key of lattice node or cell `i` (a cell is keyed by its lower node).
 #[inline]
 fn grid_key(coords: NodeCoords, i: usize) -> u64 {
@@ -458,8 +434,6 @@ pub struct Slider {
     all_triangles: OnceCell<Vec<[u32; 3]>>,
     spare_triangles: RefCell<Vec<[u32; 3]>>,
     scratch: Scratch,
-    /// Steps from a cell to its edges' ids, fixed by the lattice.
-    offsets: CellOffsets,
     stats: SliderStats,
     /// Level of detail asked for (error bound 0: off, the LOD mesh is the exact one).
     lod: LodParams,
@@ -476,7 +450,6 @@ impl Slider {
                 ..Bucket::default()
             })
             .collect();
-        let offsets = CellOffsets::new(store.lattice());
         let (he, hc) = (
             EdgeVertices::new(store.lattice(), store.coords),
             lattice_map(store.lattice()),
@@ -495,7 +468,6 @@ impl Slider {
             all_triangles: OnceCell::new(),
             spare_triangles: RefCell::default(),
             scratch: Scratch::default(),
-            offsets,
             stats: SliderStats::default(),
             lod: LodParams {
                 error_bound: 0.0,
@@ -866,16 +838,6 @@ impl Slider {
         }
     }
 
-    /// What re-triangulating cells reads, shareable across threads.
-    fn cells_reader(&self) -> CellReader<'_> {
-        CellReader {
-            store: &self.store,
-            he: &self.he,
-            offsets: &self.offsets,
-            iso: self.iso,
-        }
-    }
-
     /// Applies the net edge changes: cells first out, edges out (holes), edges in (filling
     /// holes), compaction, cells in.
     fn apply(&mut self, delta: &Delta, change: &mut Change) -> Result<()> {
@@ -1001,7 +963,9 @@ impl Slider {
         edges_done?;
         // Leftover holes: move vertices from the end into them.
         holes.sort_unstable();
-        marks.resize(self.store.nodes.div_ceil(64), 0);
+        if !holes.is_empty() {
+            marks.resize(self.store.nodes.div_ceil(64), 0);
+        }
         for &h in holes.iter() {
             while self.edges.last() == Some(&u32::MAX) {
                 self.edges.pop();
@@ -1020,32 +984,18 @@ impl Slider {
             Self::edge_cells(&lattice, coords, e, |c| push_unique(reindex, marks, c));
         }
         ascending(reindex, marks);
-        for &cell in reindex.iter() {
-            let key = grid_key(coords, cell as usize);
-            if let Some(entry) = self.hc.get(key) {
-                let t = (self.cells_reader()).triangles(cell, key, entry.case)?;
-                let b = &mut self.buckets[entry.bucket as usize];
-                let s = entry.slot as usize * b.size;
-                b.triangles[s..s + b.size].copy_from_slice(t.triangles());
-            }
-        }
-        // Cells around changed edges come back with their new case. Cases and triangles
-        // only read the store and HE (final by now): computed a batch at a time, in
-        // parallel; then the batch's cells go into the buckets and HC in ascending
-        // order, one thread.
+        // HE is final now: what re-triangulating reads, beside the cells it rewrites.
         let Slider {
             store,
             he,
             hc,
             buckets,
-            offsets,
             iso,
             ..
         } = &mut *self;
         let reader = CellReader {
             store: &*store,
             he: &*he,
-            offsets: &*offsets,
             iso: *iso,
         };
         let mut cells = CellSide {
@@ -1053,6 +1003,19 @@ impl Slider {
             hc,
             buckets,
         };
+        // Cells whose vertices moved keep their case; their triangles name the new ones.
+        for &cell in reindex.iter() {
+            let key = grid_key(coords, cell as usize);
+            if let Some(entry) = cells.hc.get(key) {
+                let t = reader.triangles(cell, key, entry.case)?;
+                let b = &mut cells.buckets[entry.bucket as usize];
+                let s = entry.slot as usize * b.size;
+                b.triangles[s..s + b.size].copy_from_slice(t.triangles());
+            }
+        }
+        // Cells around changed edges come back with their new case. Cases and triangles
+        // only read the store and HE: computed a batch at a time, in parallel; then the
+        // batch's cells go into the buckets and HC in ascending order, one thread.
         retriangulated.clear();
         retriangulated.resize(dirty.len().min(BATCH), CellTriangles::default());
         for (first, batch) in (0..).step_by(BATCH).zip(dirty.chunks(BATCH)) {
@@ -1305,7 +1268,6 @@ fn both<A: Send, B: Send>(
 struct CellReader<'a> {
     store: &'a Store,
     he: &'a EdgeVertices,
-    offsets: &'a CellOffsets,
     iso: f64,
 }
 
@@ -1318,19 +1280,18 @@ impl CellReader<'_> {
             }
             let key = grid_key(self.store.coords, cell as usize);
             let around = self.he.around(key);
-            // (Element by element: comparing the arrays whole calls `memcmp`.)
-            if around.as_flattened().iter().all(|&v| v == NO_VERTEX) {
+            let on = edges_on(&around);
+            if on == 0 {
                 // No edge on: the cell is all above or all below, and has no triangles.
                 *new = CellTriangles::default();
                 continue;
             }
-            let case =
-                case_from_edges(&around, self.lower_corner_above(cell)?).ok_or_else(|| {
-                    inconsistent(
-                        self.store,
-                        format!("the edges on in cell {cell} do not split its corners"),
-                    )
-                })?;
+            let case = case_from_edges(on, self.lower_corner_above(cell)?).ok_or_else(|| {
+                inconsistent(
+                    self.store,
+                    format!("the edges on in cell {cell} do not split its corners"),
+                )
+            })?;
             *new = self.triangles_around(cell, &around, case)?;
         }
         Ok(())
@@ -1351,11 +1312,7 @@ impl CellReader<'_> {
     /// Whether `cell`'s lower corner lies above the current isovalue.
     #[inline]
     fn lower_corner_above(&self, cell: u32) -> Result<bool> {
-        let v = match self.store.verified_value(cell as usize) {
-            Some(v) => v,
-            None => self.store.checked_value(cell as usize)?,
-        };
-        Ok(v as f64 > self.iso)
+        Ok(self.store.checked_value(cell as usize)? as f64 > self.iso)
     }
 
     /// Triangles of `cell` (keyed `key`) in `case`, as vertex indices through HE.
@@ -1382,7 +1339,7 @@ impl CellReader<'_> {
                 let (corner, axis) = EDGE_CORNER_AXIS[local as usize];
                 slot[k] = around[corner as usize][axis as usize];
                 if slot[k] == NO_VERTEX {
-                    let e = 3 * cell as usize + self.offsets.edges[local as usize];
+                    let e = edge_id(self.store.lattice(), cell, local as usize);
                     return Err(inconsistent(
                         self.store,
                         format!("cell {cell} in case {case} needs edge {e}, not on"),
@@ -1394,30 +1351,39 @@ impl CellReader<'_> {
     }
 }
 
-/// Case of a cell (bit c: corner c above the isovalue) from which of its twelve edges are
-/// on (`around`, [`EdgeVertices::around`]) and whether its lower corner is above: each
-/// corner differs from the one before it along its highest axis exactly where that edge
-/// is on. One value read where reading the eight corners took four lines of the volume;
-/// `None` when some edge contradicts the corners so found (a corrupt store).
-fn case_from_edges(around: &[[u32; 3]; 8], lower_above: bool) -> Option<u8> {
-    let on = |corner: usize, axis: usize| around[corner][axis] != NO_VERTEX;
-    let mut above = [lower_above; 8];
+/// Which of a cell's twelve edges are on (bit e: local edge e), from its edges'
+/// vertices `around` ([`EdgeVertices::around`]).
+fn edges_on(around: &[[u32; 3]; 8]) -> u16 {
+    (EDGE_CORNER_AXIS.iter().enumerate()).fold(0, |on, (e, &(c, axis))| {
+        on | u16::from(around[c as usize][axis as usize] != NO_VERTEX) << e
+    })
+}
+
+/// Case of a cell (bit c: corner c above the isovalue) from the edges on (`on`, as
+/// [`edges_on`]) and whether its lower corner is above: each corner differs from the one
+/// before it along its highest axis exactly where that edge is on. One value read where
+/// reading the eight corners took four lines of the volume; `None` when the case so found
+/// does not cut exactly those edges (a corrupt store).
+fn case_from_edges(on: u16, lower_above: bool) -> Option<u8> {
+    let mut case = u8::from(lower_above);
     for c in 1..8usize {
         let axis = c.ilog2() as usize;
         let from = c ^ 1 << axis;
-        above[c] = above[from] ^ on(from, axis);
+        let flips = on >> edge_index(from, axis) & 1 == 1;
+        case |= u8::from((case >> from & 1 == 1) ^ flips) << c;
     }
-    let mut case = 0u8;
-    for (c, &a) in above.iter().enumerate() {
-        case |= u8::from(a) << c;
-    }
-    EDGE_CORNER_AXIS
-        .iter()
-        .all(|&(c, axis)| {
-            let (c, axis) = (c as usize, axis as usize);
-            on(c, axis) == (above[c] != above[c | 1 << axis])
-        })
-        .then_some(case)
+    (case_table().edges_cut[case as usize] == on).then_some(case)
+}
+
+/// Id (`node · 3 + axis`) of local edge `local` of `cell` (an error names it).
+fn edge_id(lattice: &Lattice, cell: u32, local: usize) -> usize {
+    let (corner, axis) = edge_corner_axis(local);
+    let d = corner_offset(corner);
+    let node = cell as usize
+        + (0..3)
+            .map(|a| d[a] as usize * lattice.stride(a))
+            .sum::<usize>();
+    3 * node + axis
 }
 
 /// Interpolation data of each of `edges` into `out`, checking that each is a lattice edge.
@@ -1599,16 +1565,17 @@ mod tests {
                     around[c][axis] = (3 * c + axis) as u32;
                 }
             }
-            assert_eq!(
-                case_from_edges(&around, above(0)),
-                Some(case),
-                "case {case}"
-            );
+            let on = edges_on(&around);
+            assert_eq!(case_from_edges(on, above(0)), Some(case), "case {case}");
             for &(c, axis) in &EDGE_CORNER_AXIS {
                 let mut wrong = around;
                 let v = &mut wrong[c as usize][axis as usize];
                 *v = if *v == NO_VERTEX { 7 } else { NO_VERTEX };
-                assert_eq!(case_from_edges(&wrong, above(0)), None, "case {case}");
+                assert_eq!(
+                    case_from_edges(edges_on(&wrong), above(0)),
+                    None,
+                    "case {case}"
+                );
             }
         }
     }
