@@ -208,8 +208,11 @@ struct Scratch {
     /// [`ascending`]); cleared after each use. Cells/8 bytes, 1/32 of an f32 volume,
     /// allocated when some vertex first moves.
     marks: Vec<u64>,
-    /// Lists `dirty` from the changed edges, once each and ascending.
-    window: CellWindow,
+    /// List `dirty` from the changed edges, once each and ascending: the lower and the
+    /// upper half of the cells, side by side.
+    windows: [CellWindow; 2],
+    /// The upper half's cells, appended to `dirty` once listed.
+    upper: Vec<u32>,
     removed: Vec<u32>,
     added: Vec<u32>,
     dirty: Vec<u32>,
@@ -234,6 +237,7 @@ impl Scratch {
             &mut self.removed,
             &mut self.added,
             &mut self.dirty,
+            &mut self.upper,
             &mut self.holes,
             &mut self.reindex,
         ] {
@@ -595,11 +599,13 @@ impl Slider {
         let lists = cap(&s.delta.pairs)
             + cap(&s.delta.spare)
             + cap(&s.marks)
-            + s.window.held_bytes()
-            + [&s.removed, &s.added, &s.dirty, &s.holes, &s.reindex]
-                .into_iter()
-                .map(cap)
-                .sum::<u64>()
+            + s.windows.iter().map(CellWindow::held_bytes).sum::<u64>()
+            + [
+                &s.removed, &s.added, &s.dirty, &s.upper, &s.holes, &s.reindex,
+            ]
+            .into_iter()
+            .map(cap)
+            .sum::<u64>()
             + cap(&s.added_data)
             + cap(&s.retriangulated);
         let buckets: u64 = (self.buckets.iter())
@@ -838,6 +844,47 @@ impl Slider {
         }
     }
 
+    /// Lists the cells around the changed edges `pairs` (ascending by edge) into `dirty`,
+    /// once each and ascending: the cells below the middle pair's node from one pass
+    /// over the pairs, those above it from another, side by side when `parallel`.
+    fn list_dirty(
+        lattice: &Lattice,
+        coords: NodeCoords,
+        pairs: &[(u32, i32)],
+        [low, high]: &mut [CellWindow; 2],
+        dirty: &mut Vec<u32>,
+        upper: &mut Vec<u32>,
+        parallel: bool,
+    ) {
+        // An edge's cells lie at most a slab and a row below its node, never above it.
+        let reach = lattice.stride(1) + lattice.stride(2);
+        let node = |&(e, _): &(u32, i32)| e as usize / 3;
+        let split = pairs.get(pairs.len() / 2).map_or(usize::MAX, node);
+        let below = &pairs[..pairs.partition_point(|p| node(p) < split.saturating_add(reach))];
+        let above = &pairs[pairs.partition_point(|p| node(p) < split)..];
+        let pass = |pairs: &[(u32, i32)],
+                    keep: std::ops::Range<usize>,
+                    window: &mut CellWindow,
+                    out: &mut Vec<u32>| {
+            window.start(reach);
+            for p in pairs {
+                window.advance(node(p), out);
+                Self::edge_cells(lattice, coords, p.0, |c| {
+                    if keep.contains(&(c as usize)) {
+                        window.mark(c);
+                    }
+                });
+            }
+            window.finish(out);
+        };
+        both(
+            parallel,
+            || pass(below, 0..split, low, dirty),
+            || pass(above, split..usize::MAX, high, upper),
+        );
+        dirty.extend_from_slice(upper);
+    }
+
     /// Applies the net edge changes: cells first out, edges out (holes), edges in (filling
     /// holes), compaction, cells in.
     fn apply(&mut self, delta: &Delta, change: &mut Change) -> Result<()> {
@@ -858,7 +905,8 @@ impl Slider {
         let coords = self.store.coords;
         let Scratch {
             marks,
-            window,
+            windows,
+            upper,
             removed,
             added,
             dirty,
@@ -872,6 +920,7 @@ impl Slider {
             &mut *removed,
             &mut *added,
             &mut *dirty,
+            &mut *upper,
             &mut *holes,
             &mut *reindex,
         ] {
@@ -912,20 +961,17 @@ impl Slider {
             hc,
             buckets,
         };
+        let parallel = delta.pairs.len() >= PARALLEL_MIN;
+        Self::list_dirty(
+            &lattice,
+            coords,
+            &delta.pairs,
+            windows,
+            dirty,
+            upper,
+            parallel,
+        );
         let cells_out = || {
-            // `removed` and `added` are ascending and disjoint: merged, the edges come
-            // ascending, and their cells at most a slab and a row below their nodes.
-            window.start(lattice.stride(1) + lattice.stride(2));
-            let (mut r, mut a) = (removed.iter().peekable(), added.iter().peekable());
-            while let Some(e) = match (r.peek(), a.peek()) {
-                (Some(&&x), Some(&&y)) if x < y => r.next(),
-                (_, Some(_)) => a.next(),
-                _ => r.next(),
-            } {
-                window.advance(*e as usize / 3, dirty);
-                Self::edge_cells(&lattice, coords, *e, |c| window.mark(c));
-            }
-            window.finish(dirty);
             for (k, &cell) in dirty.iter().enumerate() {
                 cells.take_out(dirty, k, cell, removed_triangles);
             }
@@ -955,11 +1001,7 @@ impl Slider {
             }
             Ok(())
         };
-        let ((), edges_done) = both(
-            added.len() + removed.len() >= PARALLEL_MIN,
-            cells_out,
-            edges_out_in,
-        );
+        let ((), edges_done) = both(parallel, cells_out, edges_out_in);
         edges_done?;
         // Leftover holes: move vertices from the end into them.
         holes.sort_unstable();
