@@ -618,6 +618,60 @@ fn over_budget_volumes_are_refused_before_work() {
     assert!(!temp("x.isoslider").exists());
 }
 
+/// Files in `dir` (no temporaries may be left behind).
+fn files_in(dir: &std::path::Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn external_memory_builds_write_the_in_memory_store() {
+    // Nested spheres in 64×60×56 nodes: 215,040 nodes, 6.2 MB for an in-memory build; a
+    // budget of 4 MiB sorts them on disk (one run: several runs are the unit test
+    // `stores_sorted_in_runs_on_disk_are_the_in_memory_store`) and spools the levels.
+    let volume = sphere([64, 60, 56]);
+    let dir = std::env::temp_dir().join(format!("isobar-external-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let build = |name: &str, memory_budget: u64| {
+        let params = BuildParams {
+            memory_budget,
+            ..BuildParams::default()
+        };
+        let path = dir.join(name);
+        build_store(&volume, &path, &params, &mut Progress::none()).map(|s| (path, s))
+    };
+    let (whole, in_memory) = build("whole.isoslider", 64 << 20).unwrap();
+    let (spooled, external) = build("spooled.isoslider", 4 << 20).unwrap();
+    assert!(in_memory.level_blocks.len() >= 3, "{in_memory:?}");
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&spooled).unwrap(),
+        "the external-memory build wrote a different store"
+    );
+    assert_eq!(in_memory.level_edges, external.level_edges);
+    // The store is usable: the slider's surface equals marching cubes of the volume.
+    let mut slider = Slider::open(&spooled).unwrap();
+    slider.set_isovalue(-9.5).unwrap();
+    assert!(slider.triangle_count() > 500);
+    assert_same(
+        &slider_canon(&slider),
+        &reference_canon(&volume, -9.5).0,
+        "external-memory store at -9.5",
+    );
+    // Too small a budget even for sorting on disk, and one too small for the levels'
+    // open blocks: refused, and nothing left in the folder either way.
+    for budget in [20_000, 200_000] {
+        let e = build("refused.isoslider", budget).unwrap_err().to_string();
+        assert!(e.contains("memory budget"), "{budget}: {e}");
+    }
+    assert_eq!(files_in(&dir), ["spooled.isoslider", "whole.isoslider"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 // ---- Level of detail ----
 
 /// f32 volume of `f` at the nodes of a unit-spaced lattice of `dims` nodes.

@@ -44,11 +44,16 @@ where
 }
 
 /// Creates `.name.tmpPID-N` exclusively (never clobbering another writer's temporary).
-fn create_temporary(dir: &Path, name: &str) -> std::io::Result<(PathBuf, File)> {
+pub(super) fn create_temporary(dir: &Path, name: &str) -> std::io::Result<(PathBuf, File)> {
     loop {
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let tmp = dir.join(format!(".{name}.tmp{}-{n}", std::process::id()));
-        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+        match OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+        {
             Ok(file) => return Ok((tmp, file)),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(e) => return Err(e),

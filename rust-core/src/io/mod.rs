@@ -30,6 +30,7 @@ mod numeric;
 mod obj;
 mod ply;
 mod sequence;
+mod spool;
 pub mod volume;
 mod vtk_legacy;
 mod vtk_xml;
@@ -47,6 +48,7 @@ use std::path::Path;
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::write_atomically;
 pub use sequence::{expand_sequence, fill_frame, frame_number};
+pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType};
 
 /// Extensions [`read_particles`] understands (each may also carry a trailing `.gz`).

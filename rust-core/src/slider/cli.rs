@@ -40,7 +40,9 @@ pub struct BuildArgs {
     /// Most skip-list levels above level 0.
     #[arg(long, default_value_t = 12)]
     pub max_levels: usize,
-    /// Memory budget of the precomputation in bytes.
+    /// Memory budget of the precomputation in bytes, the volume excluded. Over about 29
+    /// bytes a node, the node values are sorted on disk (an external-memory sort, in
+    /// unnamed temporary files beside the output) and the skip-list levels spooled there.
     #[arg(long, default_value_t = crate::field::DEFAULT_MEMORY_BUDGET)]
     pub memory_budget: u64,
     /// Print no progress.

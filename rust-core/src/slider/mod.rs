@@ -16,6 +16,7 @@ pub mod cli;
 pub mod full;
 pub mod lod;
 pub mod runtime;
+mod sort;
 pub mod store;
 mod window;
 
