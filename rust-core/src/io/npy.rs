@@ -24,9 +24,12 @@ pub(crate) fn read_npy(bytes: &[u8], name: &str) -> Result<ParticleData> {
 
 /// Reads an `.npy` file holding one 3-D array as a volume: shape (nz, ny, nx) in C order,
 /// so x varies fastest (numpy's usual layout for `volume[z, y, x]`). Returns the node
-/// counts (x, y, z), the stored element type and the values.
-pub(crate) fn read_npy_volume(bytes: &[u8], name: &str) -> Result<([usize; 3], Scalar, Vec<f64>)> {
-    let array = Array::parse(bytes, name, None)?;
+/// counts (x, y, z), the stored element type, its byte order and the data bytes.
+pub(crate) fn read_npy_volume<'a>(
+    bytes: &'a [u8],
+    name: &str,
+) -> Result<([usize; 3], Scalar, Endian, &'a [u8])> {
+    let array = Stored::parse(bytes, name, None)?;
     let [nz, ny, nx] = array.shape[..] else {
         return Err(Error::format(
             name,
@@ -36,9 +39,11 @@ pub(crate) fn read_npy_volume(bytes: &[u8], name: &str) -> Result<([usize; 3], S
             ),
         ));
     };
+    // A 3-D array in Fortran order was refused by the parse.
     Ok((
         [nx as usize, ny as usize, nz as usize],
         array.ty,
+        array.endian,
         array.data,
     ))
 }
@@ -202,16 +207,24 @@ fn shape_text(shape: &[u64]) -> String {
 /// One decoded array.
 struct Array {
     shape: Vec<u64>,
-    /// Element type as stored.
-    ty: Scalar,
     data: Vec<f64>,
     /// "array 'positions'" (in an .npz) or "the array" (an .npy), for messages.
     what: String,
 }
 
-impl Array {
-    /// Parses one .npy; `key` is its name inside an .npz.
-    fn parse(bytes: &[u8], name: &str, key: Option<&str>) -> Result<Array> {
+/// One .npy's header and its data bytes, not yet decoded.
+struct Stored<'a> {
+    shape: Vec<u64>,
+    ty: Scalar,
+    endian: Endian,
+    /// A 2-D array stored transposed.
+    fortran: bool,
+    data: &'a [u8],
+}
+
+impl<'a> Stored<'a> {
+    /// Parses one .npy's header and finds its data; `key` is its name inside an .npz.
+    fn parse(bytes: &'a [u8], name: &str, key: Option<&str>) -> Result<Stored<'a>> {
         let prefix = key.map(|k| format!("array '{k}': ")).unwrap_or_default();
         let err = |m: String| Error::format(name, format!("{prefix}{m}"));
         if !bytes.starts_with(b"\x93NUMPY") {
@@ -275,13 +288,27 @@ impl Array {
                     data.len()
                 ))
             })?;
-        let mut values = ty.decode(&data[..need], endian);
-        if fortran {
-            values = transpose(&values, shape[1] as usize, shape[0] as usize);
-        }
-        Ok(Array {
+        Ok(Stored {
             shape,
             ty,
+            endian,
+            fortran,
+            data: &data[..need],
+        })
+    }
+}
+
+impl Array {
+    /// Parses and decodes one .npy; `key` is its name inside an .npz.
+    fn parse(bytes: &[u8], name: &str, key: Option<&str>) -> Result<Array> {
+        let stored = Stored::parse(bytes, name, key)?;
+        let mut values = stored.ty.decode(stored.data, stored.endian);
+        if stored.fortran {
+            let [rows, columns] = [stored.shape[0], stored.shape[1]].map(|d| d as usize);
+            values = transpose(&values, columns, rows);
+        }
+        Ok(Array {
+            shape: stored.shape,
             data: values,
             what: key.map_or("the array".into(), |k| format!("array '{k}'")),
         })

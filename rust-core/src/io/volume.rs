@@ -106,8 +106,14 @@ pub fn read_volume(path: &Path, array: Option<&str>, raw: Option<RawLayout>) -> 
         "vti" => read_vti(&bytes, &name, array),
         "nrrd" => read_nrrd(&bytes, &name),
         "npy" => {
-            let (dims, ty, data) = super::npy::read_npy_volume(&bytes, &name)?;
-            build(&name, dims, DVec3::ZERO, DVec3::ONE, ty, data)
+            let (dims, ty, endian, data) = super::npy::read_npy_volume(&bytes, &name)?;
+            build(
+                &name,
+                dims,
+                DVec3::ZERO,
+                DVec3::ONE,
+                decode(ty, data, endian),
+            )
         }
         _ => read_raw(&bytes, &name, raw.unwrap_or(RawLayout::default_for(&name))),
     }
@@ -134,8 +140,7 @@ pub fn read_vti(bytes: &[u8], name: &str, array: Option<&str>) -> Result<Volume>
         image.dims,
         DVec3::from_array(image.origin),
         DVec3::from_array(image.spacing),
-        image.ty,
-        image.values,
+        from_f64(image.ty, &image.values),
     )
     .map_err(|e| match e {
         Error::InvalidInput(m) => Error::format(name, format!("array '{}': {m}", image.array)),
@@ -170,8 +175,13 @@ pub fn read_raw(bytes: &[u8], name: &str, layout: RawLayout) -> Result<Volume> {
     } else {
         Endian::Little
     };
-    let data = ty.decode(bytes, endian);
-    build(name, layout.dims, layout.origin, layout.spacing, ty, data)
+    build(
+        name,
+        layout.dims,
+        layout.origin,
+        layout.spacing,
+        decode(ty, bytes, endian),
+    )
 }
 
 /// A NRRD file with attached data (`raw` or `gzip` encoding).
@@ -328,8 +338,13 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
     }
     // Raw data may be preceded by padding; NRRD puts the data at the end of the file.
     let data = &data[data.len() - count..];
-    let values = ty.decode(data, endian);
-    build(name, [nx, ny, nz], origin, spacing, ty, values)
+    build(
+        name,
+        [nx, ny, nz],
+        origin,
+        spacing,
+        decode(ty, data, endian),
+    )
 }
 
 fn nrrd_type(t: &str) -> Option<Scalar> {
@@ -346,22 +361,48 @@ fn nrrd_type(t: &str) -> Option<Scalar> {
     })
 }
 
-/// Makes a volume from decoded values, keeping f32/u16/u8 and converting the rest to f32.
+/// Values decoded from f64s of element type `ty`: u8 and u16 kept, the rest as f32.
+fn from_f64(ty: Scalar, data: &[f64]) -> Values {
+    match ty {
+        Scalar::U8 => Values::U8(data.iter().map(|&v| v as u8).collect()),
+        Scalar::U16 => Values::U16(data.iter().map(|&v| v as u16).collect()),
+        _ => Values::F32(data.iter().map(|&v| v as f32).collect()),
+    }
+}
+
+/// Values decoded from `bytes` of element type `ty`, as [`from_f64`] keeps them: a volume
+/// is never held as f64s (twice an f32 volume's bytes) on its way in.
+fn decode(ty: Scalar, bytes: &[u8], endian: Endian) -> Values {
+    match ty {
+        Scalar::U8 => Values::U8(bytes.to_vec()),
+        Scalar::U16 => Values::U16(decode_as(ty, bytes, endian, |x| x as u16)),
+        _ => Values::F32(decode_as(ty, bytes, endian, |x| x as f32)),
+    }
+}
+
+/// `bytes` decoded a bounded slice at a time through f64, each value converted.
+fn decode_as<T>(ty: Scalar, bytes: &[u8], endian: Endian, convert: impl Fn(f64) -> T) -> Vec<T> {
+    const SLICE: usize = 1 << 16;
+    let mut out = Vec::with_capacity(bytes.len() / ty.size());
+    let mut decoded = Vec::with_capacity(SLICE);
+    for piece in bytes.chunks(SLICE * ty.size()) {
+        decoded.clear();
+        ty.decode_into(piece, endian, &mut decoded);
+        out.extend(decoded.iter().map(|&x| convert(x)));
+    }
+    out
+}
+
+/// Makes a volume of `values` on a lattice of `dims` nodes.
 fn build(
     name: &str,
     dims: [usize; 3],
     origin: DVec3,
     spacing: DVec3,
-    ty: Scalar,
-    data: Vec<f64>,
+    values: Values,
 ) -> Result<Volume> {
     let lattice =
         Lattice::new(dims, origin, spacing).map_err(|e| Error::format(name, e.to_string()))?;
-    let values = match ty {
-        Scalar::U8 => Values::U8(data.iter().map(|&v| v as u8).collect()),
-        Scalar::U16 => Values::U16(data.iter().map(|&v| v as u16).collect()),
-        _ => Values::F32(data.iter().map(|&v| v as f32).collect()),
-    };
     Volume::new(lattice, values).map_err(|e| match e {
         Error::InvalidInput(m) => Error::format(name, m),
         e => e,
@@ -376,6 +417,30 @@ mod tests {
         (0..dims[0] * dims[1] * dims[2])
             .map(|i| (i * 7 % 1000) as u16)
             .collect()
+    }
+
+    #[test]
+    fn decoding_bytes_keeps_what_decoding_through_f64_keeps() {
+        // Past one decoding slice, both byte orders, every kind of element type.
+        let n = (1 << 16) + 5;
+        for (ty, endian) in [
+            (Scalar::U8, Endian::Little),
+            (Scalar::I8, Endian::Little),
+            (Scalar::U16, Endian::Big),
+            (Scalar::I16, Endian::Little),
+            (Scalar::I32, Endian::Big),
+            (Scalar::F32, Endian::Little),
+            (Scalar::F64, Endian::Big),
+        ] {
+            let bytes: Vec<u8> = (0..n * ty.size()).map(|i| (i * 131 % 256) as u8).collect();
+            let through = from_f64(ty, &ty.decode(&bytes, endian));
+            assert_eq!(through.len(), n);
+            // NaN != NaN: compare bits.
+            let bits = |v: &Values| (0..v.len()).map(|i| v.get(i).to_bits()).collect::<Vec<_>>();
+            let direct = decode(ty, &bytes, endian);
+            assert_eq!(direct.value_type(), through.value_type(), "{ty:?}");
+            assert!(bits(&direct) == bits(&through), "{ty:?} {endian:?}");
+        }
     }
 
     #[test]
@@ -421,9 +486,9 @@ mod tests {
         assert!(cut.to_string().contains("a.nrrd"), "{cut}");
 
         let npy = super::super::npy::tests::npy("<u2", "(5, 4, 3)", false, &le);
-        let (d, ty, data) = super::super::npy::read_npy_volume(&npy, "a.npy").unwrap();
-        assert_eq!((d, ty), (dims, Scalar::U16));
-        assert_eq!(data.len(), 60);
+        let (d, ty, endian, data) = super::super::npy::read_npy_volume(&npy, "a.npy").unwrap();
+        assert_eq!((d, ty, endian), (dims, Scalar::U16, Endian::Little));
+        assert_eq!(decode(ty, data, endian), expect);
         let bad = super::super::npy::tests::npy("<u2", "(60,)", false, &le);
         assert!(super::super::npy::read_npy_volume(&bad, "a.npy").is_err());
 
