@@ -192,13 +192,21 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         step=0.1,
         precision=4,
     )
+    memory_budget: FloatProperty(
+        name="Memory Budget (GiB)",
+        description="What pre-encoding the volume may hold besides the volume (0: the default, 4 GiB); "
+        "past about 29 bytes a node it sorts on disk, beside the store, and writes the same store",
+        default=4.0,
+        min=0.0,
+        soft_max=64.0,
+    )
 
     def execute(self, context):
         path = bpy.path.abspath(self.filepath)
         stem = os.path.splitext(os.path.basename(path))[0] or "volume"
         obj = None
         try:
-            store = volume_slider.ensure_store(path)
+            store = volume_slider.ensure_store(path, self.memory_budget)
             obj = _new_surface_object(context, f"{stem}_isosurface")
             # The object's own slider: opening a store checks it whole, so open it once.
             lo, hi = volume_slider.slider_for(obj, store).value_range

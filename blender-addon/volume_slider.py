@@ -48,14 +48,18 @@ def store_path_for(path: str) -> str:
     return path if path.endswith(STORE_EXTENSION) else path + STORE_EXTENSION
 
 
-def ensure_store(path: str) -> str:
+def ensure_store(path: str, memory_budget_gib: float = 0.0) -> str:
     """Builds the store of the volume at `path` unless an up-to-date one exists; returns
-    its path. Raises isobar.Error (naming the file) when the volume cannot be read."""
+    its path. `memory_budget_gib` bounds what the build holds besides the volume (0: the
+    core's default; past about 29 bytes a node it sorts on disk, beside the store). Raises
+    isobar.Error (naming the file) when the volume cannot be read or the budget is too
+    small."""
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no such volume file: {path}")
     store = store_path_for(path)
     if store != path and (not os.path.exists(store) or os.path.getmtime(store) < os.path.getmtime(path)):
-        isobar_module().Slider.build(path, store)
+        budget = int(min(max(memory_budget_gib, 0.0), 1.0e9) * 2**30)
+        isobar_module().Slider.build(path, store, memory_budget=budget)
     return store
 
 

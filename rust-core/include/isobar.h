@@ -482,18 +482,21 @@ enum IsobarStatus isobar_particles_copy_array(const struct IsobarParticles *part
 void isobar_particles_free(struct IsobarParticles *particles);
 
 // Builds a store at `store_path` from a volume file (.vti, .nrrd, .npy). `array` names
-// the ImageData point array (NULL: the default). `threshold` ≤ 0 and `max_levels` 0 take
-// the defaults. `progress` may be NULL.
+// the ImageData point array (NULL: the default). `threshold` ≤ 0, `max_levels` 0 and
+// `memory_budget` 0 (bytes the build may hold besides the volume; beyond about 29 a
+// node it sorts on disk, beside `store_path`) take the defaults. `progress` may be NULL.
 enum IsobarStatus isobar_slider_build_file(const char *volume_path,
                                            const char *array,
                                            const char *store_path,
                                            double threshold,
                                            uint32_t max_levels,
+                                           uint64_t memory_budget,
                                            IsobarProgressFn progress,
                                            void *user);
 
 // Builds a store from `dims[0]·dims[1]·dims[2]` f32 values, x fastest, with the given
-// origin and spacing (3 doubles each; NULL means 0 and 1).
+// origin and spacing (3 doubles each; NULL means 0 and 1); the other parameters as
+// [`isobar_slider_build_file`]'s.
 enum IsobarStatus isobar_slider_build_f32(const float *values,
                                           const size_t *dims,
                                           const double *origin,
@@ -501,6 +504,7 @@ enum IsobarStatus isobar_slider_build_f32(const float *values,
                                           const char *store_path,
                                           double threshold,
                                           uint32_t max_levels,
+                                          uint64_t memory_budget,
                                           IsobarProgressFn progress,
                                           void *user);
 

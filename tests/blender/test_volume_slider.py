@@ -65,6 +65,23 @@ def test_slide_follows_the_cores_slider_and_returns(scene, isobar, tmp_path):
     np.testing.assert_array_equal(mesh_arrays(obj)[1], shown[0.3][1])
 
 
+def test_a_small_memory_budget_writes_the_same_store_and_too_small_one_is_reported(scene, tmp_path):
+    # 40³ nodes: an in-memory pre-encoding needs about 1.9 MB; 1.5 MiB sorts on disk.
+    big = _volume(tmp_path / "big.npy", n=40)
+    small = tmp_path / "small.npy"
+    small.write_bytes(big.read_bytes())
+    a = _import(big)
+    b = _import(small, memory_budget=1.5 / 1024)
+    assert (tmp_path / "big.npy.isoslider").read_bytes() == (tmp_path / "small.npy.isoslider").read_bytes()
+    for x, y in zip(mesh_arrays(a), mesh_arrays(b)):
+        np.testing.assert_array_equal(x, y)
+    tiny = tmp_path / "tiny.npy"
+    tiny.write_bytes(big.read_bytes())
+    with pytest.raises(RuntimeError, match="memory budget"):
+        bpy.ops.isobar.import_volume(filepath=str(tiny), memory_budget=1e-6)
+    assert not (tmp_path / "tiny.npy.isoslider").exists()
+
+
 def test_bad_volume_is_reported_not_raised(scene, tmp_path):
     bad = tmp_path / "broken.npy"
     bad.write_bytes(b"\x93NUMPY not really")

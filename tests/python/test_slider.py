@@ -189,3 +189,27 @@ def test_lod_parameters_are_checked(tmp_path):
     slider.close()
     with pytest.raises(isobar.InvalidArgumentError):
         slider.lod_mesh()
+
+
+def test_builds_within_a_small_memory_budget_write_the_same_store(tmp_path):
+    # 40 x 44 x 48 nodes: an in-memory build needs about 29 bytes a node (2.4 MB); with
+    # 1.5 MiB the core sorts the values on disk and spools the skip-list levels.
+    z, y, x = np.meshgrid(np.arange(40), np.arange(44), np.arange(48), indexing="ij")
+    vol = (-np.sqrt((x - 23.3) ** 2 + (y - 21.6) ** 2 + (z - 19.8) ** 2)).astype(np.float32)
+    whole, spooled = tmp_path / "whole.isoslider", tmp_path / "spooled.isoslider"
+    isobar.Slider.build_array(vol, whole)
+    isobar.Slider.build_array(vol, spooled, memory_budget=3 << 19)
+    assert whole.read_bytes() == spooled.read_bytes()
+    npy = tmp_path / "ball.npy"
+    np.save(npy, vol)
+    from_file = tmp_path / "file.isoslider"
+    isobar.Slider.build(npy, from_file, memory_budget=3 << 19)
+    assert from_file.read_bytes() == whole.read_bytes()
+    # Nothing but the stores and the volume left in the folder.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ball.npy", "file.isoslider", "spooled.isoslider", "whole.isoslider"]
+    # Too small even for sorting on disk: a clear error, no store.
+    with pytest.raises(isobar.OverBudgetError, match="memory budget"):
+        isobar.Slider.build_array(vol, tmp_path / "refused.isoslider", memory_budget=20000)
+    assert not (tmp_path / "refused.isoslider").exists()
+    with pytest.raises(isobar.InvalidArgumentError):
+        isobar.Slider.build_array(vol, tmp_path / "bad.isoslider", memory_budget=-1)

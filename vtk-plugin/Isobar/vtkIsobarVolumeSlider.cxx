@@ -15,6 +15,7 @@
 
 #include "isobar.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
@@ -50,6 +51,7 @@ vtkIsobarVolumeSlider::vtkIsobarVolumeSlider()
   : Isovalue(0.0)
   , LodErrorBound(0.0)
   , LodMaxLevel(0)
+  , MemoryBudget(4.0)
   , NumberOfStoreBuilds(0)
   , NumberOfUpdates(0)
   , LastUpdateSeconds(0.0)
@@ -162,8 +164,10 @@ int vtkIsobarVolumeSlider::RequestData(
     const size_t sizes[3] = { static_cast<size_t>(dims[0]), static_cast<size_t>(dims[1]),
       static_cast<size_t>(dims[2]) };
     const std::string path = NewStorePath();
+    const uint64_t budget =
+      static_cast<uint64_t>(std::min(this->MemoryBudget, 1.0e9) * 1024.0 * 1024.0 * 1024.0);
     IsobarStatus status = isobar_slider_build_f32(
-      scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, nullptr, nullptr);
+      scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, budget, nullptr, nullptr);
     if (status != ISOBAR_STATUS_OK)
     {
       this->Fail(CoreError("isobar_slider_build_f32", status));
@@ -267,6 +271,7 @@ void vtkIsobarVolumeSlider::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Isovalue: " << this->Isovalue << "\n";
   os << indent << "LodErrorBound: " << this->LodErrorBound << "\n";
   os << indent << "LodMaxLevel: " << this->LodMaxLevel << "\n";
+  os << indent << "MemoryBudget: " << this->MemoryBudget << "\n";
   os << indent << "NumberOfStoreBuilds: " << this->NumberOfStoreBuilds << "\n";
   os << indent << "NumberOfUpdates: " << this->NumberOfUpdates << "\n";
 }

@@ -60,6 +60,15 @@ public:
   vtkGetMacro(LodMaxLevel, int);
   ///@}
 
+  ///@{
+  /// GiB the pre-encoding may hold besides the volume (default 4; 0: the core's
+  /// default). Past about 29 bytes a node the core sorts the values on disk, beside the
+  /// store, and writes the same store; too small a budget even for that is an error.
+  /// Changing it does not rebuild a store already built.
+  vtkSetClampMacro(MemoryBudget, double, 0.0, VTK_DOUBLE_MAX);
+  vtkGetMacro(MemoryBudget, double);
+  ///@}
+
   /// Times the volume was pre-encoded (once per input volume).
   vtkGetMacro(NumberOfStoreBuilds, int);
   /// Isovalue changes applied by the slider.
@@ -86,6 +95,7 @@ private:
   double Isovalue;
   double LodErrorBound;
   int LodMaxLevel;
+  double MemoryBudget;
   int NumberOfStoreBuilds;
   int NumberOfUpdates;
   double LastUpdateSeconds;

@@ -356,7 +356,7 @@ _PROTOTYPES = {
     # slider
     "isobar_slider_build_file": (
         _Status,
-        [c_char_p, c_char_p, c_char_p, c_double, c_uint32, PROGRESS_FN, c_void_p],
+        [c_char_p, c_char_p, c_char_p, c_double, c_uint32, c_uint64, PROGRESS_FN, c_void_p],
     ),
     "isobar_slider_build_f32": (
         _Status,
@@ -368,6 +368,7 @@ _PROTOTYPES = {
             c_char_p,
             c_double,
             c_uint32,
+            c_uint64,
             PROGRESS_FN,
             c_void_p,
         ],

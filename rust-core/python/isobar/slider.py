@@ -27,6 +27,13 @@ from .surface import _copy
 _NO_PROGRESS = PROGRESS_FN()
 
 
+def _budget(memory_budget) -> int:
+    """A build's memory budget in bytes (0: the core's default), checked before the call."""
+    if isinstance(memory_budget, bool) or not isinstance(memory_budget, int) or not 0 <= memory_budget < 2**64:
+        raise InvalidArgumentError(f"memory_budget must be an integer number of bytes >= 0, got {memory_budget!r}")
+    return memory_budget
+
+
 class SliderUpdate:
     """The surface after :meth:`Slider.set_isovalue`, and what changed.
 
@@ -104,8 +111,19 @@ class Slider:
             self.set_lod(lod_error_bound, lod_max_level)
 
     @staticmethod
-    def build(volume_path, store_path, array: Optional[str] = None, threshold: float = 0.0, max_levels: int = 0) -> None:
-        """Precomputes a store from a .vti, .nrrd or .npy volume (defaults for 0 parameters)."""
+    def build(
+        volume_path,
+        store_path,
+        array: Optional[str] = None,
+        threshold: float = 0.0,
+        max_levels: int = 0,
+        memory_budget: int = 0,
+    ) -> None:
+        """Precomputes a store from a .vti, .nrrd or .npy volume (defaults for 0 parameters).
+
+        ``memory_budget`` is the bytes the build may hold besides the volume; beyond about
+        29 bytes a node it sorts the values on disk, beside the store (same store).
+        """
         check(
             lib.isobar_slider_build_file(
                 encode(volume_path, "volume path"),
@@ -113,6 +131,7 @@ class Slider:
                 encode(store_path, "store path"),
                 float(threshold),
                 int(max_levels),
+                _budget(memory_budget),
                 _NO_PROGRESS,
                 None,
             )
@@ -126,8 +145,10 @@ class Slider:
         spacing=(1.0, 1.0, 1.0),
         threshold: float = 0.0,
         max_levels: int = 0,
+        memory_budget: int = 0,
     ) -> None:
-        """Precomputes a store from a 3-D array indexed ``[z, y, x]`` (x fastest)."""
+        """Precomputes a store from a 3-D array indexed ``[z, y, x]`` (x fastest); the
+        other parameters as :meth:`build`'s."""
         values = np.asarray(values)
         if values.ndim != 3:
             raise InvalidArgumentError(f"values must be a 3-D array [z, y, x], got shape {values.shape}")
@@ -145,6 +166,7 @@ class Slider:
                 encode(store_path, "store path"),
                 float(threshold),
                 int(max_levels),
+                _budget(memory_budget),
                 _NO_PROGRESS,
                 None,
             )

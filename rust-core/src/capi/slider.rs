@@ -37,9 +37,14 @@ pub struct IsobarSliderChange {
     pub seconds: f64,
 }
 
-fn build_params(threshold: f64, max_levels: u32) -> BuildParams {
+fn build_params(threshold: f64, max_levels: u32, memory_budget: u64) -> BuildParams {
     let d = BuildParams::default();
     BuildParams {
+        memory_budget: if memory_budget > 0 {
+            memory_budget
+        } else {
+            d.memory_budget
+        },
         threshold: if threshold > 0.0 {
             threshold
         } else {
@@ -50,7 +55,6 @@ fn build_params(threshold: f64, max_levels: u32) -> BuildParams {
         } else {
             d.max_levels
         },
-        ..d
     }
 }
 
@@ -58,18 +62,12 @@ fn build_params(threshold: f64, max_levels: u32) -> BuildParams {
 fn build_to(
     volume: &Volume,
     output: &str,
-    threshold: f64,
-    max_levels: u32,
+    params: BuildParams,
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> crate::Result<()> {
     with_progress(progress, user, |p| {
-        build_store(
-            volume,
-            Path::new(output),
-            &build_params(threshold, max_levels),
-            p,
-        )
+        build_store(volume, Path::new(output), &params, p)
     })?;
     Ok(())
 }
@@ -79,8 +77,9 @@ fn required(p: *const c_char, name: &'static str) -> crate::Result<String> {
 }
 
 /// Builds a store at `store_path` from a volume file (.vti, .nrrd, .npy). `array` names
-/// the ImageData point array (NULL: the default). `threshold` ≤ 0 and `max_levels` 0 take
-/// the defaults. `progress` may be NULL.
+/// the ImageData point array (NULL: the default). `threshold` ≤ 0, `max_levels` 0 and
+/// `memory_budget` 0 (bytes the build may hold besides the volume; beyond about 29 a
+/// node it sorts on disk, beside `store_path`) take the defaults. `progress` may be NULL.
 #[no_mangle]
 pub extern "C" fn isobar_slider_build_file(
     volume_path: *const c_char,
@@ -88,6 +87,7 @@ pub extern "C" fn isobar_slider_build_file(
     store_path: *const c_char,
     threshold: f64,
     max_levels: u32,
+    memory_budget: u64,
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> IsobarStatus {
@@ -96,12 +96,14 @@ pub extern "C" fn isobar_slider_build_file(
         let output = required(store_path, "store_path")?;
         let array = opt_str(array, "array")?;
         let volume = crate::io::read_volume(Path::new(&input), array.as_deref(), None)?;
-        build_to(&volume, &output, threshold, max_levels, progress, user)
+        let params = build_params(threshold, max_levels, memory_budget);
+        build_to(&volume, &output, params, progress, user)
     })
 }
 
 /// Builds a store from `dims[0]·dims[1]·dims[2]` f32 values, x fastest, with the given
-/// origin and spacing (3 doubles each; NULL means 0 and 1).
+/// origin and spacing (3 doubles each; NULL means 0 and 1); the other parameters as
+/// [`isobar_slider_build_file`]'s.
 #[no_mangle]
 #[allow(clippy::too_many_arguments)]
 pub extern "C" fn isobar_slider_build_f32(
@@ -112,6 +114,7 @@ pub extern "C" fn isobar_slider_build_f32(
     store_path: *const c_char,
     threshold: f64,
     max_levels: u32,
+    memory_budget: u64,
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> IsobarStatus {
@@ -138,7 +141,8 @@ pub extern "C" fn isobar_slider_build_f32(
             .ok_or_else(|| invalid("dims", "product overflows"))?;
         let values = slice(values, n, "values")?.to_vec();
         let volume = Volume::new(lattice, Values::F32(values))?;
-        build_to(&volume, &output, threshold, max_levels, progress, user)
+        let params = build_params(threshold, max_levels, memory_budget);
+        build_to(&volume, &output, params, progress, user)
     })
 }
 
@@ -430,6 +434,7 @@ mod tests {
             std::ptr::null(),
             path.as_ptr(),
             0.0,
+            0,
             0,
             None,
             std::ptr::null_mut(),
