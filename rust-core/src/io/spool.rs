@@ -19,7 +19,16 @@ const WRITE_BUFFER: usize = 1 << 13;
 
 pub(crate) enum Spool {
     Memory(Vec<u8>),
-    File { writer: BufWriter<File>, len: u64 },
+    /// A file being written.
+    File {
+        writer: BufWriter<File>,
+        len: u64,
+    },
+    /// A file written whole: no write buffer held (a merge holds many runs open).
+    Finished {
+        file: File,
+        len: u64,
+    },
 }
 
 impl Spool {
@@ -57,6 +66,7 @@ impl Spool {
                 *len += bytes.len() as u64;
                 writer.write_all(bytes)
             }
+            Spool::Finished { .. } => Err(std::io::Error::other("spool written after finish")),
         }
     }
 
@@ -64,7 +74,7 @@ impl Spool {
     pub(crate) fn len(&self) -> u64 {
         match self {
             Spool::Memory(v) => v.len() as u64,
-            Spool::File { len, .. } => *len,
+            Spool::File { len, .. } | Spool::Finished { len, .. } => *len,
         }
     }
 
@@ -73,15 +83,20 @@ impl Spool {
         match self {
             Spool::Memory(v) => v.capacity() as u64,
             Spool::File { writer, .. } => writer.capacity() as u64,
+            Spool::Finished { .. } => 0,
         }
     }
 
-    /// Makes everything written readable: call once writing is done.
+    /// Makes everything written readable (and frees a file's write buffer): call once
+    /// writing is done.
     pub(crate) fn finish(&mut self) -> std::io::Result<()> {
-        match self {
-            Spool::Memory(_) => Ok(()),
-            Spool::File { writer, .. } => writer.flush(),
+        if let Spool::File { writer, len } = self {
+            writer.flush()?;
+            let len = *len;
+            let file = writer.get_ref().try_clone()?;
+            *self = Spool::Finished { file, len };
         }
+        Ok(())
     }
 
     /// Fills `buf` from byte `at` on (after [`Spool::finish`]); fewer bytes at the end.
@@ -93,6 +108,7 @@ impl Spool {
                 buf[..want].copy_from_slice(&v[at as usize..at as usize + want]);
             }
             Spool::File { writer, .. } => writer.get_ref().read_exact_at(&mut buf[..want], at)?,
+            Spool::Finished { file, .. } => file.read_exact_at(&mut buf[..want], at)?,
         }
         Ok(want)
     }
@@ -104,7 +120,7 @@ impl Spool {
     ) -> std::io::Result<()> {
         match self {
             Spool::Memory(v) => v.chunks(READ_CHUNK).try_for_each(out),
-            Spool::File { len, .. } => {
+            Spool::File { len, .. } | Spool::Finished { len, .. } => {
                 let mut buf = vec![0u8; READ_CHUNK.min(*len as usize)];
                 let mut at = 0u64;
                 while at < *len {
