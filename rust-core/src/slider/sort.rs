@@ -19,6 +19,9 @@ pub(crate) const BATCH: usize = 1 << 16;
 /// Fewest nodes a merge reads from a run at a time: below this the merge is all reads.
 const MIN_BUFFER_NODES: u64 = 1 << 10;
 
+/// Most runs merged at once: each holds a file open, and a process may usually open 1,024.
+const MAX_RUNS: u64 = 512;
+
 /// How the nodes are sorted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Plan {
@@ -33,7 +36,7 @@ impl Plan {
     /// An external-memory sort within `budget` bytes for `n` nodes: half the budget for
     /// the run being sorted, then a quarter for the merge's read buffers (the rest, while
     /// merging, is for the skip-list levels' open blocks). `None` when the buffers would be
-    /// too small.
+    /// too small or the runs too many.
     pub(crate) fn external(n: u64, budget: u64) -> Option<Plan> {
         let run_nodes = (budget / 8).min(n.max(1));
         if run_nodes == 0 {
@@ -41,10 +44,12 @@ impl Plan {
         }
         let runs = n.div_ceil(run_nodes).max(1);
         let buffer_nodes = (budget / 16 / runs).min(run_nodes);
-        (buffer_nodes >= MIN_BUFFER_NODES.min(n.max(1))).then_some(Plan::External {
-            run_nodes,
-            buffer_nodes,
-        })
+        (buffer_nodes >= MIN_BUFFER_NODES.min(n.max(1)) && runs <= MAX_RUNS).then_some(
+            Plan::External {
+                run_nodes,
+                buffer_nodes,
+            },
+        )
     }
 
     /// The smallest budget [`Plan::external`] accepts for `n` nodes (for the error that
@@ -263,7 +268,7 @@ mod tests {
 
     #[test]
     fn external_plans_fit_their_budget() {
-        for n in [1u64, 1000, 1 << 20, 1 << 30] {
+        for n in [1u64, 1000, 1 << 20, 1 << 30, 1_400_000_000] {
             let least = Plan::least_external_budget(n);
             assert!(Plan::external(n, least).is_some());
             assert!(least == 1 || Plan::external(n, least - 1).is_none());
@@ -274,8 +279,10 @@ mod tests {
             else {
                 unreachable!()
             };
-            // A run's ids within half the budget, the merge's buffers within a quarter.
+            // A run's ids within half the budget, the merge's buffers within a quarter,
+            // and few enough runs to hold open.
             assert!(run_nodes * 4 <= least / 2 + 4, "n {n}");
+            assert!(n.div_ceil(run_nodes) <= MAX_RUNS, "n {n}");
             assert!(
                 buffer_nodes * 4 * n.div_ceil(run_nodes) <= least / 4 + 4,
                 "n {n}"
