@@ -22,10 +22,7 @@ where
     let file_name = path
         .file_name()
         .ok_or_else(|| Error::InvalidInput(format!("{}: not a file path", path.display())))?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
+    let dir = parent_dir(path);
     let (tmp, file) =
         create_temporary(&dir, &file_name.to_string_lossy()).map_err(|e| Error::io(path, e))?;
 
@@ -41,6 +38,14 @@ where
         return Err(Error::io(path, e));
     }
     Ok(())
+}
+
+/// The folder `path` is in (`.` for a bare file name): where its temporaries go.
+pub(crate) fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
 }
 
 /// Creates `.name.tmpPID-N` exclusively (never clobbering another writer's temporary).

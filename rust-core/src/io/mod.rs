@@ -46,7 +46,7 @@ use std::io::Read;
 use std::path::Path;
 
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
-pub(crate) use atomic::write_atomically;
+pub(crate) use atomic::{parent_dir, write_atomically};
 pub use sequence::{expand_sequence, fill_frame, frame_number};
 pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType};

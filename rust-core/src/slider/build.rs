@@ -2,7 +2,7 @@
 //! turn on and off as the isovalue passes it), consolidate blocks into skip-list levels
 //! with redundant edges removed, and write everything into one store file.
 
-use super::sort::{self, Order, Plan};
+use super::sort::{self, write_u32s, Order, Plan};
 use super::store::{
     neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER, MAGIC, VERSION,
 };
@@ -337,10 +337,7 @@ fn build_store_sorted(
         })?
     };
     let on_disk = plan != Plan::InMemory;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
+    let dir = crate::io::parent_dir(path);
     let io = |e| Error::io(path, e);
     // What the merge's read buffers leave (see `Plan::external`).
     let levels_budget = params.memory_budget - params.memory_budget / 4;
@@ -564,14 +561,6 @@ fn write_store(
         w.seek(SeekFrom::Start(0))?;
         w.write_all(&header)
     })
-}
-
-fn write_u32s(v: &[u32], out: &mut Sink) -> std::io::Result<()> {
-    for chunk in v.chunks(1 << 16) {
-        let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
-        out(&bytes)?;
-    }
-    Ok(())
 }
 
 fn write_u64s(v: &[u64], out: &mut Sink) -> std::io::Result<()> {

@@ -81,12 +81,22 @@ impl Order {
         out: &mut dyn FnMut(&[u8]) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
         match self {
-            Order::Memory(v) => v.chunks(1 << 16).try_for_each(|c| {
-                out(&c.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>())
-            }),
+            Order::Memory(v) => write_u32s(v, out),
             Order::Spooled(s) => s.read_into(out),
         }
     }
+}
+
+/// Hands `v`'s little-endian bytes to `out`, a bounded slice at a time.
+pub(crate) fn write_u32s(
+    v: &[u32],
+    out: &mut dyn FnMut(&[u8]) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    for chunk in v.chunks(BATCH) {
+        let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
+        out(&bytes)?;
+    }
+    Ok(())
 }
 
 /// Sort key of node `i`: its value's bits mapped so that unsigned order is `f32::total_cmp`
@@ -138,10 +148,7 @@ pub(crate) fn sorted_nodes(
                 ids.extend(first as u32..(first + run_nodes).min(n) as u32);
                 ids.par_sort_unstable_by_key(|&i| key(values, i));
                 let mut run = Spool::file(dir).map_err(io)?;
-                for c in ids.chunks(BATCH) {
-                    let bytes: Vec<u8> = c.iter().flat_map(|x| x.to_le_bytes()).collect();
-                    run.write(&bytes).map_err(io)?;
-                }
+                write_u32s(&ids, &mut |b| run.write(b)).map_err(io)?;
                 run.finish().map_err(io)?;
                 runs.push(run);
                 progress.report(first as f64 / n as f64)?;
@@ -167,8 +174,7 @@ pub(crate) fn sorted_nodes(
                     heap.push(Reverse((key(values, i), r)));
                 }
                 if batch.len() == BATCH || heap.is_empty() {
-                    let bytes: Vec<u8> = batch.iter().flat_map(|x| x.to_le_bytes()).collect();
-                    order.write(&bytes).map_err(io)?;
+                    write_u32s(&batch, &mut |b| order.write(b)).map_err(io)?;
                     each(&batch)?;
                     done += batch.len() as u64;
                     progress.report(done as f64 / n as f64)?;
