@@ -653,6 +653,7 @@ fn external_memory_builds_write_the_in_memory_store() {
         "the external-memory build wrote a different store"
     );
     assert_eq!(in_memory.level_edges, external.level_edges);
+    assert_eq!((in_memory.sorted_runs, external.sorted_runs), (0, 1));
     // The store is usable: the slider's surface equals marching cubes of the volume.
     let mut slider = Slider::open(&spooled).unwrap();
     slider.set_isovalue(-9.5).unwrap();

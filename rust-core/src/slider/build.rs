@@ -49,6 +49,9 @@ pub struct BuildStats {
     /// Edge entries (E+ and E−) per level, level 1 first.
     pub level_edges: Vec<u64>,
     pub file_bytes: u64,
+    /// Runs the node values were sorted in on disk (0: sorted in memory, the budget held
+    /// the whole build).
+    pub sorted_runs: u64,
     pub seconds: f64,
 }
 
@@ -378,6 +381,7 @@ fn build_store_sorted(
         nodes: n as u64,
         level_blocks: levels.iter().map(|l| l.blocks() as u64).collect(),
         level_edges: levels.iter().map(|l| l.entries).collect(),
+        sorted_runs: order.runs() as u64,
         ..BuildStats::default()
     };
     write_store(path, volume, params, &order, &mask, &levels)?;
@@ -595,17 +599,21 @@ mod tests {
         let params = BuildParams::default();
         let build = |name: &str, plan: Option<Plan>| {
             let path = dir.join(name);
-            build_store_sorted(&volume, &path, &params, plan, &mut Progress::none()).unwrap();
-            std::fs::read(&path).unwrap()
+            let stats =
+                build_store_sorted(&volume, &path, &params, plan, &mut Progress::none()).unwrap();
+            (std::fs::read(&path).unwrap(), stats.sorted_runs)
         };
-        let whole = build("whole.isoslider", None);
-        for (run_nodes, buffer_nodes) in [(17_160, 17_160), (2_000, 300), (999, 1)] {
+        let (whole, runs) = build("whole.isoslider", None);
+        assert_eq!(runs, 0);
+        for (run_nodes, buffer_nodes, runs) in [(17_160, 17_160, 1), (2_000, 300, 9), (999, 1, 18)]
+        {
             let plan = Plan::External {
                 run_nodes,
                 buffer_nodes,
             };
-            let spooled = build("spooled.isoslider", Some(plan));
+            let (spooled, sorted_runs) = build("spooled.isoslider", Some(plan));
             assert!(spooled == whole, "{plan:?}: a different store");
+            assert_eq!(sorted_runs, runs, "{plan:?}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

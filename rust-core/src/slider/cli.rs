@@ -124,7 +124,7 @@ pub fn run_build(args: &BuildArgs) -> Result<()> {
     let [nx, ny, nz] = volume.lattice.dims;
     let volume_bytes = volume.values.len() * volume.values.value_type().size();
     println!(
-        "{}: {nx}×{ny}×{nz} {} volume ({volume_bytes} bytes) -> {} ({} bytes, {:.2}× the volume), {} skip-list levels (blocks {:?}), {:.2} s",
+        "{}: {nx}×{ny}×{nz} {} volume ({volume_bytes} bytes) -> {} ({} bytes, {:.2}× the volume), {} skip-list levels (blocks {:?}), {}, {:.2} s",
         args.input.display(),
         volume.values.value_type().name(),
         output.display(),
@@ -132,6 +132,10 @@ pub fn run_build(args: &BuildArgs) -> Result<()> {
         stats.file_bytes as f64 / volume_bytes as f64,
         stats.level_blocks.len(),
         stats.level_blocks,
+        match stats.sorted_runs {
+            0 => "sorted in memory".to_string(),
+            runs => format!("sorted on disk in {runs} run(s) within the memory budget"),
+        },
         stats.seconds
     );
     Ok(())

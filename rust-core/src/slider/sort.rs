@@ -71,7 +71,11 @@ impl Plan {
 /// The sorted node indices, kept for the store's ORDER section.
 pub(crate) enum Order {
     Memory(Vec<u32>),
-    Spooled(Spool),
+    /// Merged from this many sorted runs on disk.
+    Spooled {
+        order: Spool,
+        runs: usize,
+    },
 }
 
 impl Order {
@@ -82,7 +86,15 @@ impl Order {
     ) -> std::io::Result<()> {
         match self {
             Order::Memory(v) => write_u32s(v, out),
-            Order::Spooled(s) => s.read_into(out),
+            Order::Spooled { order, .. } => order.read_into(out),
+        }
+    }
+
+    /// Sorted runs spooled to disk (0: sorted in memory).
+    pub(crate) fn runs(&self) -> usize {
+        match self {
+            Order::Memory(_) => 0,
+            Order::Spooled { runs, .. } => *runs,
         }
     }
 }
@@ -182,7 +194,10 @@ pub(crate) fn sorted_nodes(
                 }
             }
             order.finish().map_err(io)?;
-            Ok(Order::Spooled(order))
+            Ok(Order::Spooled {
+                order,
+                runs: readers.len(),
+            })
         }
     }
 }
