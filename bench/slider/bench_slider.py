@@ -76,6 +76,58 @@ def flying_edges_seconds(vol, iso, repeats=3):
     return best, count
 
 
+def slide_memory(store, isovalues):
+    """Memory of `isobar slide STORE` fed one isovalue at a time: after each update, its
+    own memory (anonymous resident pages: the slider's maps and lists, the allocator's
+    heap) and the store's pages it has mapped (clean page cache, shared and reclaimable:
+    the kernel maps whole folios, up to 2 MiB here, around each value read), then the
+    peak RSS of the whole run (VmHWM, both kinds and the program's own code)."""
+    proc = subprocess.Popen(
+        [str(CLI), "slide", str(store)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+    def status():
+        fields = {}
+        for line in Path(f"/proc/{proc.pid}/status").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if value.strip().endswith("kB"):
+                fields[key] = int(value.split()[0]) / 1024
+        return fields
+
+    def store_mib():
+        kib, in_store = 0, False
+        for line in Path(f"/proc/{proc.pid}/smaps").read_text().splitlines():
+            head = line.split()
+            if "-" in head[0] and ":" not in head[0]:
+                in_store = len(head) >= 6 and Path(head[5]) == Path(store).resolve()
+            elif in_store and head[0] == "Rss:":
+                kib += int(head[1])
+        return kib / 1024
+
+    after = []
+    for iso in isovalues:
+        proc.stdin.write(f"{iso}\n")
+        proc.stdin.flush()
+        line = proc.stdout.readline().split()
+        s = status()
+        after.append(
+            {
+                "isovalue": iso,
+                "triangles": int(line[line.index("triangles") + 1]),
+                "held_mib": float(line[line.index("held_mib") + 1]),
+                "own_mib": s["RssAnon"],
+                "store_pages_mib": store_mib(),
+            }
+        )
+    peak = status()["VmHWM"]
+    proc.stdin.close()
+    proc.wait()
+    return {"after_updates": after, "peak_rss_mib": peak}
+
+
 def run(name, vol, out, start_fraction):
     npy = out / f"{name}.npy"
     np.save(npy, vol)
@@ -119,14 +171,7 @@ def run(name, vol, out, start_fraction):
         )
     slider.close()
     # Resident memory of a separate `isobar slide` process over the same isovalues.
-    lines = "".join(f"{start + s * rng}\n" for s in (0, 0.001, 0.01, 0.05, 0.1, 0.05, 0))
-    res = subprocess.run(
-        ["/usr/bin/time", "-f", "%M", str(CLI), "slide", str(store)],
-        input=lines.encode(),
-        capture_output=True,
-        check=True,
-    )
-    rss_kib = int(res.stderr.decode().strip().splitlines()[-1])
+    memory = slide_memory(store, [start + s * rng for s in (0, 0.001, 0.01, 0.05, 0.1, 0.05, 0)])
     return {
         "volume": name,
         "dims": list(vol.shape[::-1]),
@@ -136,8 +181,12 @@ def run(name, vol, out, start_fraction):
         "build_s": build_s,
         "start_iso": start,
         "start_triangles": len(first.triangles),
-        "slide_peak_rss_mib": rss_kib / 1024,
-        "rss_over_volume": rss_kib * 1024 / vol.nbytes,
+        "slide_peak_rss_mib": memory["peak_rss_mib"],
+        "rss_over_volume": memory["peak_rss_mib"] * 2**20 / vol.nbytes,
+        "slide_memory_after_updates": memory["after_updates"],
+        "own_over_volume_max": max(m["own_mib"] for m in memory["after_updates"])
+        * 2**20
+        / vol.nbytes,
         "rows": rows,
     }
 

@@ -455,8 +455,9 @@ fn held_memory_follows_the_surface_after_a_jump() {
         jumped.triangles() == direct.triangles(),
         "same surface either way"
     );
-    // Lists are cut to at most four times what they use (none below 64 KiB: about 20
-    // lists), bricks to about twice those in use.
+    // Scratch lists are cut to at most four times what they use (none below 64 KiB:
+    // about 20 lists), the surface's own lists to a quarter more, bricks to a quarter
+    // more than those in use.
     let bound = 4 * small + (2 << 20);
     assert!(
         large > 2 * bound,

@@ -231,14 +231,15 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             as u64
     }
 
-    /// Frees the values of emptied bricks beyond as many as are in use: a map whose keys
-    /// shrank to a few (a surface after a jump) then holds about twice its bricks, not
-    /// those of its widest extent, while one whose keys move at a steady size keeps
-    /// reusing its free bricks without allocating. Returns how many bricks it freed.
+    /// Frees the values of emptied bricks beyond a quarter as many as are in use: a map
+    /// whose keys shrank (a surface after a jump) then holds a quarter more than its
+    /// bricks, not those of its widest extent, while one whose keys move at a steady
+    /// size (a few percent of its bricks emptied and refilled at a time) keeps reusing
+    /// its free bricks without allocating. Returns how many bricks it freed.
     pub fn release_free(&mut self) -> usize {
         let in_use = self.meta.len() - self.free.len();
         let holding = self.free.len() - self.released;
-        let extra = holding.saturating_sub(in_use.max(1));
+        let extra = holding.saturating_sub((in_use / 4).max(1));
         // Bricks are reused from the end of the free list: release those nearest its
         // start, after the ones already released.
         let start = self.released;
