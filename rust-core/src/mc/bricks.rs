@@ -840,6 +840,18 @@ mod tests {
                 "{} of {full}",
                 map.bytes()
             );
+            // Of emptied bricks, a quarter as many as are in use are kept for reuse:
+            // twelve in use and six emptied keep three.
+            map.clear();
+            let corner = |b: u32| VirtualGrid::key(b % 3 * side, b / 3 % 3 * side, b / 9 * side);
+            for b in 0..18 {
+                map.insert(corner(b), b as u64);
+            }
+            for b in 12..18 {
+                map.remove(corner(b));
+            }
+            assert_eq!(map.release_free(), 3);
+            assert_eq!(map.release_free(), 0);
             map.clear();
             assert!(map.is_empty());
             assert_eq!(map.iter().count(), 0);

@@ -2,7 +2,7 @@
 //! turn on and off as the isovalue passes it), consolidate blocks into skip-list levels
 //! with redundant edges removed, and write everything into one store file.
 
-use super::sort::{self, write_u32s, Order, Plan};
+use super::sort::{self, write_le, Order, Plan};
 use super::store::{
     neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER, MAGIC, VERSION,
 };
@@ -511,9 +511,9 @@ fn write_store(
                 Some(&mut chunks),
                 &[
                     &|out| out(&(level.blocks() as u64).to_le_bytes()),
-                    &|out| write_u64s(&level.plus_offsets, out),
-                    &|out| write_u64s(&level.minus_offsets, out),
-                    &|out| write_u32s(&level.starts, out),
+                    &|out| write_le(&level.plus_offsets, u64::to_le_bytes, out),
+                    &|out| write_le(&level.minus_offsets, u64::to_le_bytes, out),
+                    &|out| write_le(&level.starts, u32::to_le_bytes, out),
                     &|out| level.plus.read_into(out),
                     &|out| level.minus.read_into(out),
                 ],
@@ -535,7 +535,7 @@ fn write_store(
             0,
             false,
             None,
-            &[&|out| write_u32s(&sums, out)],
+            &[&|out| write_le(&sums, u32::to_le_bytes, out)],
         )?;
         let mut header = Vec::with_capacity(header_len);
         header.extend_from_slice(MAGIC);
@@ -565,14 +565,6 @@ fn write_store(
         w.seek(SeekFrom::Start(0))?;
         w.write_all(&header)
     })
-}
-
-fn write_u64s(v: &[u64], out: &mut Sink) -> std::io::Result<()> {
-    for chunk in v.chunks(1 << 15) {
-        let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
-        out(&bytes)?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]

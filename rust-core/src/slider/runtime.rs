@@ -259,12 +259,7 @@ const TRIM_FLOOR_BYTES: usize = 1 << 16;
 /// would otherwise hold their peak for the rest of the session, while steady updates
 /// of one size never reallocate (a list grows twice its size before it is cut again).
 fn trim<T>(v: &mut Vec<T>, used: usize) -> bool {
-    let bytes = v.capacity() * std::mem::size_of::<T>();
-    let cut = bytes > TRIM_FLOOR_BYTES && v.capacity() > 4 * used;
-    if cut {
-        v.shrink_to(2 * used);
-    }
-    cut
+    cut_capacity(v, 4 * used, 2 * used)
 }
 
 /// Cuts a list of the surface itself (E, its data, a bucket) to an eighth over `used`
@@ -275,10 +270,16 @@ fn trim<T>(v: &mut Vec<T>, used: usize) -> bool {
 /// reserving less before it: a capacity check beside the pushes of the cells going back
 /// made 0.1 % steps about 4 % slower.
 fn trim_to_surface<T>(v: &mut Vec<T>, used: usize) -> bool {
+    cut_capacity(v, used + used / 4, used + used / 8)
+}
+
+/// Shrinks `v` to `keep` items of capacity when it holds more than `most` and more than
+/// [`TRIM_FLOOR_BYTES`]; true when it did.
+fn cut_capacity<T>(v: &mut Vec<T>, most: usize, keep: usize) -> bool {
     let bytes = v.capacity() * std::mem::size_of::<T>();
-    let cut = bytes > TRIM_FLOOR_BYTES && v.capacity() > used + used / 4;
+    let cut = bytes > TRIM_FLOOR_BYTES && v.capacity() > most;
     if cut {
-        v.shrink_to(used + used / 8);
+        v.shrink_to(keep);
     }
     cut
 }
@@ -334,7 +335,7 @@ fn lattice_index(lattice: &Lattice, key: u64) -> usize {
 
 /// HE's bricks are 8³ ([`BrickShape`](crate::mc::bricks::BrickShape) 3): a cell's twelve
 /// edges are read from its eight corners, which lie in one 8³ brick for 343 of 512
-/// cells but in one 4³ brick for only 27 of 64; with 4³ bricks HE took 9.5 MiB less at
+/// cells but in one 4³ brick for only 27 of 64; with 4³ bricks HE took 9.3 MiB less at
 /// MNI152 256³ but 0.1 % steps took about 5 % longer.
 const HE_BRICK: u32 = 3;
 /// HC's bricks are 4³: a cell is looked up alone, so the smaller bricks cost no time
@@ -499,11 +500,11 @@ impl Slider {
             all_triangles: OnceCell::new(),
             spare_triangles: RefCell::default(),
             scratch: Scratch {
-                // Allocated zeroed while the heap is fresh, so the system maps it (a
-                // large block) and zeroes a page when it is first marked. Allocated
-                // when a vertex first moved, it came out of the heap the first surface
-                // had freed and was written whole: that step took 0.75 ms longer at
-                // 256³ (2 MiB).
+                // Allocated zeroed at open, where zeroing costs no update anything (in
+                // a fresh process the system maps the block and zeroes each page as it
+                // is first marked). Allocated when a vertex first moved, it came out of
+                // the heap the first surface had freed and was written whole there:
+                // that step took 0.75 ms longer at 256³ (2 MiB).
                 marks: vec![0; cells.div_ceil(64)],
                 ..Scratch::default()
             },
@@ -1008,8 +1009,9 @@ impl Slider {
             parallel,
         );
         // The change's lists are new each update: sized once from the dirty cells (the
-        // surface has about two triangles a cell) rather than doubled a dozen times.
-        removed_triangles.reserve(2 * dirty.len());
+        // surface has about two triangles a cell) rather than doubled a dozen times;
+        // only cells in HC have triangles to remove (none before the first surface).
+        removed_triangles.reserve(2 * dirty.len().min(cells.hc.len()));
         let cells_out = || {
             for (k, &cell) in dirty.iter().enumerate() {
                 cells.take_out(dirty, k, cell, removed_triangles);
@@ -1619,6 +1621,24 @@ pub(crate) fn edge_data_from(
 mod tests {
     use super::*;
     use std::collections::BTreeMap;
+
+    #[test]
+    fn lists_are_cut_back_to_what_they_use() {
+        // Items of 4 bytes: above the floor.
+        let big = 1 << 20;
+        // Scratch lists: cut to twice their use only above four times it.
+        let mut v: Vec<u32> = Vec::with_capacity(big);
+        assert!(!trim(&mut v, big / 4));
+        assert!(trim(&mut v, big / 5) && v.capacity() < big / 2);
+        // The surface's lists: cut to an eighth over their use above a quarter over.
+        let mut v: Vec<u32> = Vec::with_capacity(big);
+        assert!(!trim_to_surface(&mut v, big * 5 / 6));
+        assert!(trim_to_surface(&mut v, big * 3 / 4));
+        assert!(v.capacity() >= big * 3 / 4 + big * 3 / 32 && v.capacity() < big * 7 / 8);
+        // Below the floor nothing is cut.
+        let mut v: Vec<u32> = Vec::with_capacity(1000);
+        assert!(!trim(&mut v, 0) && !trim_to_surface(&mut v, 0));
+    }
 
     /// A small deterministic random source for the tests' inputs.
     fn xorshift(mut state: u64) -> impl FnMut() -> u64 {

@@ -85,7 +85,7 @@ impl Order {
         out: &mut dyn FnMut(&[u8]) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
         match self {
-            Order::Memory(v) => write_u32s(v, out),
+            Order::Memory(v) => write_le(v, u32::to_le_bytes, out),
             Order::Spooled { order, .. } => order.read_into(out),
         }
     }
@@ -99,14 +99,16 @@ impl Order {
     }
 }
 
-/// Hands `v`'s little-endian bytes to `out`, a bounded slice at a time.
-pub(crate) fn write_u32s(
-    v: &[u32],
+/// Hands the little-endian bytes of `v` to `out`, a bounded slice at a time (`bytes`
+/// gives one word's: `u32::to_le_bytes`, `u64::to_le_bytes`).
+pub(crate) fn write_le<T: Copy, const N: usize>(
+    v: &[T],
+    bytes: fn(T) -> [u8; N],
     out: &mut dyn FnMut(&[u8]) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
     for chunk in v.chunks(BATCH) {
-        let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
-        out(&bytes)?;
+        let b: Vec<u8> = chunk.iter().flat_map(|&x| bytes(x)).collect();
+        out(&b)?;
     }
     Ok(())
 }
@@ -160,7 +162,7 @@ pub(crate) fn sorted_nodes(
                 ids.extend(first as u32..(first + run_nodes).min(n) as u32);
                 ids.par_sort_unstable_by_key(|&i| key(values, i));
                 let mut run = Spool::file(dir).map_err(io)?;
-                write_u32s(&ids, &mut |b| run.write(b)).map_err(io)?;
+                write_le(&ids, u32::to_le_bytes, &mut |b| run.write(b)).map_err(io)?;
                 run.finish().map_err(io)?;
                 runs.push(run);
                 progress.report(first as f64 / n as f64)?;
@@ -186,7 +188,7 @@ pub(crate) fn sorted_nodes(
                     heap.push(Reverse((key(values, i), r)));
                 }
                 if batch.len() == BATCH || heap.is_empty() {
-                    write_u32s(&batch, &mut |b| order.write(b)).map_err(io)?;
+                    write_le(&batch, u32::to_le_bytes, &mut |b| order.write(b)).map_err(io)?;
                     each(&batch)?;
                     done += batch.len() as u64;
                     progress.report(done as f64 / n as f64)?;
