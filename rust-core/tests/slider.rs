@@ -940,3 +940,29 @@ fn lod_with_bound_zero_is_the_exact_mesh() {
         }
     }
 }
+
+#[test]
+fn a_store_holds_only_the_volume_it_was_built_from() {
+    let volume = blobs([11, 9, 7], 0.05);
+    let store = Store::open(&store_of(&volume, "holds.isoslider", 0.25)).unwrap();
+    assert!(store.holds(&volume).unwrap());
+    let Values::F32(v) = &volume.values else {
+        unreachable!()
+    };
+    // One value changed by one unit in the last place, the last node's.
+    let mut changed = v.clone();
+    let last = changed.len() - 1;
+    changed[last] = f32::from_bits(changed[last].to_bits() + 1);
+    let other = Volume::new(volume.lattice, Values::F32(changed)).unwrap();
+    assert!(!store.holds(&other).unwrap());
+    // Same values on another lattice (moved origin), or in another type.
+    let mut moved = volume.lattice;
+    moved.origin.x += 1e-9;
+    assert!(!store
+        .holds(&Volume::new(moved, volume.values.clone()).unwrap())
+        .unwrap());
+    let as_u8 = v.iter().map(|&x| (x * 100.0) as u8).collect();
+    assert!(!store
+        .holds(&Volume::new(volume.lattice, Values::U8(as_u8)).unwrap())
+        .unwrap());
+}

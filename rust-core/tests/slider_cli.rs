@@ -2,7 +2,7 @@
 
 use isobar::io::{read_volume, RawLayout, RawType};
 use isobar::progress::Progress;
-use isobar::slider::full;
+use isobar::slider::{full, Store};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -189,4 +189,90 @@ fn bad_inputs_fail_with_a_clear_message() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line 2") && err.contains("'abc'"), "{err}");
+}
+
+/// u16 little-endian bytes of an 18×15×13 ring-shaped bump on a ramp, moved `shift` nodes
+/// along x.
+fn ring_volume(shift: f64) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    for z in 0..13 {
+        for y in 0..15 {
+            for x in 0..18 {
+                let (fx, fy, fz) = (x as f64 - 8.5 - shift, y as f64 - 7.0, z as f64 - 6.0);
+                let ring = ((fx * fx + fy * fy).sqrt() - 4.5).powi(2) + fz * fz;
+                let v = 3000.0 * (-ring / 6.0).exp() + 20.0 * x as f64;
+                bytes.extend_from_slice(&(v as u16).to_le_bytes());
+            }
+        }
+    }
+    bytes
+}
+
+#[test]
+fn slide_on_a_volume_builds_its_store_once_and_rebuilds_a_stale_one() {
+    let raw = temp("volume-ring.raw");
+    let store = temp("volume-ring.isoslider");
+    let raw_args = ["--raw-type", "u16", "--raw-dims", "18,15,13"];
+    let layout = RawLayout {
+        dims: [18, 15, 13],
+        ty: RawType::U16,
+        big_endian: false,
+        origin: glam::DVec3::ZERO,
+        spacing: glam::DVec3::ONE,
+    };
+    let isos = [1500.0, 1510.0, 800.0, 2900.0];
+    let input: String = isos.iter().map(|v| format!("{v}\n")).collect();
+    // `slide VOLUME`: stderr says whether the store was built or reused; each line's
+    // counts are a from-scratch marching-cubes mesh of the volume as it is now.
+    let run = |want: &str| {
+        let out = slide_with(&raw, &raw_args, input.as_bytes());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        assert!(err.contains(want), "{err}");
+        let volume = read_volume(&raw, None, Some(layout)).unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(text.lines().count(), isos.len(), "{text}");
+        for (line, iso) in text.lines().zip(isos) {
+            let mesh = full::extract(&volume, iso, &mut Progress::none()).unwrap();
+            let want = format!(
+                "iso {iso} triangles {} vertices {} ",
+                mesh.triangles.len(),
+                mesh.positions.len()
+            );
+            assert!(line.starts_with(&want), "{line} vs {want}");
+        }
+    };
+    let _ = std::fs::remove_file(&store);
+    std::fs::write(&raw, ring_volume(0.0)).unwrap();
+    run("building its store");
+    assert!(Store::open(&store).is_ok(), "the store beside the volume");
+    let built = std::fs::metadata(&store).unwrap().modified().unwrap();
+    run("using its store");
+    assert_eq!(
+        std::fs::metadata(&store).unwrap().modified().unwrap(),
+        built,
+        "a store holding the volume is not rewritten"
+    );
+    // The volume changed (same size, same lattice): the old store no longer holds it.
+    std::fs::write(&raw, ring_volume(2.0)).unwrap();
+    run("building its store");
+
+    // --store elsewhere; a file there that is not a store is left alone.
+    let other = temp("volume-ring-notes.isoslider");
+    std::fs::write(&other, b"my notes").unwrap();
+    let mut args = raw_args.to_vec();
+    args.extend(["--store", other.to_str().unwrap()]);
+    let out = slide_with(&raw, &args, b"1500\n");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("volume-ring-notes.isoslider") && err.contains("not a slider store"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&other).unwrap(), b"my notes");
+    // Volume options on a store are refused, not ignored.
+    let out = slide_with(&store, &raw_args, b"1500\n");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("is a slider store already"), "{err}");
 }

@@ -49,7 +49,7 @@ use std::path::Path;
 pub(crate) use atomic::{parent_dir, write_atomically};
 pub use sequence::{expand_sequence, fill_frame, frame_number};
 pub(crate) use spool::Spool;
-pub use volume::{read_volume, RawLayout, RawType};
+pub use volume::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};
 
 /// Extensions [`read_particles`] understands (each may also carry a trailing `.gz`).
 pub const PARTICLE_EXTENSIONS: &[&str] = &[

@@ -2,22 +2,19 @@
 //! slide its isosurface from the keyboard (or from isovalues read one per line when stdin
 //! is not a terminal, so scripts and tests can drive it).
 
-use super::{build_store, BuildParams, LodParams, Slider};
+use super::store::{Store, MAGIC};
+use super::{build_store, BuildParams, BuildStats, LodParams, Slider};
 use crate::error::{Error, Result};
-use crate::io::{read_volume, RawLayout, RawType};
+use crate::field::grid::Volume;
+use crate::io::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};
 use crate::progress::Progress;
 use glam::DVec3;
 use std::io::{BufRead, IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
 
-/// `isobar slide-build`.
-#[derive(clap::Args, Debug)]
-pub struct BuildArgs {
-    /// Volume file: .vti, .nrrd, .npy (3-D, C order) or .raw (with --raw-dims, --raw-type).
-    pub input: PathBuf,
-    /// Store to write (default: the input with extension .isoslider).
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
+/// How to read a volume file (shared by `slide-build` and `slide VOLUME`).
+#[derive(clap::Args, Debug, Default)]
+pub struct VolumeArgs {
     /// Point array of a .vti to use (default: the active scalars, else the first scalar array).
     #[arg(long)]
     pub array: Option<String>,
@@ -33,6 +30,54 @@ pub struct BuildArgs {
     /// Node spacing of a .raw file.
     #[arg(long, value_delimiter = ',')]
     pub raw_spacing: Option<Vec<f64>>,
+}
+
+impl VolumeArgs {
+    /// Reads `input` as these options say.
+    pub fn read(&self, input: &Path) -> Result<Volume> {
+        let three = |v: Option<Vec<f64>>, name: &'static str| -> Result<Option<DVec3>> {
+            match v.as_deref() {
+                None => Ok(None),
+                Some([a, b, c]) => Ok(Some(DVec3::new(*a, *b, *c))),
+                Some(other) => Err(Error::InvalidParameter {
+                    name,
+                    message: format!("needs 3 comma-separated values, got {}", other.len()),
+                }),
+            }
+        };
+        let dims = three(
+            self.raw_dims
+                .as_ref()
+                .map(|d| d.iter().map(|&v| v as f64).collect()),
+            "raw-dims",
+        )?;
+        let spacing = three(self.raw_spacing.clone(), "raw-spacing")?;
+        let raw = match (dims, &self.raw_dims) {
+            (Some(_), Some(d)) => Some(RawLayout {
+                dims: [d[0], d[1], d[2]],
+                ty: self.raw_type.parse::<RawType>()?,
+                big_endian: self.raw_big_endian,
+                origin: DVec3::ZERO,
+                spacing: spacing.unwrap_or(DVec3::ONE),
+            }),
+            _ => None,
+        };
+        read_volume(input, self.array.as_deref(), raw)
+    }
+
+    /// Whether any option was given (they mean nothing for a store).
+    fn given(&self) -> bool {
+        self.array.is_some()
+            || self.raw_dims.is_some()
+            || self.raw_type != "u8"
+            || self.raw_big_endian
+            || self.raw_spacing.is_some()
+    }
+}
+
+/// How to build a store (shared by `slide-build` and `slide VOLUME`).
+#[derive(clap::Args, Debug)]
+pub struct StoreArgs {
     /// Skip-list threshold: a block closes once its redundant edges exceed this fraction
     /// of the active edges.
     #[arg(long, default_value_t = 0.25)]
@@ -45,6 +90,30 @@ pub struct BuildArgs {
     /// unnamed temporary files beside the output) and the skip-list levels spooled there.
     #[arg(long, default_value_t = crate::field::DEFAULT_MEMORY_BUDGET)]
     pub memory_budget: u64,
+}
+
+impl StoreArgs {
+    fn params(&self) -> BuildParams {
+        BuildParams {
+            threshold: self.threshold,
+            max_levels: self.max_levels,
+            memory_budget: self.memory_budget,
+        }
+    }
+}
+
+/// `isobar slide-build`.
+#[derive(clap::Args, Debug)]
+pub struct BuildArgs {
+    /// Volume file: .vti, .nrrd, .npy (3-D, C order) or .raw (with --raw-dims, --raw-type).
+    pub input: PathBuf,
+    /// Store to write (default: the input with extension .isoslider).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub build: StoreArgs,
     /// Print no progress.
     #[arg(long)]
     pub quiet: bool,
@@ -54,8 +123,17 @@ pub struct BuildArgs {
 #[derive(clap::Args, Debug)]
 #[command(allow_negative_numbers = true)]
 pub struct SlideArgs {
-    /// Store written by `isobar slide-build`.
-    pub store: PathBuf,
+    /// A store written by `isobar slide-build`, or a volume file (.vti, .nrrd, .npy, .raw
+    /// with --raw-dims): its store is built first, or reused when the one at --store holds
+    /// this very volume.
+    pub input: PathBuf,
+    /// Where a volume's store lives (default: the volume with extension .isoslider).
+    #[arg(long)]
+    pub store: Option<PathBuf>,
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub build: StoreArgs,
     /// Starting isovalue (default: the middle of the value range).
     #[arg(long)]
     pub iso: Option<f64>,
@@ -71,56 +149,12 @@ pub struct SlideArgs {
 
 /// Runs `slide-build`.
 pub fn run_build(args: &BuildArgs) -> Result<()> {
-    let three = |v: &Option<Vec<f64>>, name: &'static str| -> Result<Option<DVec3>> {
-        match v.as_deref() {
-            None => Ok(None),
-            Some([a, b, c]) => Ok(Some(DVec3::new(*a, *b, *c))),
-            Some(other) => Err(Error::InvalidParameter {
-                name,
-                message: format!("needs 3 comma-separated values, got {}", other.len()),
-            }),
-        }
-    };
-    let dims = three(
-        &args
-            .raw_dims
-            .as_ref()
-            .map(|d| d.iter().map(|&v| v as f64).collect()),
-        "raw-dims",
-    )?;
-    let spacing = three(&args.raw_spacing, "raw-spacing")?;
-    let raw = match (dims, &args.raw_dims) {
-        (Some(_), Some(d)) => Some(RawLayout {
-            dims: [d[0], d[1], d[2]],
-            ty: args.raw_type.parse::<RawType>()?,
-            big_endian: args.raw_big_endian,
-            origin: DVec3::ZERO,
-            spacing: spacing.unwrap_or(DVec3::ONE),
-        }),
-        _ => None,
-    };
-    let volume = read_volume(&args.input, args.array.as_deref(), raw)?;
+    let volume = args.volume.read(&args.input)?;
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| default_store_path(&args.input));
-    let params = BuildParams {
-        threshold: args.threshold,
-        max_levels: args.max_levels,
-        memory_budget: args.memory_budget,
-    };
-    let quiet = args.quiet;
-    let mut report = |f: f64, phase: &str| {
-        if !quiet {
-            eprint!("\r{:>3.0}% {phase:<24}", f * 100.0);
-        }
-        true
-    };
-    let stats = build_store(&volume, &output, &params, &mut Progress::new(&mut report));
-    if !quiet {
-        eprintln!();
-    }
-    let stats = stats?;
+    let stats = build_with_progress(&volume, &output, &args.build.params(), args.quiet)?;
     let [nx, ny, nz] = volume.lattice.dims;
     let volume_bytes = volume.values.len() * volume.values.value_type().size();
     println!(
@@ -141,9 +175,96 @@ pub fn run_build(args: &BuildArgs) -> Result<()> {
     Ok(())
 }
 
+/// [`build_store`] with a percentage and the phase on stderr unless `quiet`.
+fn build_with_progress(
+    volume: &Volume,
+    output: &Path,
+    params: &BuildParams,
+    quiet: bool,
+) -> Result<BuildStats> {
+    let mut report = |f: f64, phase: &str| {
+        if !quiet {
+            eprint!("\r{:>3.0}% {phase:<24}", f * 100.0);
+        }
+        true
+    };
+    let stats = build_store(volume, output, params, &mut Progress::new(&mut report));
+    if !quiet {
+        eprintln!();
+    }
+    stats
+}
+
+/// The store `slide` opens for `args.input`: the input itself when it is a store; for a
+/// volume, the store at `--store` (default beside the volume) if it holds this volume's
+/// lattice and values, else one built there now (replacing a stale one by rename).
+fn store_for(args: &SlideArgs) -> Result<Slider> {
+    let volume_named = args
+        .input
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| VOLUME_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()));
+    // Neither a store nor named as a volume: opening it as a store says what is wrong.
+    if is_store(&args.input)? || !volume_named {
+        if args.store.is_some() || args.volume.given() {
+            return Err(Error::InvalidParameter {
+                name: "store",
+                message: format!(
+                    "{} is a slider store already; --store and the volume options apply to a volume",
+                    args.input.display()
+                ),
+            });
+        }
+        return Slider::open(&args.input);
+    }
+    let volume = args.volume.read(&args.input)?;
+    let path = args
+        .store
+        .clone()
+        .unwrap_or_else(|| default_store_path(&args.input));
+    if path.exists() {
+        if !is_store(&path)? {
+            // Not ours to replace.
+            return Err(Error::format(
+                path,
+                "exists and is not a slider store; name another path with --store",
+            ));
+        }
+        // A store that fails to open (another version, corrupt) is rebuilt like a stale one.
+        if let Ok(store) = Store::open(&path) {
+            if store.holds(&volume)? {
+                eprintln!(
+                    "{}: using its store {}",
+                    args.input.display(),
+                    path.display()
+                );
+                drop(volume);
+                return Slider::open(&path);
+            }
+        }
+    }
+    eprintln!(
+        "{}: building its store {}",
+        args.input.display(),
+        path.display()
+    );
+    build_with_progress(&volume, &path, &args.build.params(), false)?;
+    // The slider reads the store, not the volume: free it before the surface is built.
+    drop(volume);
+    Slider::open(&path)
+}
+
+/// Whether `path` starts with a store's magic (a missing file is an error naming it).
+fn is_store(path: &Path) -> Result<bool> {
+    let mut head = [0u8; 8];
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let n = file.read(&mut head).map_err(|e| Error::io(path, e))?;
+    Ok(n == head.len() && &head == MAGIC)
+}
+
 /// Runs `slide`: interactive on a terminal, else one isovalue per input line.
 pub fn run_slide(args: &SlideArgs) -> Result<()> {
-    let mut slider = Slider::open(&args.store)?;
+    let mut slider = store_for(args)?;
     if let Some(error_bound) = args.lod {
         slider.set_lod(LodParams {
             error_bound,
@@ -245,7 +366,7 @@ fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Re
     let mut step = args.step * range;
     eprintln!(
         "{}: values {lo} .. {}; keys: up/right/+ raise, down/left/- lower, ]/[ step ×10/÷10, q quits",
-        args.store.display(),
+        slider.store().path().display(),
         lo + range
     );
     let _raw = RawTerminal::enter();

@@ -35,7 +35,7 @@
 //! follows what the slider reads and a corrupt chunk is refused before its data is used.
 
 use crate::error::{Error, Result};
-use crate::field::grid::{Lattice, NodeCoords, ValueType};
+use crate::field::grid::{Lattice, NodeCoords, ValueType, Volume};
 use crate::prefetch::prefetch;
 use glam::DVec3;
 use memmap2::Mmap;
@@ -394,6 +394,40 @@ impl Store {
     /// The file this store was opened from.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Whether this store was built from `volume`: the same lattice, value type and
+    /// values, byte for byte. The values are read from the file with `pread`, not
+    /// through the map, so the check leaves none of them mapped (resident) in the
+    /// process; it stops at the first differing piece.
+    pub fn holds(&self, volume: &Volume) -> Result<bool> {
+        use std::os::unix::fs::FileExt;
+        if volume.lattice != self.lattice || volume.values.value_type() != self.value_type {
+            return Ok(false);
+        }
+        let file = std::fs::File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
+        let (mut at, mut stored) = (self.values as u64, Vec::new());
+        let mut failed = None;
+        let same = volume
+            .values
+            .write_le(&mut |bytes: &[u8]| {
+                stored.resize(bytes.len(), 0);
+                if let Err(e) = file.read_exact_at(&mut stored, at) {
+                    failed = Some(e);
+                    return Err(());
+                }
+                at += bytes.len() as u64;
+                if stored == bytes {
+                    Ok(())
+                } else {
+                    Err(())
+                }
+            })
+            .is_ok();
+        match failed {
+            Some(e) => Err(Error::io(&self.path, e)),
+            None => Ok(same),
+        }
     }
 
     /// Lattice of the volume.
