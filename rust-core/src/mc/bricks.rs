@@ -6,7 +6,8 @@
 //! everything seen so far. Bricks keep neighbouring keys together: the brick table is
 //! small enough to stay in cache, most of a cell's eight corners lie in one brick, and a
 //! scan in key order walks one brick at a time (the last brick is remembered). Memory
-//! still follows the surface: only touched bricks exist.
+//! still follows the surface: only touched bricks exist, and an 8³ brick holds values
+//! only for the 4³ sub-cubes its keys lie in ([`BrickShape::CHUNKED`]).
 
 use super::VirtualGrid;
 use crate::prefetch::prefetch;
