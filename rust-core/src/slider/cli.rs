@@ -77,7 +77,7 @@ impl VolumeArgs {
 
 /// How to build a store (shared by `slide-build` and `slide VOLUME`).
 #[derive(clap::Args, Debug)]
-pub struct StoreArgs {
+pub struct BuildOptions {
     /// Skip-list threshold: a block closes once its redundant edges exceed this fraction
     /// of the active edges.
     #[arg(long, default_value_t = 0.25)]
@@ -92,7 +92,7 @@ pub struct StoreArgs {
     pub memory_budget: u64,
 }
 
-impl StoreArgs {
+impl BuildOptions {
     fn params(&self) -> BuildParams {
         BuildParams {
             threshold: self.threshold,
@@ -113,7 +113,7 @@ pub struct BuildArgs {
     #[command(flatten)]
     pub volume: VolumeArgs,
     #[command(flatten)]
-    pub build: StoreArgs,
+    pub build: BuildOptions,
     /// Print no progress.
     #[arg(long)]
     pub quiet: bool,
@@ -133,7 +133,7 @@ pub struct SlideArgs {
     #[command(flatten)]
     pub volume: VolumeArgs,
     #[command(flatten)]
-    pub build: StoreArgs,
+    pub build: BuildOptions,
     /// Starting isovalue (default: the middle of the value range).
     #[arg(long)]
     pub iso: Option<f64>,
