@@ -18,15 +18,18 @@ use rustc_hash::FxHashMap;
 /// Smaller bricks waste less where a surface crosses a brick at a slant (the 1M-particle
 /// frame's node cache filled about a fifth of its 8³ bricks' slots, a third of 4³ ones');
 /// larger ones keep more of a cell's corners in
-/// one brick (343 cells in 512 against 27 in 64).
-pub struct BrickShape<const S: u32>;
+/// one brick (343 cells in 512 against 27 in 64). `C`: chunked, see
+/// [`BrickShape::CHUNKED`].
+pub struct BrickShape<const S: u32, const C: bool = false>;
 
 /// Presence words a brick holds, enough for the largest shape.
 const MAX_WORDS: usize = 8;
-/// [`Meta::chunk`] of a presence word whose keys have no values allocated.
+/// Chunks a chunked brick is cut into (its eight half-size sub-cubes).
+const CHUNKS: usize = 8;
+/// [`Meta::chunk`] of a sub-cube whose keys have no values allocated.
 const NO_CHUNK: u8 = u8::MAX;
 
-impl<const S: u32> BrickShape<S> {
+impl<const S: u32, const C: bool> BrickShape<S, C> {
     const LOCAL: u32 = (1 << S) - 1;
     /// Keys per brick.
     const KEYS: usize = 1 << (3 * S);
@@ -42,20 +45,25 @@ impl<const S: u32> BrickShape<S> {
         (brick, Self::local(x, y, z))
     }
 
-    /// Bricks of several presence words (8³) are chunked: their keys are numbered 4³
-    /// sub-cube by sub-cube, one presence word each, and a sub-cube's values are
-    /// allocated only once one of its keys is set. A surface crosses an 8³ brick in a
-    /// few of its sub-cubes: the slider's HE, whose 8³ bricks were about a twentieth
-    /// full on MNI152, held half its values in sub-cubes with no key at all.
-    const CHUNKED: bool = Self::WORDS > 1;
+    /// A chunked brick (`C`, 4³ or 8³) numbers its keys sub-cube by sub-cube (its eight
+    /// half-size sub-cubes) and allocates a sub-cube's values only once one of its keys
+    /// is set. A surface crosses a brick in a few of its sub-cubes: the slider's HE,
+    /// whose 8³ bricks were about a twentieth full on MNI152, held half its values in
+    /// sub-cubes with no key at all. Maps whose lookups must be a single load (the
+    /// correctors' node cache) stay unchunked.
+    const CHUNKED: bool = C && S >= 2;
+    /// Sub-cube edge, in bits, and keys per sub-cube (chunk).
+    const HALF: u32 = S - 1;
+    const CHUNK_KEYS: usize = Self::KEYS / CHUNKS;
 
     /// Index within its brick of the key at (x, y, z): x fastest, or for chunked bricks
-    /// the sub-cube (bit 2 of each coordinate) first, then x fastest within it.
+    /// the sub-cube (the top bit of each coordinate) first, then x fastest within it.
     #[inline]
     fn local(x: u32, y: u32, z: u32) -> usize {
         if Self::CHUNKED {
-            let sub = (x >> 2 & 1) | (y >> 2 & 1) << 1 | (z >> 2 & 1) << 2;
-            (sub << 6 | (x & 3) | (y & 3) << 2 | (z & 3) << 4) as usize
+            let (h, m) = (Self::HALF, (1 << Self::HALF) - 1);
+            let sub = (x >> h & 1) | (y >> h & 1) << 1 | (z >> h & 1) << 2;
+            (sub << (3 * h) | (x & m) | (y & m) << h | (z & m) << (2 * h)) as usize
         } else {
             let l = Self::LOCAL;
             ((x & l) | (y & l) << S | (z & l) << (2 * S)) as usize
@@ -68,11 +76,12 @@ impl<const S: u32> BrickShape<S> {
         let [bx, by, bz] = VirtualGrid::coords(brick);
         let l = local as u32;
         let [x, y, z] = if Self::CHUNKED {
-            let (sub, inner) = (l >> 6, l & 63);
+            let (h, m) = (Self::HALF, (1 << Self::HALF) - 1);
+            let (sub, inner) = (l >> (3 * h), l & ((1 << (3 * h)) - 1));
             [
-                (sub & 1) << 2 | (inner & 3),
-                (sub >> 1 & 1) << 2 | (inner >> 2 & 3),
-                (sub >> 2) << 2 | (inner >> 4),
+                (sub & 1) << h | (inner & m),
+                (sub >> 1 & 1) << h | (inner >> h & m),
+                (sub >> 2) << h | (inner >> (2 * h)),
             ]
         } else {
             let m = Self::LOCAL;
@@ -86,7 +95,8 @@ impl<const S: u32> BrickShape<S> {
     #[inline(always)]
     fn slot(meta: &Meta, local: usize) -> usize {
         if Self::CHUNKED {
-            meta.chunk[local / 64] as usize * 64 + local % 64
+            let k = Self::CHUNK_KEYS;
+            meta.chunk[local / k] as usize * k + local % k
         } else {
             local
         }
@@ -100,11 +110,11 @@ impl<const S: u32> BrickShape<S> {
         values: &mut Box<[T]>,
         local: usize,
     ) -> usize {
-        if Self::CHUNKED && meta.chunk[local / 64] == NO_CHUNK {
+        if Self::CHUNKED && meta.chunk[local / Self::CHUNK_KEYS] == NO_CHUNK {
             let c = meta.chunks;
-            meta.chunk[local / 64] = c;
+            meta.chunk[local / Self::CHUNK_KEYS] = c;
             meta.chunks += 1;
-            let needed = (c as usize + 1) * 64;
+            let needed = (c as usize + 1) * Self::CHUNK_KEYS;
             if values.len() < needed {
                 let mut grown = Vec::with_capacity(needed);
                 grown.extend_from_slice(values);
@@ -169,13 +179,14 @@ impl<const S: u32> BrickShape<S> {
             std::array::from_fn(|k| {
                 let [dx, dy, dz] = super::corner_offset(k);
                 if Self::CHUNKED {
-                    // One step along an axis moves 1, 4 or 16 within a sub-cube; from
-                    // its last layer it moves into the next sub-cube instead.
+                    // One step along axis a moves 2^(h·a) within a sub-cube; from its
+                    // last layer it moves into the next sub-cube instead.
+                    let (h, m) = (Self::HALF, (1 << Self::HALF) - 1);
                     let step = |c: u32, a: u32| {
-                        if c & 3 == 3 {
-                            (1 << (6 + a)) - (3 << (2 * a))
+                        if c & m == m {
+                            (1 << (3 * h + a)) - (m << (h * a))
                         } else {
-                            1 << (2 * a)
+                            1 << (h * a)
                         }
                     };
                     local + (dx * step(x, 0) + dy * step(y, 1) + dz * step(z, 2)) as usize
@@ -199,10 +210,10 @@ struct Meta {
     present: [u64; MAX_WORDS],
     /// Keys present (0: the brick is free, on the map's free list).
     count: u32,
-    /// Chunked bricks: the chunk of the brick's values holding each presence word's
-    /// keys ([`NO_CHUNK`]: none yet), and how many chunks are assigned. A word whose
+    /// Chunked bricks: the chunk of the brick's values holding each sub-cube's keys
+    /// ([`NO_CHUNK`]: none yet), and how many chunks are assigned. A sub-cube whose
     /// keys are all removed keeps its chunk until the brick is freed.
-    chunk: [u8; MAX_WORDS],
+    chunk: [u8; CHUNKS],
     chunks: u8,
     /// The brick's own key (grid key divided by the brick edge), for iteration.
     key: u64,
@@ -220,7 +231,7 @@ enum Index {
 const NO_BRICK: u32 = u32::MAX;
 
 /// A map from grid keys to `T`, stored brick by brick.
-pub struct BrickMap<T, const S: u32 = 3> {
+pub struct BrickMap<T, const S: u32 = 3, const C: bool = false> {
     index: Index,
     /// Brick `i`'s values. Boxed one by one so that growing the map never copies (or
     /// briefly doubles) what it holds; the pointers sit in one small array that stays
@@ -239,13 +250,13 @@ pub struct BrickMap<T, const S: u32 = 3> {
     last: Option<(u64, u32)>,
 }
 
-impl<T: Copy + Default, const S: u32> Default for BrickMap<T, S> {
+impl<T: Copy + Default, const S: u32, const C: bool> Default for BrickMap<T, S, C> {
     fn default() -> Self {
         BrickMap::with_index(Index::Hashed(FxHashMap::default()))
     }
 }
 
-impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
+impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     fn with_index(index: Index) -> Self {
         const { assert!(S >= 1 && S <= 3, "bricks of 2³ to 8³ keys") };
         BrickMap {
@@ -378,16 +389,16 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// hint the slider's 1 % steps took about a tenth longer.
     #[inline]
     pub fn prefetch(&self, key: u64) {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         if let Some(i) = self.brick_index(brick) {
             let i = i as usize;
             let meta = &self.meta[i];
             prefetch(&meta.present[local / 64]);
-            if !BrickShape::<S>::CHUNKED {
+            if !BrickShape::<S, C>::CHUNKED {
                 prefetch(&self.values[i][local]);
-            } else if meta.chunk[local / 64] != NO_CHUNK {
+            } else if meta.chunk[local / BrickShape::<S, C>::CHUNK_KEYS] != NO_CHUNK {
                 // The chunk comes from the brick's meta: one load more before the hint.
-                prefetch(&self.values[i][BrickShape::<S>::slot(meta, local)]);
+                prefetch(&self.values[i][BrickShape::<S, C>::slot(meta, local)]);
             }
         }
     }
@@ -423,17 +434,17 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
                 let meta = &mut self.meta[i as usize];
                 meta.key = brick;
                 // A chunked brick reassigns the chunks its values kept, in order.
-                (meta.chunk, meta.chunks) = ([NO_CHUNK; MAX_WORDS], 0);
+                (meta.chunk, meta.chunks) = ([NO_CHUNK; CHUNKS], 0);
                 let values = &mut self.values[i as usize];
                 if values.is_empty() {
-                    *values = BrickShape::<S>::new_values();
+                    *values = BrickShape::<S, C>::new_values();
                 }
             } else {
-                self.values.push(BrickShape::<S>::new_values());
+                self.values.push(BrickShape::<S, C>::new_values());
                 self.meta.push(Meta {
                     present: [0; MAX_WORDS],
                     count: 0,
-                    chunk: [NO_CHUNK; MAX_WORDS],
+                    chunk: [NO_CHUNK; CHUNKS],
                     chunks: 0,
                     key: brick,
                 });
@@ -446,7 +457,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// Removes `key`, returning its value; a brick left empty goes to the free list.
     #[inline]
     pub fn remove(&mut self, key: u64) -> Option<T> {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index(brick)?;
         let m = &mut self.meta[i as usize];
         let word = &mut m.present[local / 64];
@@ -457,7 +468,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
         *word &= !bit;
         m.count -= 1;
         self.len -= 1;
-        let value = self.values[i as usize][BrickShape::<S>::slot(m, local)];
+        let value = self.values[i as usize][BrickShape::<S, C>::slot(m, local)];
         if m.count == 0 {
             match &mut self.index {
                 Index::Hashed(map) => {
@@ -492,7 +503,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
         while start < orders.len() {
             let brick = orders[start] >> (3 * S);
             let end = start + orders[start..].partition_point(|&o| o >> (3 * S) == brick);
-            let i = self.brick_index_or_insert(BrickShape::<S>::brick_of_order(orders[start]));
+            let i = self.brick_index_or_insert(BrickShape::<S, C>::brick_of_order(orders[start]));
             groups.push((i, start..end));
             start = end;
         }
@@ -519,12 +530,12 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             .map(|((meta, brick), range)| {
                 let mut added = 0;
                 for (&o, &v) in orders[range.clone()].iter().zip(&values[range]) {
-                    let local = BrickShape::<S>::local_of_order(o);
+                    let local = BrickShape::<S, C>::local_of_order(o);
                     let word = &mut meta.present[local / 64];
                     let bit = 1u64 << (local % 64);
                     added += usize::from(*word & bit == 0);
                     *word |= bit;
-                    brick[BrickShape::<S>::slot_or_make(meta, brick, local)] = v;
+                    brick[BrickShape::<S, C>::slot_or_make(meta, brick, local)] = v;
                 }
                 meta.count += added as u32;
                 added
@@ -537,9 +548,9 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// The value at `key`, if present, to change in place.
     #[inline]
     pub fn get_mut(&mut self, key: u64) -> Option<&mut T> {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index(brick)? as usize;
-        let slot = BrickShape::<S>::slot(&self.meta[i], local);
+        let slot = BrickShape::<S, C>::slot(&self.meta[i], local);
         self.present(i, local).then(|| &mut self.values[i][slot])
     }
 
@@ -547,10 +558,10 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// brick lookup either way).
     #[inline]
     pub fn get_or_insert(&mut self, key: u64, value: T) -> &mut T {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
-        let slot = BrickShape::<S>::slot_or_make(m, &mut self.values[i], local);
+        let slot = BrickShape::<S, C>::slot_or_make(m, &mut self.values[i], local);
         let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         if *word & bit == 0 {
@@ -571,7 +582,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             .flat_map(|(i, m)| {
                 let values = &self.values[i];
                 let brick = m.key;
-                (0..BrickShape::<S>::WORDS)
+                (0..BrickShape::<S, C>::WORDS)
                     .flat_map(move |w| {
                         let mut bits = m.present[w];
                         std::iter::from_fn(move || {
@@ -583,8 +594,8 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
                         })
                     })
                     .map(move |local| {
-                        let key = BrickShape::<S>::key(brick, local);
-                        (key, values[BrickShape::<S>::slot(m, local)])
+                        let key = BrickShape::<S, C>::key(brick, local);
+                        (key, values[BrickShape::<S, C>::slot(m, local)])
                     })
             })
     }
@@ -592,16 +603,16 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// The value at `key`, if present.
     #[inline]
     pub fn get(&self, key: u64) -> Option<T> {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index(brick)? as usize;
         self.present(i, local)
-            .then(|| self.values[i][BrickShape::<S>::slot(&self.meta[i], local)])
+            .then(|| self.values[i][BrickShape::<S, C>::slot(&self.meta[i], local)])
     }
 
     /// Whether `key` is present.
     #[inline]
     pub fn contains(&self, key: u64) -> bool {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         self.brick_index(brick)
             .is_some_and(|i| self.present(i as usize, local))
     }
@@ -609,10 +620,10 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// Sets `key` to `value`; returns true when the key was not present before.
     #[inline]
     pub fn insert(&mut self, key: u64, value: T) -> bool {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
-        let slot = BrickShape::<S>::slot_or_make(m, &mut self.values[i], local);
+        let slot = BrickShape::<S, C>::slot_or_make(m, &mut self.values[i], local);
         let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         let new = *word & bit == 0;
@@ -627,10 +638,10 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// does not straddle a brick boundary. Every corner must be present.
     #[inline]
     pub fn corners(&self, cell: u64) -> [T; 8] {
-        if let Some((brick, at)) = BrickShape::<S>::corners_in_one_brick(cell) {
+        if let Some((brick, at)) = BrickShape::<S, C>::corners_in_one_brick(cell) {
             if let Some(i) = self.brick_index(brick) {
                 let (meta, values) = (&self.meta[i as usize], &self.values[i as usize]);
-                return at.map(|a| values[BrickShape::<S>::slot(meta, a)]);
+                return at.map(|a| values[BrickShape::<S, C>::slot(meta, a)]);
             }
         }
         std::array::from_fn(|k| {
@@ -643,7 +654,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// one brick lookup when the cell does not straddle a brick boundary.
     #[inline]
     pub fn corners_or(&self, cell: u64, absent: T) -> [T; 8] {
-        if let Some((brick, at)) = BrickShape::<S>::corners_in_one_brick(cell) {
+        if let Some((brick, at)) = BrickShape::<S, C>::corners_in_one_brick(cell) {
             let Some(i) = self.brick_index(brick) else {
                 return [absent; 8];
             };
@@ -654,7 +665,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
             let mut out = [absent; 8];
             for (o, &a) in out.iter_mut().zip(&at) {
                 if meta.present[a / 64] >> (a % 64) & 1 == 1 {
-                    *o = values[BrickShape::<S>::slot(meta, a)];
+                    *o = values[BrickShape::<S, C>::slot(meta, a)];
                 }
             }
             return out;
@@ -671,7 +682,7 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
     /// cell straddling one face cost two brick lookups, not eight.
     #[inline]
     fn get_near(&self, key: u64, found: &mut Option<(u64, Option<u32>)>) -> Option<T> {
-        let (brick, local) = BrickShape::<S>::split(key);
+        let (brick, local) = BrickShape::<S, C>::split(key);
         let i = match *found {
             Some((b, i)) if b == brick => i,
             _ => {
@@ -682,14 +693,14 @@ impl<T: Copy + Default, const S: u32> BrickMap<T, S> {
         }?;
         let i = i as usize;
         self.present(i, local)
-            .then(|| self.values[i][BrickShape::<S>::slot(&self.meta[i], local)])
+            .then(|| self.values[i][BrickShape::<S, C>::slot(&self.meta[i], local)])
     }
 
     /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
     /// does not straddle a brick boundary.
     #[inline]
     pub fn present_corners(&self, cell: u64) -> u8 {
-        if let Some((brick, at)) = BrickShape::<S>::corners_in_one_brick(cell) {
+        if let Some((brick, at)) = BrickShape::<S, C>::corners_in_one_brick(cell) {
             let Some(i) = self.brick_index(brick) else {
                 return 0;
             };
@@ -753,14 +764,16 @@ mod tests {
 
     #[test]
     fn agrees_with_a_hash_map_across_brick_boundaries() {
-        agrees_with_a_hash_map_across_brick_boundaries_for::<2>();
-        agrees_with_a_hash_map_across_brick_boundaries_for::<3>();
+        agrees_with_a_hash_map_across_brick_boundaries_for::<2, false>();
+        agrees_with_a_hash_map_across_brick_boundaries_for::<2, true>();
+        agrees_with_a_hash_map_across_brick_boundaries_for::<3, false>();
+        agrees_with_a_hash_map_across_brick_boundaries_for::<3, true>();
     }
 
-    fn agrees_with_a_hash_map_across_brick_boundaries_for<const S: u32>() {
+    fn agrees_with_a_hash_map_across_brick_boundaries_for<const S: u32, const C: bool>() {
         let mut next = crate::test_rng::lcg(7);
         let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
-        let mut map = BrickMap::<u64, S>::default();
+        let mut map = BrickMap::<u64, S, C>::default();
         let mut reference = HashMap::new();
         for _ in 0..20_000 {
             let key = VirtualGrid::key(rnd(40), rnd(40), rnd(40));
@@ -787,11 +800,13 @@ mod tests {
     /// at the largest coordinates too.
     #[test]
     fn inserts_in_brick_order_agree_with_single_inserts() {
-        inserts_in_brick_order_agree_with_single_inserts_for::<2>();
-        inserts_in_brick_order_agree_with_single_inserts_for::<3>();
+        inserts_in_brick_order_agree_with_single_inserts_for::<2, false>();
+        inserts_in_brick_order_agree_with_single_inserts_for::<2, true>();
+        inserts_in_brick_order_agree_with_single_inserts_for::<3, false>();
+        inserts_in_brick_order_agree_with_single_inserts_for::<3, true>();
     }
 
-    fn inserts_in_brick_order_agree_with_single_inserts_for<const S: u32>() {
+    fn inserts_in_brick_order_agree_with_single_inserts_for<const S: u32, const C: bool>() {
         let top = (1u32 << 20) - 1;
         for key in [
             VirtualGrid::key(top, 3, top),
@@ -799,27 +814,27 @@ mod tests {
             0,
         ] {
             assert_eq!(
-                BrickShape::<S>::key_of_order(BrickShape::<S>::order(key)),
+                BrickShape::<S, C>::key_of_order(BrickShape::<S, C>::order(key)),
                 key
             );
         }
         let mut next = crate::test_rng::lcg(11);
         let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
         for mut batched in [
-            BrickMap::<u64, S>::default(),
+            BrickMap::<u64, S, C>::default(),
             BrickMap::within([40, 40, 40]),
         ] {
-            let mut single = BrickMap::<u64, S>::default();
+            let mut single = BrickMap::<u64, S, C>::default();
             for batch in 0..6 {
                 let mut orders: Vec<u64> = (0..3_000)
-                    .map(|_| BrickShape::<S>::order(VirtualGrid::key(rnd(40), rnd(40), rnd(40))))
+                    .map(|_| BrickShape::<S, C>::order(VirtualGrid::key(rnd(40), rnd(40), rnd(40))))
                     .collect();
                 orders.sort_unstable();
                 orders.dedup();
                 let values: Vec<u64> = orders.iter().map(|&o| o ^ batch).collect();
                 batched.insert_in_brick_order(&orders, &values);
                 for (&o, &v) in orders.iter().zip(&values) {
-                    single.insert(BrickShape::<S>::key_of_order(o), v);
+                    single.insert(BrickShape::<S, C>::key_of_order(o), v);
                 }
                 assert_eq!(batched.len(), single.len());
             }
@@ -836,15 +851,17 @@ mod tests {
     /// entries, an emptied brick is reused, and `clear` empties it.
     #[test]
     fn remove_get_mut_iter_and_clear_agree_with_a_hash_map() {
-        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<2>();
-        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<3>();
+        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<2, false>();
+        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<2, true>();
+        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<3, false>();
+        remove_get_mut_iter_and_clear_agree_with_a_hash_map_for::<3, true>();
     }
 
-    fn remove_get_mut_iter_and_clear_agree_with_a_hash_map_for<const S: u32>() {
+    fn remove_get_mut_iter_and_clear_agree_with_a_hash_map_for<const S: u32, const C: bool>() {
         const SIDE: u32 = 27;
         for mut map in [
-            BrickMap::<u64, S>::default(),
-            BrickMap::<u64, S>::within([SIDE, SIDE - 3, SIDE - 7]),
+            BrickMap::<u64, S, C>::default(),
+            BrickMap::<u64, S, C>::within([SIDE, SIDE - 3, SIDE - 7]),
         ] {
             let mut next = crate::test_rng::lcg(11);
             let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
@@ -932,10 +949,10 @@ mod tests {
             assert_eq!(map.release_free(), 2);
             assert_eq!(map.release_free(), 0);
             // Each brick held one key: a chunk of 64 values when chunked, else all.
-            let keys = if BrickShape::<S>::CHUNKED {
-                64
+            let keys = if BrickShape::<S, C>::CHUNKED {
+                BrickShape::<S, C>::CHUNK_KEYS
             } else {
-                BrickShape::<S>::KEYS
+                BrickShape::<S, C>::KEYS
             };
             let brick = keys * 8;
             assert!(
@@ -966,12 +983,14 @@ mod tests {
 
     #[test]
     fn corners_match_single_lookups_inside_and_across_bricks() {
-        corners_match_single_lookups_inside_and_across_bricks_for::<2>();
-        corners_match_single_lookups_inside_and_across_bricks_for::<3>();
+        corners_match_single_lookups_inside_and_across_bricks_for::<2, false>();
+        corners_match_single_lookups_inside_and_across_bricks_for::<2, true>();
+        corners_match_single_lookups_inside_and_across_bricks_for::<3, false>();
+        corners_match_single_lookups_inside_and_across_bricks_for::<3, true>();
     }
 
-    fn corners_match_single_lookups_inside_and_across_bricks_for<const S: u32>() {
-        let mut map = BrickMap::<u64, S>::default();
+    fn corners_match_single_lookups_inside_and_across_bricks_for<const S: u32, const C: bool>() {
+        let mut map = BrickMap::<u64, S, C>::default();
         for x in 0..18 {
             for y in 0..18 {
                 for z in 0..18 {
@@ -1002,7 +1021,7 @@ mod tests {
     /// to the sub-cubes it holds now.
     #[test]
     fn chunked_bricks_hold_the_sub_cubes_their_keys_lie_in() {
-        let mut map = BrickMap::<u64, 3>::within([16, 16, 16]);
+        let mut map = BrickMap::<u64, 3, true>::within([16, 16, 16]);
         let chunk = 64 * 8;
         let index = map.bytes();
         let plane = |x: u32, y: u32| VirtualGrid::key(x, y, 1);
@@ -1047,15 +1066,22 @@ mod tests {
 
     #[test]
     fn present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks() {
-        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<2>();
-        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<3>();
+        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<2, false>(
+        );
+        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<2, true>(
+        );
+        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<3, false>(
+        );
+        present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for::<3, true>(
+        );
     }
 
     fn present_corners_and_corners_or_match_single_lookups_inside_and_across_bricks_for<
         const S: u32,
+        const C: bool,
     >() {
         // Every third key of a 20³ box, so corners are a mix of present and absent.
-        let mut map = BrickMap::<u8, S>::default();
+        let mut map = BrickMap::<u8, S, C>::default();
         for x in 0..20 {
             for y in 0..20 {
                 for z in 0..20 {
