@@ -7,7 +7,8 @@
 //! small enough to stay in cache, most of a cell's eight corners lie in one brick, and a
 //! scan in key order walks one brick at a time (the last brick is remembered). Memory
 //! still follows the surface: only touched bricks exist, and an 8³ brick holds values
-//! only for the 4³ sub-cubes its keys lie in ([`BrickShape::CHUNKED`]).
+//! only for the 2³ sub-cubes its keys lie in when the map asks for it
+//! ([`BrickShape::CHUNKED`]).
 
 use super::VirtualGrid;
 use crate::prefetch::prefetch;
@@ -24,9 +25,9 @@ pub struct BrickShape<const S: u32, const C: bool = false>;
 
 /// Presence words a brick holds, enough for the largest shape.
 const MAX_WORDS: usize = 8;
-/// Chunks a chunked brick is cut into (its eight half-size sub-cubes).
-const CHUNKS: usize = 8;
-/// [`Meta::chunk`] of a sub-cube whose keys have no values allocated.
+/// Most chunks a chunked brick is cut into (an 8³ brick's 2³ sub-cubes).
+const CHUNKS: usize = 64;
+/// A [`BrickMap::chunk_maps`] entry of a sub-cube whose keys have no values allocated.
 const NO_CHUNK: u8 = u8::MAX;
 
 impl<const S: u32, const C: bool> BrickShape<S, C> {
@@ -45,24 +46,28 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
         (brick, Self::local(x, y, z))
     }
 
-    /// A chunked brick (`C`, 4³ or 8³) numbers its keys sub-cube by sub-cube (its eight
-    /// half-size sub-cubes) and allocates a sub-cube's values only once one of its keys
-    /// is set. A surface crosses a brick in a few of its sub-cubes: the slider's HE,
-    /// whose 8³ bricks were about a twentieth full on MNI152, held half its values in
-    /// sub-cubes with no key at all. Maps whose lookups must be a single load (the
-    /// correctors' node cache) stay unchunked.
+    /// A chunked brick (`C`, 4³ or 8³) numbers its keys 2³ sub-cube by sub-cube and
+    /// allocates a sub-cube's eight values only once one of its keys is set. A surface
+    /// crosses a brick in a few of its sub-cubes: the slider's HE, whose 8³ bricks were
+    /// about a twentieth full at MNI152's starting surface, held 21.2 MiB of values in
+    /// whole bricks against 10.2 in 4³ sub-cubes and 4.8 in 2³ ones. A lookup then reads
+    /// the brick's chunk map before the value; maps whose lookups must be a single load
+    /// (the correctors' node cache) stay unchunked.
     const CHUNKED: bool = C && S >= 2;
-    /// Sub-cube edge, in bits, and keys per sub-cube (chunk).
-    const HALF: u32 = S - 1;
-    const CHUNK_KEYS: usize = Self::KEYS / CHUNKS;
+    /// Chunk (sub-cube) edge in bits, chunks along a brick edge in bits, keys per chunk.
+    const CB: u32 = 1;
+    const AB: u32 = S - Self::CB;
+    const CHUNK_KEYS: usize = 1 << (3 * Self::CB);
 
     /// Index within its brick of the key at (x, y, z): x fastest, or for chunked bricks
-    /// the sub-cube (the top bit of each coordinate) first, then x fastest within it.
+    /// the sub-cube (the coordinates but their low bit, x fastest) first, then x fastest
+    /// within it.
     #[inline]
     fn local(x: u32, y: u32, z: u32) -> usize {
         if Self::CHUNKED {
-            let (h, m) = (Self::HALF, (1 << Self::HALF) - 1);
-            let sub = (x >> h & 1) | (y >> h & 1) << 1 | (z >> h & 1) << 2;
+            let (h, a, l) = (Self::CB, Self::AB, Self::LOCAL);
+            let m = (1 << h) - 1;
+            let sub = ((x & l) >> h) | ((y & l) >> h) << a | ((z & l) >> h) << (2 * a);
             (sub << (3 * h) | (x & m) | (y & m) << h | (z & m) << (2 * h)) as usize
         } else {
             let l = Self::LOCAL;
@@ -76,12 +81,13 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
         let [bx, by, bz] = VirtualGrid::coords(brick);
         let l = local as u32;
         let [x, y, z] = if Self::CHUNKED {
-            let (h, m) = (Self::HALF, (1 << Self::HALF) - 1);
+            let (h, a) = (Self::CB, Self::AB);
+            let (m, am) = ((1 << h) - 1, (1 << a) - 1);
             let (sub, inner) = (l >> (3 * h), l & ((1 << (3 * h)) - 1));
             [
-                (sub & 1) << h | (inner & m),
-                (sub >> 1 & 1) << h | (inner >> h & m),
-                (sub >> 2) << h | (inner >> (2 * h)),
+                (sub & am) << h | (inner & m),
+                (sub >> a & am) << h | (inner >> h & m),
+                (sub >> (2 * a)) << h | (inner >> (2 * h)),
             ]
         } else {
             let m = Self::LOCAL;
@@ -90,30 +96,32 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
         VirtualGrid::key(bx << S | x, by << S | y, bz << S | z)
     }
 
-    /// Where key `local` of a brick described by `meta` sits in its values (the key's
-    /// chunk must have been made).
+    /// Where key `local` of a brick whose chunk map is `map` (empty when unchunked) sits
+    /// in its values (the key's chunk must have been made).
     #[inline(always)]
-    fn slot(meta: &Meta, local: usize) -> usize {
+    fn slot(map: &[u8], local: usize) -> usize {
         if Self::CHUNKED {
             let k = Self::CHUNK_KEYS;
-            meta.chunk[local / k] as usize * k + local % k
+            map[local / k] as usize * k + local % k
         } else {
             local
         }
     }
 
-    /// [`BrickShape::slot`], first making the key's chunk if it has none: the brick's
-    /// values grow by one chunk, or reuse one they kept from before the brick was freed.
+    /// [`BrickShape::slot`], first making the key's chunk if it has none (`chunks` of
+    /// the brick's are assigned): the brick's values grow by one chunk, or reuse one
+    /// they kept from before the brick was freed.
     #[inline]
     fn slot_or_make<T: Copy + Default>(
-        meta: &mut Meta,
+        chunks: &mut u8,
+        map: &mut [u8],
         values: &mut Box<[T]>,
         local: usize,
     ) -> usize {
-        if Self::CHUNKED && meta.chunk[local / Self::CHUNK_KEYS] == NO_CHUNK {
-            let c = meta.chunks;
-            meta.chunk[local / Self::CHUNK_KEYS] = c;
-            meta.chunks += 1;
+        if Self::CHUNKED && map[local / Self::CHUNK_KEYS] == NO_CHUNK {
+            let c = *chunks;
+            map[local / Self::CHUNK_KEYS] = c;
+            *chunks += 1;
             let needed = (c as usize + 1) * Self::CHUNK_KEYS;
             if values.len() < needed {
                 let mut grown = Vec::with_capacity(needed);
@@ -122,7 +130,7 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
                 *values = grown.into_boxed_slice();
             }
         }
-        Self::slot(meta, local)
+        Self::slot(map, local)
     }
 
     /// Values a new brick is given: all of them, or none for a chunked brick.
@@ -181,10 +189,11 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
                 if Self::CHUNKED {
                     // One step along axis a moves 2^(h·a) within a sub-cube; from its
                     // last layer it moves into the next sub-cube instead.
-                    let (h, m) = (Self::HALF, (1 << Self::HALF) - 1);
+                    let (h, b) = (Self::CB, Self::AB);
+                    let m = (1 << h) - 1;
                     let step = |c: u32, a: u32| {
                         if c & m == m {
-                            (1 << (3 * h + a)) - (m << (h * a))
+                            (1 << (3 * h + b * a)) - (m << (h * a))
                         } else {
                             1 << (h * a)
                         }
@@ -199,7 +208,7 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
 }
 
 /// One brick's presence bits and values, borrowed to be filled by one thread.
-type BrickMut<'a, T> = (&'a mut Meta, &'a mut Box<[T]>);
+type BrickMut<'a, T> = (&'a mut Meta, &'a mut Box<[T]>, &'a mut [u8]);
 
 /// What a brick holds besides its values: a presence bit per key, how many are present
 /// and its own key. Kept apart from the values (in [`BrickMap::meta`]) so that a lookup's
@@ -210,10 +219,8 @@ struct Meta {
     present: [u64; MAX_WORDS],
     /// Keys present (0: the brick is free, on the map's free list).
     count: u32,
-    /// Chunked bricks: the chunk of the brick's values holding each sub-cube's keys
-    /// ([`NO_CHUNK`]: none yet), and how many chunks are assigned. A sub-cube whose
-    /// keys are all removed keeps its chunk until the brick is freed.
-    chunk: [u8; CHUNKS],
+    /// Chunked bricks: how many chunks of the brick's values are assigned to sub-cubes
+    /// (its [`BrickMap::chunk_maps`] entry says which).
     chunks: u8,
     /// The brick's own key (grid key divided by the brick edge), for iteration.
     key: u64,
@@ -238,6 +245,11 @@ pub struct BrickMap<T, const S: u32 = 3, const C: bool = false> {
     /// in cache, so a lookup still goes from the slot straight to the value's line.
     values: Vec<Box<[T]>>,
     meta: Vec<Meta>,
+    /// Chunked maps: for each brick, the chunk of its values holding each sub-cube's
+    /// keys ([`NO_CHUNK`]: none yet); a sub-cube whose keys are all removed keeps its
+    /// chunk until the brick is freed. Apart from `meta` so that unchunked maps do not
+    /// carry it; empty for them.
+    chunk_maps: Vec<[u8; CHUNKS]>,
     /// Bricks emptied by [`BrickMap::remove`], reused before new ones are allocated, so
     /// a map whose keys move (a sliding surface) holds the bricks of its widest extent,
     /// not of every key it ever held.
@@ -263,6 +275,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
             index,
             values: Vec::new(),
             meta: Vec::new(),
+            chunk_maps: Vec::new(),
             free: Vec::new(),
             released: 0,
             len: 0,
@@ -318,8 +331,10 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
             Index::Hashed(map) => map.capacity() * 16,
             Index::Dense { slots, .. } => slots.len() * 4,
         };
-        (values * std::mem::size_of::<T>() + self.meta.len() * std::mem::size_of::<Meta>() + index)
-            as u64
+        (values * std::mem::size_of::<T>()
+            + self.meta.len() * std::mem::size_of::<Meta>()
+            + self.chunk_maps.len() * CHUNKS
+            + index) as u64
     }
 
     /// Frees the values of emptied bricks beyond a quarter as many as are in use: a map
@@ -349,6 +364,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         }
         self.values = Vec::new();
         self.meta = Vec::new();
+        self.chunk_maps = Vec::new();
         self.free = Vec::new();
         self.released = 0;
         self.len = 0;
@@ -376,6 +392,22 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         }
     }
 
+    /// Brick `i`'s chunk map in `maps` (empty when the map is unchunked).
+    #[inline(always)]
+    fn chunk_map(maps: &[[u8; CHUNKS]], i: usize) -> &[u8] {
+        if BrickShape::<S, C>::CHUNKED {
+            &maps[i]
+        } else {
+            &[]
+        }
+    }
+
+    /// Where key `local` of brick `i` sits in its values.
+    #[inline(always)]
+    fn slot(&self, i: usize, local: usize) -> usize {
+        BrickShape::<S, C>::slot(Self::chunk_map(&self.chunk_maps, i), local)
+    }
+
     /// Whether key `local` of brick `i` is present.
     #[inline(always)]
     fn present(&self, i: usize, local: usize) -> bool {
@@ -396,9 +428,9 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
             prefetch(&meta.present[local / 64]);
             if !BrickShape::<S, C>::CHUNKED {
                 prefetch(&self.values[i][local]);
-            } else if meta.chunk[local / BrickShape::<S, C>::CHUNK_KEYS] != NO_CHUNK {
-                // The chunk comes from the brick's meta: one load more before the hint.
-                prefetch(&self.values[i][BrickShape::<S, C>::slot(meta, local)]);
+            } else if self.chunk_maps[i][local / BrickShape::<S, C>::CHUNK_KEYS] != NO_CHUNK {
+                // The chunk comes from the brick's chunk map: one load more before the hint.
+                prefetch(&self.values[i][self.slot(i, local)]);
             }
         }
     }
@@ -434,17 +466,22 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                 let meta = &mut self.meta[i as usize];
                 meta.key = brick;
                 // A chunked brick reassigns the chunks its values kept, in order.
-                (meta.chunk, meta.chunks) = ([NO_CHUNK; CHUNKS], 0);
+                meta.chunks = 0;
+                if BrickShape::<S, C>::CHUNKED {
+                    self.chunk_maps[i as usize] = [NO_CHUNK; CHUNKS];
+                }
                 let values = &mut self.values[i as usize];
                 if values.is_empty() {
                     *values = BrickShape::<S, C>::new_values();
                 }
             } else {
                 self.values.push(BrickShape::<S, C>::new_values());
+                if BrickShape::<S, C>::CHUNKED {
+                    self.chunk_maps.push([NO_CHUNK; CHUNKS]);
+                }
                 self.meta.push(Meta {
                     present: [0; MAX_WORDS],
                     count: 0,
-                    chunk: [NO_CHUNK; CHUNKS],
                     chunks: 0,
                     key: brick,
                 });
@@ -468,7 +505,8 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         *word &= !bit;
         m.count -= 1;
         self.len -= 1;
-        let value = self.values[i as usize][BrickShape::<S, C>::slot(m, local)];
+        let at = BrickShape::<S, C>::slot(Self::chunk_map(&self.chunk_maps, i as usize), local);
+        let value = self.values[i as usize][at];
         if m.count == 0 {
             match &mut self.index {
                 Index::Hashed(map) => {
@@ -512,6 +550,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         // follows the batch, not the map.
         groups.sort_unstable_by_key(|&(i, _)| i);
         let (mut metas, mut boxes) = (self.meta.iter_mut(), self.values.iter_mut());
+        let mut maps = self.chunk_maps.iter_mut();
         let mut next = 0;
         let jobs: Vec<(BrickMut<'_, T>, std::ops::Range<usize>)> = groups
             .into_iter()
@@ -522,12 +561,17 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                 let (Some(meta), Some(values)) = brick else {
                     unreachable!("brick {i} was just found or made")
                 };
-                ((meta, values), range)
+                // Unchunked maps have no chunk maps: an empty one each.
+                let map: &mut [u8] = match maps.nth(skip) {
+                    Some(m) => m,
+                    None => &mut [],
+                };
+                ((meta, values, map), range)
             })
             .collect();
         let added: usize = jobs
             .into_par_iter()
-            .map(|((meta, brick), range)| {
+            .map(|((meta, brick, map), range)| {
                 let mut added = 0;
                 for (&o, &v) in orders[range.clone()].iter().zip(&values[range]) {
                     let local = BrickShape::<S, C>::local_of_order(o);
@@ -535,7 +579,8 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                     let bit = 1u64 << (local % 64);
                     added += usize::from(*word & bit == 0);
                     *word |= bit;
-                    brick[BrickShape::<S, C>::slot_or_make(meta, brick, local)] = v;
+                    let at = BrickShape::<S, C>::slot_or_make(&mut meta.chunks, map, brick, local);
+                    brick[at] = v;
                 }
                 meta.count += added as u32;
                 added
@@ -550,7 +595,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     pub fn get_mut(&mut self, key: u64) -> Option<&mut T> {
         let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index(brick)? as usize;
-        let slot = BrickShape::<S, C>::slot(&self.meta[i], local);
+        let slot = self.slot(i, local);
         self.present(i, local).then(|| &mut self.values[i][slot])
     }
 
@@ -561,7 +606,11 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
-        let slot = BrickShape::<S, C>::slot_or_make(m, &mut self.values[i], local);
+        let map: &mut [u8] = match self.chunk_maps.get_mut(i) {
+            Some(map) => map,
+            None => &mut [],
+        };
+        let slot = BrickShape::<S, C>::slot_or_make(&mut m.chunks, map, &mut self.values[i], local);
         let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         if *word & bit == 0 {
@@ -581,6 +630,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
             .filter(|(_, m)| m.count > 0)
             .flat_map(|(i, m)| {
                 let values = &self.values[i];
+                let map = Self::chunk_map(&self.chunk_maps, i);
                 let brick = m.key;
                 (0..BrickShape::<S, C>::WORDS)
                     .flat_map(move |w| {
@@ -595,7 +645,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                     })
                     .map(move |local| {
                         let key = BrickShape::<S, C>::key(brick, local);
-                        (key, values[BrickShape::<S, C>::slot(m, local)])
+                        (key, values[BrickShape::<S, C>::slot(map, local)])
                     })
             })
     }
@@ -606,7 +656,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index(brick)? as usize;
         self.present(i, local)
-            .then(|| self.values[i][BrickShape::<S, C>::slot(&self.meta[i], local)])
+            .then(|| self.values[i][self.slot(i, local)])
     }
 
     /// Whether `key` is present.
@@ -623,7 +673,11 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
-        let slot = BrickShape::<S, C>::slot_or_make(m, &mut self.values[i], local);
+        let map: &mut [u8] = match self.chunk_maps.get_mut(i) {
+            Some(map) => map,
+            None => &mut [],
+        };
+        let slot = BrickShape::<S, C>::slot_or_make(&mut m.chunks, map, &mut self.values[i], local);
         let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
         let new = *word & bit == 0;
@@ -640,8 +694,9 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     pub fn corners(&self, cell: u64) -> [T; 8] {
         if let Some((brick, at)) = BrickShape::<S, C>::corners_in_one_brick(cell) {
             if let Some(i) = self.brick_index(brick) {
-                let (meta, values) = (&self.meta[i as usize], &self.values[i as usize]);
-                return at.map(|a| values[BrickShape::<S, C>::slot(meta, a)]);
+                let i = i as usize;
+                let (map, values) = (Self::chunk_map(&self.chunk_maps, i), &self.values[i]);
+                return at.map(|a| values[BrickShape::<S, C>::slot(map, a)]);
             }
         }
         std::array::from_fn(|k| {
@@ -658,14 +713,15 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
             let Some(i) = self.brick_index(brick) else {
                 return [absent; 8];
             };
-            let meta = &self.meta[i as usize];
-            let values = &self.values[i as usize];
+            let i = i as usize;
+            let (present, values) = (&self.meta[i].present, &self.values[i]);
+            let map = Self::chunk_map(&self.chunk_maps, i);
             // A plain loop: `at.map` compiled to a fallible-map adapter costing a third
             // more instructions here.
             let mut out = [absent; 8];
             for (o, &a) in out.iter_mut().zip(&at) {
-                if meta.present[a / 64] >> (a % 64) & 1 == 1 {
-                    *o = values[BrickShape::<S, C>::slot(meta, a)];
+                if present[a / 64] >> (a % 64) & 1 == 1 {
+                    *o = values[BrickShape::<S, C>::slot(map, a)];
                 }
             }
             return out;
@@ -693,7 +749,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         }?;
         let i = i as usize;
         self.present(i, local)
-            .then(|| self.values[i][BrickShape::<S, C>::slot(&self.meta[i], local)])
+            .then(|| self.values[i][self.slot(i, local)])
     }
 
     /// Bit k set when corner k of `cell` is present, with one brick lookup when the cell
@@ -1016,13 +1072,14 @@ mod tests {
         }
     }
 
-    /// An 8³ brick allocates a 4³ sub-cube's values when a key in it is first set; its
+    /// An 8³ brick allocates a 2³ sub-cube's values when a key in it is first set; its
     /// values survive the brick's growth, and a brick freed and reused hands its chunks
     /// to the sub-cubes it holds now.
     #[test]
     fn chunked_bricks_hold_the_sub_cubes_their_keys_lie_in() {
         let mut map = BrickMap::<u64, 3, true>::within([16, 16, 16]);
-        let chunk = 64 * 8;
+        let chunk = 8 * 8;
+        let brick = std::mem::size_of::<Meta>() + CHUNKS;
         let index = map.bytes();
         let plane = |x: u32, y: u32| VirtualGrid::key(x, y, 1);
         for x in 0..4 {
@@ -1030,20 +1087,15 @@ mod tests {
                 map.insert(plane(x, y), (10 * x + y) as u64);
             }
         }
-        assert_eq!(
-            map.bytes() - index,
-            (chunk + std::mem::size_of::<Meta>()) as u64
-        );
-        // The plane on through the brick: four sub-cubes of its eight.
+        // A 4×4 patch of the plane: four sub-cubes.
+        assert_eq!(map.bytes() - index, (4 * chunk + brick) as u64);
+        // The plane on through the brick: sixteen sub-cubes of its 64.
         for x in 0..8 {
             for y in 0..8 {
                 map.insert(plane(x, y), (10 * x + y) as u64);
             }
         }
-        assert_eq!(
-            map.bytes() - index,
-            (4 * chunk + std::mem::size_of::<Meta>()) as u64
-        );
+        assert_eq!(map.bytes() - index, (16 * chunk + brick) as u64);
         for x in 0..8 {
             for y in 0..8 {
                 assert_eq!(map.get(plane(x, y)), Some((10 * x + y) as u64));

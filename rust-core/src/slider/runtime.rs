@@ -336,9 +336,10 @@ fn lattice_index(lattice: &Lattice, key: u64) -> usize {
 /// HE's bricks are 8³ ([`BrickShape`](crate::mc::bricks::BrickShape) 3): a cell's twelve
 /// edges are read from its eight corners, which lie in one 8³ brick for 343 of 512
 /// cells but in one 4³ brick for only 27 of 64; with 4³ bricks HE took 9.3 MiB less at
-/// MNI152 256³ but 0.1 % steps took about 5 % longer. 8³ bricks allocate their values
-/// a 4³ sub-cube at a time: the slider's own memory after a 0.1 % step on MNI152 fell
-/// from 46.9 to 36.3 MiB, for 0.1 % steps about 4 % longer (0.964 -> 1.004 ms).
+/// MNI152 256³ but 0.1 % steps took about 5 % longer. HE's bricks are chunked (values
+/// allocated a 2³ sub-cube at a time): the slider's own memory after a 0.1 % step on
+/// MNI152 fell from 46.9 to 31.0 MiB (36.3 with 4³ sub-cubes), for 0.1 % steps about 4 %
+/// longer.
 const HE_BRICK: u32 = 3;
 /// HC's bricks are 4³: a cell is looked up alone, so the smaller bricks cost no time
 /// and hold less of what the surface does not cross (HC 11.3 -> 7.6 MiB at MNI152 256³).
