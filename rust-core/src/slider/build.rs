@@ -2,11 +2,12 @@
 //! turn on and off as the isovalue passes it), consolidate blocks into skip-list levels
 //! with redundant edges removed, and write everything into one store file.
 
-use super::sort::{self, write_le, Order, Plan};
+use super::sort::{self, Order, Plan};
 use super::store::{
     neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER, MAGIC, VERSION,
 };
 use crate::error::{Error, Result};
+use crate::field::grid::write_le;
 use crate::field::grid::{Lattice, Values, Volume};
 use crate::io::Spool;
 use crate::progress::Progress;

@@ -5,7 +5,7 @@
 //! way and the store is the same byte for byte.
 
 use crate::error::{Error, Result};
-use crate::field::grid::Values;
+use crate::field::grid::{write_le, Values};
 use crate::io::Spool;
 use crate::progress::Progress;
 use rayon::prelude::*;
@@ -97,20 +97,6 @@ impl Order {
             Order::Spooled { runs, .. } => *runs,
         }
     }
-}
-
-/// Hands the little-endian bytes of `v` to `out`, a bounded slice at a time (`bytes`
-/// gives one word's: `u32::to_le_bytes`, `u64::to_le_bytes`).
-pub(crate) fn write_le<T: Copy, const N: usize>(
-    v: &[T],
-    bytes: fn(T) -> [u8; N],
-    out: &mut dyn FnMut(&[u8]) -> std::io::Result<()>,
-) -> std::io::Result<()> {
-    for chunk in v.chunks(BATCH) {
-        let b: Vec<u8> = chunk.iter().flat_map(|&x| bytes(x)).collect();
-        out(&b)?;
-    }
-    Ok(())
 }
 
 /// Sort key of node `i`: its value's bits mapped so that unsigned order is `f32::total_cmp`
