@@ -287,24 +287,29 @@ impl Volume {
 
     /// Gradient at a node by central differences (one-sided on the boundary).
     pub fn node_gradient(&self, c: [usize; 3]) -> DVec3 {
-        node_gradient(&self.lattice, |i| self.values.get(i), c)
+        node_gradient(&self.lattice, |n| self.at(n[0], n[1], n[2]), c)
     }
 }
 
-/// Gradient at node `c` of values given by `value(index)`, by central differences inside
+/// Gradient at node `c` of values given by `value(node)`, by central differences inside
 /// and one-sided differences on the boundary. Shared by the volume and the slider's
-/// memory-mapped store so both give the same normals.
-pub fn node_gradient(lattice: &Lattice, value: impl Fn(usize) -> f32, c: [usize; 3]) -> DVec3 {
-    let i = lattice.index(c[0], c[1], c[2]);
+/// memory-mapped store (which finds values by coordinates: its layout is bricked) so
+/// both give the same normals.
+#[inline]
+pub fn node_gradient(lattice: &Lattice, value: impl Fn([usize; 3]) -> f32, c: [usize; 3]) -> DVec3 {
     let mut g = DVec3::ZERO;
     for a in 0..3 {
-        let s = lattice.stride(a);
-        let (lo, hi, span) = if c[a] == 0 {
-            (i, i + s, 1.0)
+        let (mut lo, mut hi) = (c, c);
+        let span = if c[a] == 0 {
+            hi[a] += 1;
+            1.0
         } else if c[a] + 1 == lattice.dims[a] {
-            (i - s, i, 1.0)
+            lo[a] -= 1;
+            1.0
         } else {
-            (i - s, i + s, 2.0)
+            lo[a] -= 1;
+            hi[a] += 1;
+            2.0
         };
         g[a] = (value(hi) as f64 - value(lo) as f64) / (span * lattice.spacing[a]);
     }

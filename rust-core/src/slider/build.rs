@@ -4,8 +4,10 @@
 
 use super::sort::{self, Order, Plan};
 use super::store::{
-    neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER, MAGIC, VERSION,
+    header_length, neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER,
+    MAGIC, VERSION,
 };
+use super::value_bricks::ValueBricks;
 use crate::error::{Error, Result};
 use crate::field::grid::write_le;
 use crate::field::grid::{Lattice, Values, Volume};
@@ -441,8 +443,7 @@ fn write_store(
 ) -> Result<()> {
     let lattice = &volume.lattice;
     let sections = 4 + levels.len();
-    let dir_end = FIXED_HEADER + sections * DIRECTORY_ENTRY;
-    let header_len = (dir_end + 4).next_multiple_of(8);
+    let header_len = header_length(sections);
     super::super::io::write_atomically(path, |w| {
         w.write_all(&vec![0u8; header_len])?;
         let mut at = header_len as u64;
@@ -497,7 +498,10 @@ fn write_store(
             0,
             true,
             c,
-            &[&|out| volume.values.write_le(out)],
+            &[&|out| {
+                ValueBricks::new(lattice.dims, volume.values.value_type())
+                    .write(&volume.values, out)
+            }],
         )?;
         let c = Some(&mut chunks);
         section(w, Kind::Order, 0, true, c, &[&|out| order.write_le(out)])?;

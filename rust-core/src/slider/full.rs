@@ -27,7 +27,7 @@ pub fn extract_keyed(
     let lattice = &volume.lattice;
     let [nx, ny, nz] = lattice.dims;
     progress.phase("classifying cells", 0.0, 0.5)?;
-    let value = |i: usize| volume.values.get(i);
+    let value = |n: [usize; 3]| volume.at(n[0], n[1], n[2]);
     let cells: Vec<ActiveCell> = (0..nz - 1)
         .into_par_iter()
         .flat_map_iter(|z| {

@@ -328,10 +328,7 @@ impl Lod<'_> {
 
     /// Whether node `c` lies above the isovalue (as `mc::case_index` counts corners).
     fn above(&self, c: [usize; 3]) -> Result<bool> {
-        Ok(self
-            .store
-            .checked_value(self.lattice.index(c[0], c[1], c[2]))? as f64
-            > self.iso)
+        Ok(self.store.checked_value_at(c)? as f64 > self.iso)
     }
 
     /// Case of the cube of edge `size` at `o`.
@@ -431,8 +428,8 @@ impl Lod<'_> {
         for z in 0..n {
             for y in 0..n {
                 for x in 0..n {
-                    let i = self.lattice.index(o[0] + x, o[1] + y, o[2] + z);
-                    v.push(self.store.checked_value(i)? as f64);
+                    let n = [o[0] + x, o[1] + y, o[2] + z];
+                    v.push(self.store.checked_value_at(n)? as f64);
                 }
             }
         }
@@ -629,11 +626,7 @@ impl Lod<'_> {
         let c = self.lattice.coords(node);
         let mut up = c;
         up[axis] += 1;
-        let value = |p: [usize; 3]| -> Result<f64> {
-            Ok(self
-                .store
-                .checked_value(self.lattice.index(p[0], p[1], p[2]))? as f64)
-        };
+        let value = |p: [usize; 3]| -> Result<f64> { Ok(self.store.checked_value_at(p)? as f64) };
         let mut g = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
         g[axis] += linear_crossing(value(c)?, value(up)?, self.iso);
         Ok(g)
@@ -646,9 +639,7 @@ impl Lod<'_> {
         let mut v = [0.0; 8];
         for (k, v) in v.iter_mut().enumerate() {
             let n = offset(c, corner_offset(k), 1);
-            *v = self
-                .store
-                .checked_value(self.lattice.index(n[0], n[1], n[2]))? as f64;
+            *v = self.store.checked_value_at(n)? as f64;
         }
         Ok(trilinear(&v, f))
     }

@@ -18,6 +18,7 @@ pub mod lod;
 pub mod runtime;
 mod sort;
 pub mod store;
+mod value_bricks;
 mod window;
 
 pub use build::{build_store, BuildParams, BuildStats};

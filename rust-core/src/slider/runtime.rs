@@ -630,11 +630,12 @@ impl Slider {
     }
 
     /// Bytes the slider holds in its own memory (HE, HC, E and its interpolation data,
-    /// the buckets, the scratch lists, the full arrays last read; not the LOD mesh); the
-    /// store's mapped pages are not counted. After an update it follows the surface:
-    /// what a larger surface left behind is given back (a scratch list keeps at most four
-    /// times what the last update used, or 64 KiB; E, its data and the buckets a quarter
-    /// more than the surface; the brick maps a quarter more bricks than in use).
+    /// the buckets, the scratch lists, the full arrays last read, the bricks of values
+    /// read from the store; not the LOD mesh); the store's mapped pages are not counted.
+    /// After an update it follows the surface: what a larger surface left behind is given
+    /// back (a scratch list keeps at most four times what the last update used, or 64 KiB;
+    /// E, its data and the buckets a quarter more than the surface; the brick maps a
+    /// quarter more bricks than in use; the values' bricks an eighth of the volume).
     pub fn held_bytes(&self) -> u64 {
         fn cap<T>(v: &Vec<T>) -> u64 {
             (v.capacity() * std::mem::size_of::<T>()) as u64
@@ -668,6 +669,7 @@ impl Slider {
             + arrays(self.vertices.get())
             + arrays(Some(&spare))
             + triangles
+            + self.store.values_held() as u64
     }
 
     /// Running totals.
@@ -764,6 +766,10 @@ impl Slider {
         });
         self.scratch.delta = delta;
         let cut = self.scratch.trim() | self.trim_surface_lists();
+        // The bricks of values read so far stay while they are few (the next small steps
+        // read mostly the same ones) and go after a jump that read many.
+        let budget = (self.store.values_bytes() / VALUES_HELD_FRACTION).max(VALUES_HELD_MIN);
+        let cut = self.store.trim_values(budget) | cut;
         if long_walk || cut {
             return_freed_memory();
         }
@@ -1391,7 +1397,7 @@ impl CellReader<'_> {
     fn prefetch(&self, cell: u32) {
         let lattice = self.store.lattice();
         let (cell, y, z) = (cell as usize, lattice.stride(1), lattice.stride(2));
-        self.store.prefetch_value(cell);
+        self.store.prefetch_value_at(self.store.coords.coords(cell));
         for node in [cell, cell + y, cell + z, cell + y + z] {
             self.he.map.prefetch(grid_key(self.store.coords, node));
         }
@@ -1499,14 +1505,21 @@ fn edges_data(store: &Store, edges: &[u32], out: &mut [EdgeData]) -> Result<()> 
 fn prefetch_edge_data(store: &Store, e: u32) {
     let lattice = store.lattice();
     let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-    let up = node + lattice.stride(axis);
-    for n in [node, up] {
+    if node >= store.nodes {
+        return; // not checked yet: the caller refuses it
+    }
+    let c = store.coords.coords(node);
+    let mut up = c;
+    up[axis] = (up[axis] + 1).min(lattice.dims[axis] - 1);
+    for n in [c, up] {
         for a in 1..3 {
-            let s = lattice.stride(a);
-            store.prefetch_value(n.saturating_sub(s));
-            store.prefetch_value(n + s);
+            let (mut lo, mut hi) = (n, n);
+            lo[a] = lo[a].saturating_sub(1);
+            hi[a] = (hi[a] + 1).min(lattice.dims[a] - 1);
+            store.prefetch_value_at(lo);
+            store.prefetch_value_at(hi);
         }
-        store.prefetch_value(n);
+        store.prefetch_value_at(n);
     }
 }
 
@@ -1522,8 +1535,8 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     // Once the neighbourhood's chunks have been verified (every edge after the first few
     // in a region), each read is a bit test and a load: no error plumbing per value.
     let unverified = Cell::new(false);
-    let fast = |i: usize| {
-        store.verified_value(i).unwrap_or_else(|| {
+    let fast = |n: [usize; 3]| {
+        store.verified_value_at(n).unwrap_or_else(|| {
             unverified.set(true);
             0.0
         })
@@ -1534,8 +1547,8 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     }
     // Some chunk is read for the first time: check it (the first failure is the error).
     let failed: Cell<Option<Error>> = Cell::new(None);
-    let value = |i: usize| {
-        store.checked_value(i).unwrap_or_else(|err| {
+    let value = |n: [usize; 3]| {
+        store.checked_value_at(n).unwrap_or_else(|err| {
             let first = failed.take().unwrap_or(err);
             failed.set(Some(first));
             0.0
@@ -1556,6 +1569,12 @@ fn push_each(out: &mut Vec<[u32; 3]>, tris: &[[u32; 3]]) {
         out.push(t);
     }
 }
+
+/// The bricks of values a slider keeps between updates: at most this fraction of the
+/// volume's bytes...
+const VALUES_HELD_FRACTION: usize = 8;
+/// ...or this many bytes, whichever is more.
+const VALUES_HELD_MIN: usize = 4 << 20;
 
 /// Scanning a word of `marks` costs about what sorting costs per cell; the scan is taken
 /// while the marked words' span is at most this many words per cell.
@@ -1608,17 +1627,18 @@ fn ascending(cells: &mut Vec<u32>, marks: &mut [u64]) {
 }
 
 /// Interpolation data of the edge from node `c` to its neighbour `up`.
+#[inline]
 pub(crate) fn edge_data_from(
     lattice: &Lattice,
-    value: impl Fn(usize) -> f32 + Copy,
+    value: impl Fn([usize; 3]) -> f32 + Copy,
     c: [usize; 3],
     up: [usize; 3],
 ) -> EdgeData {
     let g0 = node_gradient(lattice, value, c).as_vec3().to_array();
     let g1 = node_gradient(lattice, value, up).as_vec3().to_array();
     EdgeData {
-        s0: value(lattice.index(c[0], c[1], c[2])),
-        s1: value(lattice.index(up[0], up[1], up[2])),
+        s0: value(c),
+        s1: value(up),
         g0,
         g1,
     }

@@ -7,9 +7,9 @@
 //!   32 origin f64×3          56 spacing f64×3      80 node count u64
 //!   88 skip-list threshold f64                     96 levels above 0 u32   100 sections u32
 //! directory: per section kind u32, level u32, offset u64, length u64, crc32 u32, 0 u32
-//! crc32 of header + directory, u32; padding to 8 bytes
+//! crc32 of header + directory, u32; zeros to 4096 bytes (so every chunk below is a page)
 //! sections, 8-byte aligned, in this order (the file ends exactly where CHECKS ends):
-//!   VALUES  node values in their type, x fastest
+//!   VALUES  node values in their type, in 4096-byte bricks (see `value_bricks`)
 //!   ORDER   u32 node ids sorted by (value, id): block B_r of level 0 is node ORDER[r]
 //!   MASK    u8 per block of level 0: bit 2a+s set when the edge to the neighbour along
 //!           axis a (s = 0: −, 1: +) becomes active as the isovalue passes the node going
@@ -26,17 +26,19 @@
 //!
 //! An edge is `node · 3 + axis` (from its lower node), a cell is its lower corner node.
 //! Interpolation data (the end values and, through neighbours, the gradients) comes from
-//! VALUES, which is read only around the surface.
+//! VALUES, which is read only around the surface, a brick at a time by `pread` into the
+//! store's brick cache (version 3; version 2 kept VALUES x fastest, read through the map).
 //!
 //! Opening reads the header, the directory, CHECKS and the skip-list tables (a few
 //! kilobytes a level) and checks every size against the file's length, so a truncated
 //! or foreign file is refused at once; the data is checked a chunk at a time on first
-//! touch ([`Store::ensure`]) or all at once by [`Store::verify`], so resident memory
-//! follows what the slider reads and a corrupt chunk is refused before its data is used.
+//! touch ([`Store::ensure`], or as a brick is read) or all at once by [`Store::verify`],
+//! so resident memory follows what the slider reads and a corrupt chunk is refused
+//! before its data is used.
 
+use super::value_bricks::{Brick, BrickCache, ValueBricks, BRICK_BYTES};
 use crate::error::{Error, Result};
 use crate::field::grid::{Lattice, NodeCoords, ValueType, Volume};
-use crate::prefetch::prefetch;
 use glam::DVec3;
 use memmap2::Mmap;
 use std::path::{Path, PathBuf};
@@ -45,12 +47,19 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// First bytes of every store.
 pub const MAGIC: &[u8; 8] = b"ISOSLIDE";
 /// The version this build writes and reads.
-pub(crate) const VERSION: u32 = 2;
-/// Bytes per checksummed chunk (a page: checking one touches no other).
-pub(crate) const CHUNK: usize = 4096;
+pub(crate) const VERSION: u32 = 3;
+/// Bytes per checksummed chunk: a page (checking one touches no other) and a brick.
+pub(crate) const CHUNK: usize = BRICK_BYTES;
 pub(crate) const FIXED_HEADER: usize = 104;
 pub(crate) const DIRECTORY_ENTRY: usize = 32;
 const MAX_SECTIONS: usize = 64;
+
+/// Bytes of the header of a store with `sections` sections: the fixed part, the
+/// directory and its checksum, padded with zeros to a chunk so that the body (VALUES'
+/// bricks first) starts on a page.
+pub(crate) fn header_length(sections: usize) -> usize {
+    (FIXED_HEADER + sections * DIRECTORY_ENTRY + 4).next_multiple_of(CHUNK)
+}
 
 /// What a section holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,9 +104,12 @@ pub(crate) struct Level {
     minus: usize,
 }
 
-/// An opened store: the mapped file and where each section is.
+/// An opened store: the mapped file, where each section is, and the bricks of VALUES
+/// read so far.
 pub struct Store {
     map: Mmap,
+    /// The file, for reading VALUES' bricks.
+    file: std::fs::File,
     path: PathBuf,
     pub(crate) lattice: Lattice,
     /// The lattice's index-to-coordinates without `div` (every map key of an update).
@@ -106,7 +118,12 @@ pub struct Store {
     pub(crate) nodes: usize,
     /// Redundancy threshold the levels were built with.
     pub threshold: f64,
+    /// Offset of VALUES, where each node's value lies in it, and the bricks read.
     values: usize,
+    bricks: ValueBricks,
+    cache: BrickCache,
+    /// The smallest and largest values (read at open).
+    range: (f32, f32),
     order: usize,
     mask: usize,
     pub(crate) levels: Vec<Level>,
@@ -153,10 +170,10 @@ impl Store {
         // SAFETY: the map is read-only; isobar writes stores by rename, never in place, so
         // the mapped file does not change under us unless someone else truncates it.
         let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
-        Self::from_map(map, path)
+        Self::from_map(map, file, path)
     }
 
-    fn from_map(map: Mmap, path: &Path) -> Result<Store> {
+    fn from_map(map: Mmap, file: std::fs::File, path: &Path) -> Result<Store> {
         let err = |m: String| Error::format(path, m);
         let b = &map[..];
         if b.len() < 8 || &b[..8] != MAGIC {
@@ -188,7 +205,7 @@ impl Store {
         }
         let dir_end = FIXED_HEADER + sections * DIRECTORY_ENTRY;
         let header_len = u32_at(b, 12) as usize;
-        if header_len != (dir_end + 4).next_multiple_of(8) {
+        if header_len != header_length(sections) {
             return Err(err(format!(
                 "corrupt header: length {header_len} does not match {sections} sections"
             )));
@@ -198,6 +215,15 @@ impl Store {
         }
         if crc32fast::hash(&b[..dir_end]) != u32_at(b, dir_end) {
             return Err(err("corrupt header: checksum mismatch".into()));
+        }
+        if b.len() < header_len {
+            return Err(err(format!(
+                "truncated: {} bytes, inside the {header_len}-byte header",
+                b.len()
+            )));
+        }
+        if b[dir_end + 4..header_len].iter().any(|&x| x != 0) {
+            return Err(err("corrupt header: its padding is not zero".into()));
         }
         let dims = [u32_at(b, 16), u32_at(b, 20), u32_at(b, 24)].map(|d| d as usize);
         let value_type = ValueType::from_code(b[28])
@@ -281,7 +307,13 @@ impl Store {
         {
             return Err(err("corrupt directory: a section overlaps 'checks'".into()));
         }
-        let values = section(Kind::Values, 0, Some(nodes * value_type.size()))?.0;
+        let bricks = ValueBricks::new(dims, value_type);
+        let values = section(Kind::Values, 0, Some(bricks.bytes()))?.0;
+        if values % CHUNK != 0 {
+            return Err(err(
+                "corrupt: section 'values' does not start on a page".into()
+            ));
+        }
         let order = section(Kind::Order, 0, Some(nodes * 4))?.0;
         let mask = section(Kind::Mask, 0, Some(nodes))?.0;
         let mut store = Store {
@@ -292,6 +324,9 @@ impl Store {
             nodes,
             threshold,
             values,
+            cache: BrickCache::new(bricks.count()).map_err(|e| Error::io(path, e))?,
+            bricks,
+            range: (0.0, 0.0),
             order,
             mask,
             levels: Vec::with_capacity(level_count),
@@ -303,6 +338,7 @@ impl Store {
                 .collect(),
             sections: found.clone(),
             map,
+            file,
         };
         for l in 1..=level_count {
             let (offset, length) = section(Kind::Level, l, None)?;
@@ -316,9 +352,13 @@ impl Store {
         let last = nodes - 1;
         store.ensure(order, order + 4)?;
         store.ensure(order + 4 * last, order + 4 * nodes)?;
-        for r in [0, last] {
-            store.checked_value(store.order_checked(r)?)?;
-        }
+        store.range = (
+            store.checked_value(store.order_checked(0)?)?,
+            store.checked_value(store.order_checked(last)?)?,
+        );
+        // Nothing read at open stays: the slider's first update reads what it needs.
+        store.cache.clear();
+        store.release(0..store.map.len());
         Ok(store)
     }
 
@@ -344,9 +384,16 @@ impl Store {
     fn verify_chunk(&self, c: usize) -> Result<()> {
         let lo = self.body + c * CHUNK;
         let hi = (lo + CHUNK).min(self.body_end);
-        if crc32fast::hash(&self.map[lo..hi]) == u32_at(&self.map, self.checks + 4 * c) {
+        self.check_chunk(c, &self.map[lo..hi])
+    }
+
+    /// Checks `bytes`, read from chunk `c`, against the chunk's checksum.
+    fn check_chunk(&self, c: usize, bytes: &[u8]) -> Result<()> {
+        if crc32fast::hash(bytes) == u32_at(&self.map, self.checks + 4 * c) {
             return Ok(());
         }
+        let lo = self.body + c * CHUNK;
+        let hi = lo + bytes.len();
         let what = self
             .sections
             .iter()
@@ -408,9 +455,9 @@ impl Store {
         let file = std::fs::File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
         let (mut at, mut stored) = (self.values as u64, Vec::new());
         let mut failed = None;
-        let same = volume
-            .values
-            .write_le(&mut |bytes: &[u8]| {
+        let same = self
+            .bricks
+            .write(&volume.values, &mut |bytes: &[u8]| {
                 stored.resize(bytes.len(), 0);
                 if let Err(e) = file.read_exact_at(&mut stored, at) {
                     failed = Some(e);
@@ -442,10 +489,7 @@ impl Store {
 
     /// Smallest and largest node value.
     pub fn value_range(&self) -> (f32, f32) {
-        (
-            self.value(self.order(0)),
-            self.value(self.order(self.nodes - 1)),
-        )
+        self.range
     }
 
     /// Number of nodes.
@@ -458,47 +502,85 @@ impl Store {
         self.map.len() as u64
     }
 
-    /// Value of node `i`, unchecked: only after [`Store::ensure`] covered it.
+    /// Value of node `c` in `brick`, at byte `at` of VALUES.
     #[inline(always)]
-    pub(crate) fn value(&self, i: usize) -> f32 {
-        let b = &self.map[..];
+    fn value_in(&self, brick: &Brick, at: usize) -> f32 {
+        let at = at % BRICK_BYTES;
         match self.value_type {
-            ValueType::F32 => f32::from_bits(u32_at(b, self.values + 4 * i)),
-            ValueType::U16 => {
-                let at = self.values + 2 * i;
-                let mut a = [0u8; 2];
-                a.copy_from_slice(&b[at..at + 2]);
-                u16::from_le_bytes(a) as f32
-            }
-            ValueType::U8 => b[self.values + i] as f32,
+            ValueType::F32 => f32::from_bits(u32_at(brick, at)),
+            ValueType::U16 => u16::from_le_bytes([brick[at], brick[at + 1]]) as f32,
+            ValueType::U8 => brick[at] as f32,
         }
     }
 
-    /// Starts loading node `i`'s value into the caches (a hint: reads and checks nothing).
+    /// Starts loading node `c`'s value into the CPU caches if its brick has been read (a
+    /// hint: reads nothing from the file).
     #[inline(always)]
-    pub(crate) fn prefetch_value(&self, i: usize) {
-        if let Some(b) = self.map.get(self.values + self.value_type.size() * i) {
-            prefetch(b);
-        }
+    pub(crate) fn prefetch_value_at(&self, c: [usize; 3]) {
+        self.cache.prefetch(self.bricks.at(c));
     }
 
-    /// Value of node `i`, its chunk checked first (a value never straddles chunks: the
-    /// section is 8-aligned and the value size divides the chunk).
+    /// Value of node `i` (below the node count), its brick read and checked first.
     #[inline(always)]
     pub(crate) fn checked_value(&self, i: usize) -> Result<f32> {
-        let at = self.values + self.value_type.size() * i;
-        if !self.chunk_checked(at) {
-            self.ensure(at, at + 1)?;
-        }
-        Ok(self.value(i))
+        self.checked_value_at(self.coords.coords(i))
     }
 
-    /// Value of node `i` if its chunk has already been checked, else `None` (nothing is
-    /// checked here): the hot path of reads that mostly hit verified chunks.
+    /// Value of node `c` (inside the lattice), its brick read and checked first.
     #[inline(always)]
-    pub(crate) fn verified_value(&self, i: usize) -> Option<f32> {
-        let at = self.values + self.value_type.size() * i;
-        self.chunk_checked(at).then(|| self.value(i))
+    pub(crate) fn checked_value_at(&self, c: [usize; 3]) -> Result<f32> {
+        let at = self.bricks.at(c);
+        match self.cache.get(at / BRICK_BYTES) {
+            Some(brick) => Ok(self.value_in(brick, at)),
+            None => self.read_value(at),
+        }
+    }
+
+    /// Value of node `c` if its brick has already been read, else `None` (nothing is
+    /// read here): the hot path of reads that mostly hit read bricks.
+    #[inline(always)]
+    pub(crate) fn verified_value_at(&self, c: [usize; 3]) -> Option<f32> {
+        let at = self.bricks.at(c);
+        self.cache
+            .get(at / BRICK_BYTES)
+            .map(|brick| self.value_in(brick, at))
+    }
+
+    /// The value at byte `at` of VALUES, its brick read from the file into the cache
+    /// first and checked against its chunk's checksum.
+    #[cold]
+    fn read_value(&self, at: usize) -> Result<f32> {
+        use std::os::unix::fs::FileExt;
+        let b = at / BRICK_BYTES;
+        let from = self.values + b * BRICK_BYTES;
+        let mut spare = [0u8; BRICK_BYTES];
+        let brick = self.cache.get_or_read(b, &mut spare, |brick| {
+            self.file
+                .read_exact_at(brick, from as u64)
+                .map_err(|e| Error::io(&self.path, e))?;
+            self.check_chunk((from - self.body) / CHUNK, brick)
+        })?;
+        Ok(self.value_in(brick, at))
+    }
+
+    /// Bytes of VALUES' bricks held in memory.
+    pub fn values_held(&self) -> usize {
+        self.cache.bytes()
+    }
+
+    /// Frees the bricks of VALUES read so far when they hold more than `budget` bytes
+    /// (between updates: the next reads them again as it needs them).
+    pub(crate) fn trim_values(&mut self, budget: usize) -> bool {
+        let over = self.cache.bytes() > budget;
+        if over {
+            self.cache.clear();
+        }
+        over
+    }
+
+    /// Bytes of VALUES in the file (the volume's values, bricked).
+    pub(crate) fn values_bytes(&self) -> usize {
+        self.bricks.bytes()
     }
 
     /// Whether the chunk holding byte `at` has been checked (the hot path of every
@@ -523,12 +605,6 @@ impl Store {
             ));
         }
         Ok(j)
-    }
-
-    /// Node of level-0 block `r`, unchecked: only for ranks `open` checked.
-    #[inline]
-    fn order(&self, r: usize) -> usize {
-        u32_at(&self.map, self.order + 4 * r) as usize
     }
 
     /// Activation mask of level-0 block `r` (chunk checked).
