@@ -982,7 +982,11 @@ fn values_are_read_only_around_the_surface() {
     for values in [
         Values::F32((0..n).map(|i| distance(i) as f32).collect()),
         Values::U16((0..n).map(|i| (distance(i) * 100.0) as u16).collect()),
-        Values::U8((0..n).map(|i| (distance(i) * 2.0).min(255.0) as u8).collect()),
+        Values::U8(
+            (0..n)
+                .map(|i| (distance(i) * 2.0).min(255.0) as u8)
+                .collect(),
+        ),
     ] {
         let scale = match values {
             Values::F32(_) => 1.0,

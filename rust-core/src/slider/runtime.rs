@@ -461,6 +461,10 @@ pub struct Slider {
     iso: f64,
     edges: Vec<u32>,
     data: Vec<EdgeData>,
+    /// Bytes of the store's value bricks held past which [`Slider::trim_values`] frees
+    /// those the surface does not read, and the surface's edges at the last trim.
+    values_budget: usize,
+    values_edges: usize,
     he: EdgeVertices,
     hc: CellTable,
     buckets: Vec<Bucket>,
@@ -493,12 +497,15 @@ impl Slider {
             lattice_map(store.lattice()),
         );
         let cells = store.nodes;
+        let values_budget = (store.values_bytes() / VALUES_HELD_FRACTION).max(VALUES_HELD_MIN);
         let mut slider = Slider {
             store,
             rank: 0,
             iso: 0.0,
             edges: Vec::new(),
             data: Vec::new(),
+            values_budget,
+            values_edges: 0,
             he,
             hc,
             buckets,
@@ -524,6 +531,25 @@ impl Slider {
         };
         slider.clear();
         slider
+    }
+
+    /// Frees the store's value bricks that the surface does not read once they pass the
+    /// budget: an eighth of the volume, or half again what the surface read at the last
+    /// trim, whichever is more (so the trim, a pass over E, comes only after the
+    /// surface has moved into as many new bricks again); or, above the eighth, once the
+    /// surface has shrunk to half its edges at the last trim. Says whether it freed any.
+    fn trim_values(&mut self) -> bool {
+        let held = self.store.values_held();
+        let floor = (self.store.values_bytes() / VALUES_HELD_FRACTION).max(VALUES_HELD_MIN);
+        let shrunk = held > floor && 2 * self.edges.len() < self.values_edges;
+        if held <= self.values_budget && !shrunk {
+            return false;
+        }
+        self.store.retain_values(&self.edges);
+        let kept = self.store.values_held();
+        self.values_budget = floor.max(kept + kept / 2);
+        self.values_edges = self.edges.len();
+        true
     }
 
     /// Back to the empty surface below every value (as [`Slider::new`] leaves it).
@@ -635,7 +661,8 @@ impl Slider {
     /// After an update it follows the surface: what a larger surface left behind is given
     /// back (a scratch list keeps at most four times what the last update used, or 64 KiB;
     /// E, its data and the buckets a quarter more than the surface; the brick maps a
-    /// quarter more bricks than in use; the values' bricks an eighth of the volume).
+    /// quarter more bricks than in use; the values' bricks the surface's, or an eighth of
+    /// the volume).
     pub fn held_bytes(&self) -> u64 {
         fn cap<T>(v: &Vec<T>) -> u64 {
             (v.capacity() * std::mem::size_of::<T>()) as u64
@@ -768,8 +795,7 @@ impl Slider {
         let cut = self.scratch.trim() | self.trim_surface_lists();
         // The bricks of values read so far stay while they are few (the next small steps
         // read mostly the same ones) and go after a jump that read many.
-        let budget = (self.store.values_bytes() / VALUES_HELD_FRACTION).max(VALUES_HELD_MIN);
-        let cut = self.store.trim_values(budget) | cut;
+        let cut = self.trim_values() | cut;
         if long_walk || cut {
             return_freed_memory();
         }
@@ -1570,8 +1596,8 @@ fn push_each(out: &mut Vec<[u32; 3]>, tris: &[[u32; 3]]) {
     }
 }
 
-/// The bricks of values a slider keeps between updates: at most this fraction of the
-/// volume's bytes...
+/// The bricks of values a slider keeps between updates before it frees those the
+/// surface does not read: this fraction of the volume's bytes...
 const VALUES_HELD_FRACTION: usize = 8;
 /// ...or this many bytes, whichever is more.
 const VALUES_HELD_MIN: usize = 4 << 20;

@@ -568,14 +568,36 @@ impl Store {
         self.cache.bytes()
     }
 
-    /// Frees the bricks of VALUES read so far when they hold more than `budget` bytes
-    /// (between updates: the next reads them again as it needs them).
-    pub(crate) fn trim_values(&mut self, budget: usize) -> bool {
-        let over = self.cache.bytes() > budget;
-        if over {
-            self.cache.clear();
+    /// Keeps the bricks of VALUES that the interpolation data of `edges` reads (their
+    /// nodes and the nodes' neighbours: what the surface's next small steps read again)
+    /// and frees the rest.
+    pub(crate) fn retain_values(&mut self, edges: &[u32]) {
+        let mut keep = vec![0u64; self.bricks.count().div_ceil(64)];
+        let dims = self.lattice.dims;
+        let mut mark = |p: [usize; 3]| {
+            let b = self.bricks.at(p) / BRICK_BYTES;
+            keep[b / 64] |= 1 << (b % 64);
+        };
+        for &e in edges {
+            let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
+            if node >= self.nodes {
+                continue;
+            }
+            let c = self.coords.coords(node);
+            let mut up = c;
+            up[axis] = (up[axis] + 1).min(dims[axis] - 1);
+            for n in [c, up] {
+                mark(n);
+                for a in 0..3 {
+                    let (mut lo, mut hi) = (n, n);
+                    lo[a] = lo[a].saturating_sub(1);
+                    hi[a] = (hi[a] + 1).min(dims[a] - 1);
+                    mark(lo);
+                    mark(hi);
+                }
+            }
         }
-        over
+        self.cache.retain(&keep);
     }
 
     /// Bytes of VALUES in the file (the volume's values, bricked).

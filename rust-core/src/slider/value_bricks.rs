@@ -231,6 +231,35 @@ impl BrickCache {
         self.count.load(Ordering::Relaxed) * BRICK_BYTES
     }
 
+    /// Frees the bricks held whose bit in `keep` (one per brick) is clear: their pages go
+    /// back to the system.
+    pub(crate) fn retain(&mut self, keep: &[u64]) {
+        let mut run: Option<(usize, usize)> = None;
+        let mut dropped = 0;
+        for (w, (loaded, claimed)) in self.loaded.iter_mut().zip(&mut self.claimed).enumerate() {
+            let mut gone = *loaded.get_mut() & !keep[w];
+            *loaded.get_mut() &= !gone;
+            *claimed.get_mut() &= !gone;
+            dropped += gone.count_ones() as usize;
+            while gone != 0 {
+                let b = w * 64 + gone.trailing_zeros() as usize;
+                gone &= gone - 1;
+                run = match run {
+                    Some((first, end)) if end == b => Some((first, b + 1)),
+                    Some(r) => {
+                        free(&self.region, r);
+                        Some((b, b + 1))
+                    }
+                    None => Some((b, b + 1)),
+                };
+            }
+        }
+        if let Some(r) = run {
+            free(&self.region, r);
+        }
+        *self.count.get_mut() -= dropped;
+    }
+
     /// Frees every brick held: their pages go back to the system.
     pub(crate) fn clear(&mut self) {
         if *self.count.get_mut() == 0 {
@@ -244,6 +273,18 @@ impl BrickCache {
         }
         *self.count.get_mut() = 0;
     }
+}
+
+/// Hands back the pages of bricks `first..end` of `region` (no longer marked loaded).
+fn free(region: &MmapMut, (first, end): (usize, usize)) {
+    // SAFETY: as in `BrickCache::clear`; the caller holds the cache by `&mut`.
+    let _ = unsafe {
+        region.unchecked_advise_range(
+            UncheckedAdvice::DontNeed,
+            first * BRICK_BYTES,
+            (end - first) * BRICK_BYTES,
+        )
+    };
 }
 
 #[cfg(test)]
@@ -347,6 +388,24 @@ mod tests {
         let n = reads.load(Ordering::Relaxed);
         assert!((100..=800).contains(&n), "{n} reads");
         assert!((0..100).all(|b| cache.get(b).is_some()));
+
+        // Keeping the even bricks below 70 frees the others; the kept read back right.
+        let mut keep = vec![0u64; 2];
+        for b in (0..70).step_by(2) {
+            keep[b / 64] |= 1 << (b % 64);
+        }
+        cache.retain(&keep);
+        assert_eq!(cache.bytes(), 35 * BRICK_BYTES);
+        for b in 0..100 {
+            let kept = b < 70 && b % 2 == 0;
+            assert_eq!(cache.get(b).is_some(), kept, "brick {b}");
+            if kept {
+                assert_eq!(cache.get(b).unwrap()[5], (b * 7 + 5) as u8);
+            }
+        }
+        let mut spare = [0u8; BRICK_BYTES];
+        let again = cache.get_or_read(51, &mut spare, fill(51)).unwrap();
+        assert_eq!(again[5], (51 * 7 + 5) as u8);
 
         cache.clear();
         assert_eq!(cache.bytes(), 0);
