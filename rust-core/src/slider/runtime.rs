@@ -1549,17 +1549,17 @@ fn prefetch_edge_data(store: &Store, e: u32) {
     }
 }
 
-/// Interpolation data of edge `e` (`node · 3 + axis`) from `store`'s mapped values, each
-/// value read through its chunk's check (one bit test once the chunk has been verified):
-/// the first failure is the error.
+/// Interpolation data of edge `e` (`node · 3 + axis`) from `store`'s values, each read
+/// from its brick (one bit test once the brick has been read and checked; read and
+/// checked first if not): the first failure is the error.
 pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     let lattice = store.lattice();
     let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
     let c = store.coords.coords(node);
     let mut up = c;
     up[axis] += 1;
-    // Once the neighbourhood's chunks have been verified (every edge after the first few
-    // in a region), each read is a bit test and a load: no error plumbing per value.
+    // Once the neighbourhood's bricks have been read (every edge after the first few in a
+    // region), each value is a bit test and a load: no error plumbing per value.
     let unverified = Cell::new(false);
     let fast = |n: [usize; 3]| {
         store.verified_value_at(n).unwrap_or_else(|| {
@@ -1571,7 +1571,8 @@ pub(crate) fn store_edge_data(store: &Store, e: u32) -> Result<EdgeData> {
     if !unverified.get() {
         return Ok(data);
     }
-    // Some chunk is read for the first time: check it (the first failure is the error).
+    // Some brick is needed for the first time: read and check it (the first failure is
+    // the error).
     let failed: Cell<Option<Error>> = Cell::new(None);
     let value = |n: [usize; 3]| {
         store.checked_value_at(n).unwrap_or_else(|err| {
