@@ -57,10 +57,24 @@ def ensure_store(path: str, memory_budget_gib: float = 0.0) -> str:
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no such volume file: {path}")
     store = store_path_for(path)
-    if store != path and (not os.path.exists(store) or os.path.getmtime(store) < os.path.getmtime(path)):
+    if store != path and not _store_is_current(store, path):
         budget = int(min(max(memory_budget_gib, 0.0), 1.0e9) * 2**30)
         isobar_module().Slider.build(path, store, memory_budget=budget)
     return store
+
+
+def _store_is_current(store: str, volume: str) -> bool:
+    """Whether `store` exists, is newer than `volume` and opens: a store an earlier isobar
+    wrote in another format version (or a damaged one) is rebuilt like a stale one, not
+    shown as an error."""
+    if not os.path.exists(store) or os.path.getmtime(store) < os.path.getmtime(volume):
+        return False
+    isobar = isobar_module()
+    try:
+        isobar.Slider(store).close()
+    except isobar.FormatError:
+        return False
+    return True
 
 
 def slider_for(obj, store: str):

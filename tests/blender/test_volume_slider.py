@@ -190,3 +190,18 @@ def test_import_with_a_lod_error_bound(scene, isobar, tmp_path):
         core.set_lod(settings.lod_error_bound)
         lod = core.lod_mesh()
     assert len(triangles) == len(lod.triangles) < len(exact.triangles)
+
+
+def test_a_store_of_another_version_beside_the_volume_is_rebuilt(scene, isobar, tmp_path):
+    volume = _volume(tmp_path / "old.npy")
+    store = tmp_path / "old.npy.isoslider"
+    # What an earlier isobar left: the magic, format version 2, newer than the volume.
+    store.write_bytes(b"ISOSLIDE" + (2).to_bytes(4, "little") + bytes(4096))
+    with pytest.raises(isobar.FormatError, match="version 2"):
+        isobar.Slider(store)
+    obj = _import(volume)
+    settings = obj.isobar_slider
+    assert not settings.status_error and settings.triangles > 0, settings.status
+    with isobar.Slider(store) as core:
+        want = core.set_isovalue(settings.isovalue)
+    np.testing.assert_array_equal(mesh_arrays(obj)[1], want.triangles.astype(np.int32))
