@@ -293,8 +293,8 @@ impl Volume {
 
 /// Gradient at node `c` of values given by `value(node)`, by central differences inside
 /// and one-sided differences on the boundary. Shared by the volume and the slider's
-/// memory-mapped store (which finds values by coordinates: its layout is bricked) so
-/// both give the same normals.
+/// store (which finds values by coordinates: its layout is bricked) so both give the
+/// same normals.
 #[inline]
 pub fn node_gradient(lattice: &Lattice, value: impl Fn([usize; 3]) -> f32, c: [usize; 3]) -> DVec3 {
     let mut g = DVec3::ZERO;

@@ -1,4 +1,5 @@
-//! The slider's store file: one file, memory-mapped at run time.
+//! The slider's store file: one file, memory-mapped at run time but for VALUES, which
+//! the slider reads a brick at a time (`value_bricks`).
 //!
 //! ```text
 //! header (104 bytes, little endian)
@@ -8,7 +9,8 @@
 //!   88 skip-list threshold f64                     96 levels above 0 u32   100 sections u32
 //! directory: per section kind u32, level u32, offset u64, length u64, crc32 u32, 0 u32
 //! crc32 of header + directory, u32; zeros to 4096 bytes (so every chunk below is a page)
-//! sections, 8-byte aligned, in this order (the file ends exactly where CHECKS ends):
+//! sections, 8-byte aligned (VALUES, first, on a page), in this order (the file ends
+//! exactly where CHECKS ends):
 //!   VALUES  node values in their type, in 4096-byte bricks (see `value_bricks`)
 //!   ORDER   u32 node ids sorted by (value, id): block B_r of level 0 is node ORDER[r]
 //!   MASK    u8 per block of level 0: bit 2a+s set when the edge to the neighbour along
@@ -307,8 +309,11 @@ impl Store {
         {
             return Err(err("corrupt directory: a section overlaps 'checks'".into()));
         }
+        // The size first: a header naming absurd dims cannot make the tables be built.
+        let values_bytes = ValueBricks::bytes_for(dims, value_type)
+            .ok_or_else(|| err(format!("corrupt header: dims {dims:?} overflow")))?;
+        let values = section(Kind::Values, 0, Some(values_bytes))?.0;
         let bricks = ValueBricks::new(dims, value_type);
-        let values = section(Kind::Values, 0, Some(bricks.bytes()))?.0;
         if values % CHUNK != 0 {
             return Err(err(
                 "corrupt: section 'values' does not start on a page".into()

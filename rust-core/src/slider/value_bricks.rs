@@ -21,7 +21,7 @@
 //! against its chunk's checksum as it arrives, into memory of the process's own.
 
 use crate::field::grid::{ValueType, Values};
-use crate::prefetch::prefetch;
+use crate::prefetch::prefetch_address;
 use memmap2::{Advice, MmapMut, UncheckedAdvice};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
@@ -42,15 +42,33 @@ pub(crate) struct ValueBricks {
 }
 
 impl ValueBricks {
-    /// The layout of a `dims` volume of `value_type` values.
-    pub(crate) fn new(dims: [usize; 3], value_type: ValueType) -> ValueBricks {
-        let size = value_type.size();
+    /// Nodes per brick along each axis for `value_type`.
+    fn shape(value_type: ValueType) -> [usize; 3] {
         let shape = match value_type {
             ValueType::F32 => [16, 8, 8],
             ValueType::U16 => [16, 16, 8],
             ValueType::U8 => [16, 16, 16],
         };
-        debug_assert_eq!(shape.iter().product::<usize>() * size, BRICK_BYTES);
+        debug_assert_eq!(
+            shape.iter().product::<usize>() * value_type.size(),
+            BRICK_BYTES
+        );
+        shape
+    }
+
+    /// Bytes of VALUES for a `dims` volume of `value_type` values (what [`ValueBricks::bytes`]
+    /// will say, without building the tables: a store's header is checked with it first).
+    pub(crate) fn bytes_for(dims: [usize; 3], value_type: ValueType) -> Option<usize> {
+        let shape = Self::shape(value_type);
+        (0..3).try_fold(BRICK_BYTES, |n, a| {
+            n.checked_mul(dims[a].div_ceil(shape[a]))
+        })
+    }
+
+    /// The layout of a `dims` volume of `value_type` values.
+    pub(crate) fn new(dims: [usize; 3], value_type: ValueType) -> ValueBricks {
+        let size = value_type.size();
+        let shape = Self::shape(value_type);
         let counts = [0, 1, 2].map(|a| dims[a].div_ceil(shape[a]));
         let brick_step = [1, counts[0], counts[0] * counts[1]].map(|s| s * BRICK_BYTES);
         let node_step = [1, shape[0], shape[0] * shape[1]].map(|s| s * size);
@@ -70,6 +88,10 @@ impl ValueBricks {
     /// Byte offset in VALUES of node `c`'s value (`c` inside the volume).
     #[inline(always)]
     pub(crate) fn at(&self, c: [usize; 3]) -> usize {
+        debug_assert!(
+            (0..3).all(|a| c[a] < self.dims[a]),
+            "node {c:?} outside the volume"
+        );
         self.along[0][c[0]] + self.along[1][c[1]] + self.along[2][c[2]]
     }
 
@@ -147,8 +169,12 @@ pub(crate) type Brick = [u8; BRICK_BYTES];
 /// own copy. Emptied between updates by [`BrickCache::clear`].
 pub(crate) struct BrickCache {
     region: MmapMut,
-    /// `region`'s first byte, written through by the claiming thread only.
+    /// `region`'s first byte and length: every access goes through `base`, as no
+    /// reference to the whole region may be made while a thread writes a brick in it.
     base: *mut u8,
+    len: usize,
+    /// The system's page size: what `MADV_DONTNEED` frees at the least.
+    page: usize,
     /// Bit per brick: its bytes are in `region` (set with release ordering after the
     /// write, tested with acquire ordering before the read).
     loaded: Vec<AtomicU64>,
@@ -170,8 +196,14 @@ impl BrickCache {
         // A huge page would make one brick's read two megabytes of memory.
         let _ = region.advise(Advice::NoHugePage);
         let bits = || (0..count.div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
+        // SAFETY: sysconf reads a constant of the system.
+        let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
         Ok(BrickCache {
             base: region.as_mut_ptr(),
+            len: region.len(),
+            page: usize::try_from(page)
+                .unwrap_or(BRICK_BYTES)
+                .max(BRICK_BYTES),
             region,
             loaded: bits(),
             claimed: bits(),
@@ -191,9 +223,9 @@ impl BrickCache {
     /// (a hint: an unread brick's page is not there to load, and nothing faults).
     #[inline(always)]
     pub(crate) fn prefetch(&self, at: usize) {
-        if at < self.region.len() {
-            // SAFETY: inside `region`; a prefetch reads nothing into the program.
-            prefetch(unsafe { &*self.base.add(at) });
+        if at < self.len {
+            // SAFETY: inside `region` (by address only: no reference is made).
+            prefetch_address(unsafe { self.base.add(at) });
         }
     }
 
@@ -247,7 +279,7 @@ impl BrickCache {
                 run = match run {
                     Some((first, end)) if end == b => Some((first, b + 1)),
                     Some(r) => {
-                        free(&self.region, r);
+                        free(&self.region, self.page, r);
                         Some((b, b + 1))
                     }
                     None => Some((b, b + 1)),
@@ -255,7 +287,7 @@ impl BrickCache {
             }
         }
         if let Some(r) = run {
-            free(&self.region, r);
+            free(&self.region, self.page, r);
         }
         *self.count.get_mut() -= dropped;
     }
@@ -275,16 +307,25 @@ impl BrickCache {
     }
 }
 
-/// Hands back the pages of bricks `first..end` of `region` (no longer marked loaded).
-fn free(region: &MmapMut, (first, end): (usize, usize)) {
-    // SAFETY: as in `BrickCache::clear`; the caller holds the cache by `&mut`.
-    let _ = unsafe {
-        region.unchecked_advise_range(
-            UncheckedAdvice::DontNeed,
-            first * BRICK_BYTES,
-            (end - first) * BRICK_BYTES,
-        )
-    };
+/// Hands back the whole pages of `region` that bricks `first..end` (no longer marked
+/// loaded) cover: where a page is larger than a brick, a page the run shares with a
+/// kept brick stays (freeing it would zero that brick).
+fn free(region: &MmapMut, page: usize, (first, end): (usize, usize)) {
+    if let Some((from, to)) = whole_pages(first, end, page) {
+        // SAFETY: as in `BrickCache::clear`; the caller holds the cache by `&mut`, and
+        // every brick in `from..to` is unmarked.
+        let _ =
+            unsafe { region.unchecked_advise_range(UncheckedAdvice::DontNeed, from, to - from) };
+    }
+}
+
+/// The byte range of the whole `page`-byte pages inside bricks `first..end`, if any.
+fn whole_pages(first: usize, end: usize, page: usize) -> Option<(usize, usize)> {
+    let (from, to) = (
+        (first * BRICK_BYTES).next_multiple_of(page),
+        end * BRICK_BYTES / page * page,
+    );
+    (from < to).then_some((from, to))
 }
 
 #[cfg(test)]
@@ -355,6 +396,22 @@ mod tests {
             }
             Ok(())
         }
+    }
+
+    /// Freeing a run of bricks frees only the pages wholly inside it: with 16-KiB pages
+    /// (four bricks a page) a run that shares a page with a kept brick leaves that page.
+    #[test]
+    fn only_whole_pages_of_a_run_are_freed() {
+        assert_eq!(whole_pages(0, 1, BRICK_BYTES), Some((0, BRICK_BYTES)));
+        assert_eq!(
+            whole_pages(3, 5, BRICK_BYTES),
+            Some((3 * BRICK_BYTES, 5 * BRICK_BYTES))
+        );
+        let page = 4 * BRICK_BYTES;
+        assert_eq!(whole_pages(0, 1, page), None);
+        assert_eq!(whole_pages(2, 8, page), Some((page, 2 * page)));
+        assert_eq!(whole_pages(4, 12, page), Some((page, 3 * page)));
+        assert_eq!(whole_pages(5, 11, page), None);
     }
 
     /// Threads racing for the same bricks each get the brick's bytes; each brick is
