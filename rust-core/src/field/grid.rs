@@ -96,35 +96,6 @@ impl Values {
             Values::U8(_) => ValueType::U8,
         }
     }
-
-    /// Little-endian bytes of every value, in order, handed to `out` a bounded chunk at a
-    /// time (a store build writes the volume without a second whole copy of it).
-    pub fn write_le<E>(
-        &self,
-        out: &mut dyn FnMut(&[u8]) -> std::result::Result<(), E>,
-    ) -> std::result::Result<(), E> {
-        match self {
-            Values::F32(v) => write_le(v, f32::to_le_bytes, out),
-            Values::U16(v) => write_le(v, u16::to_le_bytes, out),
-            Values::U8(v) => out(v),
-        }
-    }
-}
-
-/// Hands the little-endian bytes of `v` to `out`, a bounded slice at a time (`bytes`
-/// gives one word's: `f32::to_le_bytes`, `u32::to_le_bytes`, ...): the one writer of the
-/// volume's values and the slider store's integer sections.
-pub(crate) fn write_le<T: Copy, const N: usize, E>(
-    v: &[T],
-    bytes: fn(T) -> [u8; N],
-    out: &mut dyn FnMut(&[u8]) -> std::result::Result<(), E>,
-) -> std::result::Result<(), E> {
-    const CHUNK: usize = 1 << 16;
-    for chunk in v.chunks(CHUNK) {
-        let b: Vec<u8> = chunk.iter().flat_map(|&x| bytes(x)).collect();
-        out(&b)?;
-    }
-    Ok(())
 }
 
 /// Coordinates of a lattice's node indices by multiplication ([`Divisor`]) instead of

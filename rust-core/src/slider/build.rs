@@ -4,12 +4,11 @@
 
 use super::sort::{self, Order, Plan};
 use super::store::{
-    header_length, neighbour, rises, write_varints, Kind, CHUNK, DIRECTORY_ENTRY, FIXED_HEADER,
-    MAGIC, VERSION,
+    header_length, neighbour, rises, write_le, write_varints, Kind, CHUNK, DIRECTORY_ENTRY,
+    FIXED_HEADER, MAGIC, VERSION,
 };
 use super::value_bricks::ValueBricks;
 use crate::error::{Error, Result};
-use crate::field::grid::write_le;
 use crate::field::grid::{Lattice, Values, Volume};
 use crate::io::Spool;
 use crate::progress::Progress;

@@ -4,8 +4,9 @@
 //! derived from it (the level-0 masks, the skip-list levels) is built by one pass either
 //! way and the store is the same byte for byte.
 
+use super::store::write_le;
 use crate::error::{Error, Result};
-use crate::field::grid::{write_le, Values};
+use crate::field::grid::Values;
 use crate::io::Spool;
 use crate::progress::Progress;
 use rayon::prelude::*;

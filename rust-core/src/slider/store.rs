@@ -573,35 +573,15 @@ impl Store {
         self.cache.bytes()
     }
 
-    /// Keeps the bricks of VALUES that the interpolation data of `edges` reads (their
-    /// nodes and the nodes' neighbours: what the surface's next small steps read again)
-    /// and frees the rest.
-    pub(crate) fn retain_values(&mut self, edges: &[u32]) {
+    /// Keeps the bricks of VALUES holding the nodes (inside the lattice) that `reads`
+    /// hands to the function it is given, and frees the rest.
+    pub(crate) fn retain_values(&mut self, reads: impl FnOnce(&mut dyn FnMut([usize; 3]))) {
         let mut keep = vec![0u64; self.bricks.count().div_ceil(64)];
-        let dims = self.lattice.dims;
-        let mut mark = |p: [usize; 3]| {
-            let b = self.bricks.at(p) / BRICK_BYTES;
+        let bricks = &self.bricks;
+        reads(&mut |n| {
+            let b = bricks.at(n) / BRICK_BYTES;
             keep[b / 64] |= 1 << (b % 64);
-        };
-        for &e in edges {
-            let (node, axis) = ((e / 3) as usize, (e % 3) as usize);
-            if node >= self.nodes {
-                continue;
-            }
-            let c = self.coords.coords(node);
-            let mut up = c;
-            up[axis] = (up[axis] + 1).min(dims[axis] - 1);
-            for n in [c, up] {
-                mark(n);
-                for a in 0..3 {
-                    let (mut lo, mut hi) = (n, n);
-                    lo[a] = lo[a].saturating_sub(1);
-                    hi[a] = (hi[a] + 1).min(dims[a] - 1);
-                    mark(lo);
-                    mark(hi);
-                }
-            }
-        }
+        });
         self.cache.retain(&keep);
     }
 
@@ -819,6 +799,22 @@ impl Iterator for Varints<'_> {
         self.prev = self.prev.wrapping_add(gap);
         Some(self.prev)
     }
+}
+
+/// Hands the little-endian bytes of `v` to `out`, a bounded slice at a time (`bytes`
+/// gives one word's: `u32::to_le_bytes`, `u64::to_le_bytes`, ...): the one writer of the
+/// store's integer sections (its values are written brick by brick, by `value_bricks`).
+pub(crate) fn write_le<T: Copy, const N: usize, E>(
+    v: &[T],
+    bytes: fn(T) -> [u8; N],
+    out: &mut dyn FnMut(&[u8]) -> std::result::Result<(), E>,
+) -> std::result::Result<(), E> {
+    const CHUNK: usize = 1 << 16;
+    for chunk in v.chunks(CHUNK) {
+        let b: Vec<u8> = chunk.iter().flat_map(|&x| bytes(x)).collect();
+        out(&b)?;
+    }
+    Ok(())
 }
 
 /// Appends `ids` (ascending) to `out` as LEB128 gaps.
