@@ -190,8 +190,9 @@ class IsobarSettings(bpy.types.PropertyGroup):
     method: EnumProperty(name="Method", items=METHODS, default="CORRECTORS", update=_changed)
     splash_threshold: IntProperty(
         name="Splash Threshold",
-        description="Adaptive: coarse cells holding 1 to this many particles are refined to the finest level",
-        default=1,
+        description="Adaptive: coarse cells holding 1 to this many particles are refined to the finest level "
+        "(the paper's splash rule is 1; 0: none, the error criterion alone, far fewer triangles)",
+        default=0,
         min=0,
         soft_max=8,
         update=_changed,
@@ -200,7 +201,7 @@ class IsobarSettings(bpy.types.PropertyGroup):
         name="Max Error",
         description="Adaptive: each cell at the surface takes the lowest level whose surface lies within this many "
         "finest cells of the finest level's there (0: off, splash criterion alone)",
-        default=0.4,
+        default=0.35,
         min=0.0,
         soft_max=2.0,
         update=_changed,

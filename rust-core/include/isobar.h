@@ -77,7 +77,8 @@ typedef struct IsobarSurface IsobarSurface;
 typedef struct IsobarAdaptiveParams {
   // sizeof(IsobarAdaptiveParams) as the caller compiled it.
   uint32_t struct_size;
-  // Coarse cells holding 1..=this many particles become level 3 (paper: 1; 0 = none).
+  // Coarse cells holding 1..=this many particles become level 3 (the paper's rule: 1;
+  // default 0, none: the error criterion decides).
   uint32_t splash_threshold;
   // Layers of neighbour cells raised to level 3 around each splash cell (0 = paper).
   uint32_t splash_dilation;

@@ -250,6 +250,15 @@ def test_adaptive_method(scene, isobar, demo_sequence):
     assert np.array_equal(forward, np.sort(directed[:, 1] << 32 | directed[:, 0]))
     # The adaptive surface carries no particle arrays: no stale SPH attributes stay behind.
     assert not [a.name for a in obj.data.attributes if a.name.startswith("sph_") or a.name == "velocity"]
+    # Splash Threshold reaches the core: the panel's default is the core's (0, no splash
+    # cells), and the paper's rule (1) refines the cells holding one particle: more
+    # triangles, the core's mesh at that threshold.
+    assert settings.splash_threshold == isobar.adaptive.default_params().splash_threshold == 0
+    settings.splash_threshold = 1
+    with isobar.Particles.read(str(path)) as particles:
+        paper, _ = isobar.extract_adaptive(particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=1)
+    assert_mesh_equals(obj, paper)
+    assert paper.n_triangles > adaptive.n_triangles
     settings.splash_threshold = 0
     with isobar.Particles.read(str(path)) as particles:
         coarse, coarse_stats = isobar.extract_adaptive(particles, ISO, h=H, grid_factor=GRID_FACTOR, splash_threshold=0)

@@ -76,7 +76,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="where the GPU-capable steps run (correctors: the seed cells' neighbour search; adaptive: the "
                    "grids): cpu, gpu (wgpu; an error without an adapter) or auto (a hardware GPU when there is one); "
                    "default: the core's (correctors cpu, adaptive auto)")
-    g.add_argument("--splash-threshold", type=int, help="adaptive: coarse cells holding 1..N particles are refined to the finest level (core default 1)")
+    g.add_argument("--splash-threshold", type=int, help="adaptive: coarse cells holding 1..N particles are refined to the finest level (the paper's rule: 1; core default 0, none)")
     g.add_argument("--max-error", type=float, help="adaptive: each cell at the surface takes the lowest level whose surface lies "
                    "within this many finest cells of the finest level's there "
                    "(0: off, the splash criterion alone; default: the core's)")

@@ -160,7 +160,8 @@ public:
 
   ///@{
   /// Adaptive method: coarse cells holding 1 to this many particles (splashes) are refined
-  /// to the finest level (core default 1; 0 refines none).
+  /// to the finest level (the paper's rule: 1; core default 0, none: the error criterion
+  /// alone decides).
   vtkSetClampMacro(SplashThreshold, int, 0, VTK_INT_MAX);
   vtkGetMacro(SplashThreshold, int);
   ///@}

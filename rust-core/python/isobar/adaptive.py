@@ -50,8 +50,8 @@ def extract_adaptive(
     (level-3) cell in units of the smallest h, coarse cells being four times larger.
 
     Args:
-        splash_threshold: coarse cells holding 1..=N particles become level 3 (core
-            default 1, the paper's; 0 keeps every cell at level 1).
+        splash_threshold: coarse cells holding 1..=N particles become level 3 (the
+            paper's rule is 1; core default 0, none: the error criterion alone decides).
         splash_dilation: layers of neighbour cells raised to level 3 around each splash
             cell (core default 1; 0 is the paper's criterion alone).
         max_error: error criterion, added to the splash one: each cell at the surface

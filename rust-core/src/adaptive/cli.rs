@@ -16,8 +16,9 @@ use std::time::Instant;
 /// Options of `isobar adaptive` beyond the SPH field's.
 #[derive(clap::Args, Clone, Debug)]
 pub struct AdaptiveArgs {
-    /// Splash criterion: coarse cells holding 1..=N particles become level 3 (paper: 1;
-    /// 0 keeps every cell at level 1).
+    /// Splash criterion: coarse cells holding 1..=N particles become level 3 (the paper's
+    /// rule is 1; 0, the default, leaves the levels to the error criterion, which at
+    /// finest cells of 0.375–0.5 h gives far fewer triangles within the same distance).
     #[arg(long, default_value_t = Params::default().splash_threshold)]
     pub splash_threshold: u32,
     /// Layers of neighbour cells raised to level 3 around each splash cell (0 = the

@@ -1,6 +1,7 @@
 //! Adaptive crack-free SPH surfaces on 3-level grids, after
 //! `shared/papers/gpu-adaptive-3level-sph-surfaces.txt`: coarse cells split to level 3
-//! where they hold few particles (splashes), cells at the surface raised to the lowest
+//! where they hold few particles (the paper's splashes; off by default, see
+//! [`DEFAULT_SPLASH_THRESHOLD`]), cells at the surface raised to the lowest
 //! level whose surface lies within `max_error` finest cells of the finest one ([`refine`]), cells
 //! hiding a droplet between their sub-cell corners raised until a node sees it
 //! ([`refine::hidden_surfaces`]), face neighbours raised so levels differ by at most one,
@@ -31,10 +32,23 @@ use levels::LevelArrays;
 use std::time::Instant;
 
 /// Default of [`Params::max_error`] in finest cells. The criterion bounds each cell's own
-/// surface; cracks and neighbouring cells add a little, so it sits below the target of
-/// half a finest cell: at 0.4 the real dam-break frames' surfaces stay within 0.48 finest
-/// cells of the uniform finest one (`tests/adaptive_frames.rs`), at 0.5 they did not.
-pub const DEFAULT_MAX_ERROR: f64 = 0.4;
+/// surface; cracks and neighbouring cells add a little (a piece of the finest surface
+/// within the tolerance of a face is left to the neighbour, which may not hold it
+/// either), so it sits below the target of half a finest cell: with no splash cells, at
+/// 0.35 the splashsurf frames and shapes in `shared/data` stay within 0.49 finest cells of
+/// the uniform finest surface at grid factors 0.375 and 0.5 (`tests/adaptive_frames.rs`,
+/// `bench/results/adaptive_splash.md`); at 0.4 double_dam_26 reached 0.57.
+pub const DEFAULT_MAX_ERROR: f64 = 0.35;
+
+/// Default of [`Params::splash_threshold`]: no splash cells. The paper's rule (1: a coarse
+/// cell holding one particle is a splash) assumes coarse cells holding many particles; at
+/// the cell sizes users pick for SPH surfaces (finest cells of 0.375–0.5 h, coarse cells
+/// of 1.5–2 particle spacings) every ordinary surface cell holds one to three particles,
+/// so the rule put most of the surface at level 3 (90 % of dam_break_23's triangles):
+/// 1.03–1.7× fewer triangles than uniform on 20 of the 22 frame settings measured, where
+/// the error criterion alone gives 1.3–13× and keeps droplets fine where their surface
+/// needs it (`bench/results/adaptive_splash.md`, session 25).
+pub const DEFAULT_SPLASH_THRESHOLD: u32 = 0;
 
 /// Parameters of an adaptive extraction. The field itself (kernel, h, h-scale, which
 /// quantity) is chosen with `SphSettings`, as for Marching Correctors.
@@ -45,7 +59,7 @@ pub struct Params {
     /// cells are four times larger.
     pub grid_factor: f64,
     /// Splash criterion: a coarse cell holding 1..=this many particles becomes level 3
-    /// (paper: 1). 0 keeps every cell at level 1.
+    /// (paper: 1; default 0, none: see [`DEFAULT_SPLASH_THRESHOLD`]).
     pub splash_threshold: u32,
     /// Layers of neighbour cells (26-neighbourhood) raised to level 3 around each splash
     /// cell, so a droplet's whole kernel support is contoured finely (0 = the paper).
@@ -78,7 +92,7 @@ impl Default for Params {
         Params {
             isovalue: 0.5,
             grid_factor: 0.5,
-            splash_threshold: 1,
+            splash_threshold: DEFAULT_SPLASH_THRESHOLD,
             splash_dilation: 1,
             max_error: DEFAULT_MAX_ERROR,
             hidden_surfaces: true,

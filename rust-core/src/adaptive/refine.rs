@@ -295,6 +295,19 @@ fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DV
 /// distances were most of the criterion's time).
 fn surfaces_within(a: &[[DVec3; 3]], b: &[[DVec3; 3]], size: f64, tolerance: f64) -> bool {
     let one_way = |from: &[[DVec3; 3]], to: &[[DVec3; 3]]| -> bool {
+        // A sample outside a target's box grown by the tolerance is too far from that
+        // triangle without the exact distance (the margin is a hair wider than the
+        // tolerance, so rounding never rejects what the exact test would accept). The
+        // triangle close enough to the previous sample is tried first: samples come
+        // triangle by triangle, and neighbours usually share their nearest target.
+        let grow = tolerance * (1.0 + 1e-9) + 1e-12;
+        let near = |p: DVec3, k: usize| {
+            let [a, b, c] = to[k];
+            p.cmpge(a.min(b).min(c) - grow).all()
+                && p.cmple(a.max(b).max(c) + grow).all()
+                && point_triangle(p, a, b, c) <= tolerance
+        };
+        let mut last = 0;
         from.iter().all(|t| {
             let samples = [
                 t[0],
@@ -307,10 +320,16 @@ fn surfaces_within(a: &[[DVec3; 3]], b: &[[DVec3; 3]], size: f64, tolerance: f64
             ];
             samples.iter().all(|&p| {
                 let face = p.min_element().min(size - p.max_element());
-                (face > 0.0 && face <= tolerance)
-                    || to
-                        .iter()
-                        .any(|u| point_triangle(p, u[0], u[1], u[2]) <= tolerance)
+                if (face > 0.0 && face <= tolerance) || (last < to.len() && near(p, last)) {
+                    return true;
+                }
+                match (0..to.len()).find(|&k| near(p, k)) {
+                    Some(k) => {
+                        last = k;
+                        true
+                    }
+                    None => false,
+                }
             })
         })
     };

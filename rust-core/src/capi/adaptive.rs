@@ -22,7 +22,8 @@ use std::ffi::c_void;
 pub struct IsobarAdaptiveParams {
     /// sizeof(IsobarAdaptiveParams) as the caller compiled it.
     pub struct_size: u32,
-    /// Coarse cells holding 1..=this many particles become level 3 (paper: 1; 0 = none).
+    /// Coarse cells holding 1..=this many particles become level 3 (the paper's rule: 1;
+    /// default 0, none: the error criterion decides).
     pub splash_threshold: u32,
     /// Layers of neighbour cells raised to level 3 around each splash cell (0 = paper).
     pub splash_dilation: u32,
