@@ -73,7 +73,7 @@ class Params:
     grid_factor: float = 0.5
     method: str = "CORRECTORS"  # or "ADAPTIVE"
     splash_threshold: int = 0  # the core's adaptive default (the paper's rule is 1)
-    max_error: float = 0.35  # the core's adaptive default (isobar.adaptive.default_params())
+    max_error: float = 0.4  # the core's adaptive default (isobar.adaptive.default_params())
     bisection_iterations: int = 5  # the core's adaptive default, as max_error's
     backend: str = "CPU"  # CPU, GPU (wgpu) or AUTO (a hardware GPU when there is one); both methods
     correct: bool = True

@@ -201,7 +201,7 @@ class IsobarSettings(bpy.types.PropertyGroup):
         name="Max Error",
         description="Adaptive: each cell at the surface takes the lowest level whose surface lies within this many "
         "finest cells of the finest level's there (0: off, splash criterion alone)",
-        default=0.35,
+        default=0.4,
         min=0.0,
         soft_max=2.0,
         update=_changed,

@@ -32,13 +32,12 @@ use levels::LevelArrays;
 use std::time::Instant;
 
 /// Default of [`Params::max_error`] in finest cells. The criterion bounds each cell's own
-/// surface; cracks and neighbouring cells add a little (a piece of the finest surface
-/// within the tolerance of a face is left to the neighbour, which may not hold it
-/// either), so it sits below the target of half a finest cell: with no splash cells, at
-/// 0.35 the splashsurf frames and shapes in `shared/data` stay within 0.49 finest cells of
-/// the uniform finest surface at grid factors 0.375 and 0.5 (`tests/adaptive_frames.rs`,
-/// `bench/results/adaptive_splash.md`); at 0.4 double_dam_26 reached 0.57.
-pub const DEFAULT_MAX_ERROR: f64 = 0.35;
+/// surface (a sample near a face against the face neighbour's surface too); cracks and
+/// neighbouring cells add a little, so it sits below the target of half a finest cell:
+/// with no splash cells, at 0.4 the splashsurf frames and shapes in `shared/data` stay
+/// within 0.5 finest cells of the uniform finest surface at grid factors 0.375 and 0.5
+/// (`tests/adaptive_frames.rs`, `bench/results/adaptive_splash.md`, worst 0.497).
+pub const DEFAULT_MAX_ERROR: f64 = 0.4;
 
 /// Default of [`Params::splash_threshold`]: no splash cells. The paper's rule (1: a coarse
 /// cell holding one particle is a splash) assumes coarse cells holding many particles; at
