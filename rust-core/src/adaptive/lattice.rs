@@ -279,6 +279,18 @@ impl Lattice {
         self.block(c.map(|x| x * FINE_PER_COARSE), M, 1, out);
     }
 
+    /// The `M`³ node values of coarse cell `c` when every one is stored, else None (a
+    /// cell next to the covered region, or outside the lattice).
+    pub fn stored_cell(&self, c: [u32; 3]) -> Option<[f64; M * M * M]> {
+        let first = c.map(|x| x * FINE_PER_COARSE);
+        let mut out = [0.0; M * M * M];
+        for (v, value) in out.iter_mut().enumerate() {
+            let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
+            *value = self.get(std::array::from_fn(|a| first[a] + l[a]))?;
+        }
+        Some(out)
+    }
+
     /// The values at the `n`³ nodes `first + stride · l` (l in 0..n per axis, x fastest)
     /// into `out`; each must be stored. The tile of each node comes from per-axis tables
     /// (this runs for every node of every contoured cell).
@@ -383,7 +395,10 @@ mod tests {
                 let node = std::array::from_fn(|a| c[a] * 4 + l[a]);
                 assert_eq!(f.to_bits(), at(node).to_bits(), "cell {i} node {node:?}");
             }
+            assert_eq!(lattice.stored_cell(c), Some(values), "cell {i}");
         }
+        // (1, 0, 1) shares nodes with covered cells but is not covered itself.
+        assert_eq!(lattice.stored_cell([1, 0, 1]), None);
         // In the first tile but a node of cell (1, 0, 1) only; a coarse node of no
         // covered cell, read once the coarse nodes are covered.
         assert_eq!(lattice.get([6, 2, 6]), None);

@@ -45,8 +45,8 @@ pub const DEFAULT_MAX_ERROR: f64 = 0.4;
 /// of 1.5–2 particle spacings) every ordinary surface cell holds one to three particles,
 /// so the rule put most of the surface at level 3 (90 % of dam_break_23's triangles):
 /// 1.03–1.7× fewer triangles than uniform on 20 of the 22 frame settings measured, where
-/// the error criterion alone gives 1.3–13× and keeps droplets fine where their surface
-/// needs it (`bench/results/adaptive_splash.md`, session 25).
+/// the error criterion alone gives 1.4–13× (at the default max_error) and keeps droplets
+/// fine where their surface needs it (`bench/results/adaptive_splash.md`, session 25).
 pub const DEFAULT_SPLASH_THRESHOLD: u32 = 0;
 
 /// Parameters of an adaptive extraction. The field itself (kernel, h, h-scale, which

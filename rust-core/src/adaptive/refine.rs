@@ -232,29 +232,20 @@ fn needed_level(grid: &CoarseGrid, lattice: &Lattice, c: [u32; 3], iso: f64, max
     lattice.cell(c, &mut values);
     let finest = lattice_surface(&values, M, 1, iso);
     let size = (M - 1) as f64;
-    // The face neighbours' lattices, when stored, for samples within the tolerance of a
-    // face: (axis, side) -> values.
-    let neighbour = |axis: usize, side: usize| -> Option<Vec<f64>> {
-        let mut first = c.map(|x| x * FINE_PER_COARSE);
+    // The face neighbours' lattices (faces numbered 2·axis + side), when stored.
+    let neighbour = |axis: usize, side: usize| -> Option<[f64; M * M * M]> {
+        let mut n = c;
         if side == 0 {
-            first[axis] = first[axis].checked_sub(FINE_PER_COARSE)?;
+            n[axis] = n[axis].checked_sub(1)?;
         } else if c[axis] + 1 < grid.cells[axis] {
-            first[axis] += FINE_PER_COARSE;
+            n[axis] += 1;
         } else {
             return None;
         }
-        let mut out = Vec::with_capacity(M * M * M);
-        for z in 0..M as u32 {
-            for y in 0..M as u32 {
-                for x in 0..M as u32 {
-                    out.push(lattice.get([first[0] + x, first[1] + y, first[2] + z])?);
-                }
-            }
-        }
-        Some(out)
+        lattice.stored_cell(n)
     };
     // Computed on first need: most samples are close to their own cell's surface.
-    let near: [std::cell::OnceCell<Option<Vec<f64>>>; 6] = Default::default();
+    let near: [std::cell::OnceCell<Option<[f64; M * M * M]>>; 6] = Default::default();
     let lattice_of = |f: usize| near[f].get_or_init(|| neighbour(f / 2, f % 2)).as_ref();
     let shifted = |f: usize, tris: Vec<[DVec3; 3]>| -> Vec<[DVec3; 3]> {
         let mut d = DVec3::ZERO;
@@ -354,6 +345,11 @@ fn surfaces_within<'a>(
     tolerance: f64,
     beyond: &dyn Fn(usize) -> Option<&'a [[DVec3; 3]]>,
 ) -> bool {
+    // A sample outside a target's box grown by the tolerance is too far from that
+    // triangle without the exact distance (the margin is a hair wider than the tolerance,
+    // so rounding never rejects what the exact test would accept). The triangle close
+    // enough to the previous sample is tried first: samples come triangle by triangle,
+    // and neighbours usually share their nearest target.
     let grow = tolerance * (1.0 + 1e-9) + 1e-12;
     let near = |p: DVec3, t: &[DVec3; 3]| {
         let [a, b, c] = *t;
@@ -382,11 +378,7 @@ fn surfaces_within<'a>(
             }
             // Within the tolerance of a face (not on it): the neighbour's surface there.
             let mut faces = (0..6).filter(|&f| {
-                let d = if f % 2 == 0 {
-                    p[f / 2]
-                } else {
-                    size - p[f / 2]
-                };
+                let d = [p[f / 2], size - p[f / 2]][f % 2];
                 d > 0.0 && d <= tolerance
             });
             faces.any(|f| beyond(f).is_none_or(|b| b.iter().any(|u| near(p, u))))
