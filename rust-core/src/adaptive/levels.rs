@@ -300,7 +300,7 @@ fn bisect<F: ScalarField + ?Sized>(
 }
 
 /// The point `t` bisection units (2^-`shift` finest cells) along edge `key` from its start.
-fn along(grid: &CoarseGrid, key: u64, shift: u32, t: i64) -> DVec3 {
+pub(crate) fn along(grid: &CoarseGrid, key: u64, shift: u32, t: i64) -> DVec3 {
     let (node, axis) = crate::mc::edge_node_axis(key);
     let mut s = VirtualGrid::coords(node).map(|c| (c as i64) << shift);
     s[axis] += t;

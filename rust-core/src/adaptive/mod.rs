@@ -337,7 +337,7 @@ fn extract_sph_gpu(
         levels, refined, ..
     } = levels_from_counts(field, grid, &positions, &registered.counts, params)?;
     let elapsed = start.elapsed().as_secs_f64();
-    let mut out = extract_gpu_on(gpu, &on_device, grid, &levels, params, progress)?;
+    let mut out = extract_gpu_on(gpu, &on_device, field, grid, &levels, params, progress)?;
     out.stats.timings.levels = elapsed;
     add_refined(&mut out.stats, refined);
     Ok(out)
@@ -425,21 +425,29 @@ pub(crate) fn extract_gpu(
 ) -> Result<Extraction> {
     let gpu = crate::gpu::device::get()?;
     let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
-    extract_gpu_on(gpu, &on_device, grid, levels, params, progress)
+    extract_gpu_on(gpu, &on_device, field, grid, levels, params, progress)
 }
 
-/// [`extract_gpu`] with the field already on the device (relative to `grid.origin`).
+/// [`extract_gpu`] with `field` already on the device (relative to `grid.origin`).
 #[cfg(feature = "gpu")]
 fn extract_gpu_on(
     gpu: &crate::gpu::device::Gpu,
     on_device: &crate::gpu::sph::GpuField,
+    field: &SphField,
     grid: &CoarseGrid,
     levels: &[u8],
     params: &Params,
     progress: &mut Progress,
 ) -> Result<Extraction> {
-    // The kernels compare with the f32 isovalue; cracks see the same signs.
-    let iso = params.isovalue as f32;
+    // One table of settled nodes for all levels; cracks compare the levels' settled
+    // values with the same f32 isovalue.
+    let sides = std::cell::RefCell::new(crate::gpu::sides::Sides::new(
+        gpu,
+        field,
+        grid,
+        params.isovalue,
+    ));
+    let iso = sides.borrow().iso32;
     // Each level's device buffers, kept for crack filling to bind as they are.
     let on_level = std::cell::RefCell::new(Vec::with_capacity(3));
     let mut out = extract_with(
@@ -454,7 +462,7 @@ fn extract_gpu_on(
                 grid,
                 levels,
                 level,
-                iso,
+                &mut sides.borrow_mut(),
                 params.bisection_iterations,
                 params.normals,
                 progress,

@@ -4,11 +4,12 @@
 //! | step | where |
 //! |---|---|
 //! | vertex values of every cell of the level (SPH field at the finest-lattice nodes) | GPU |
+//! | the CPU's side at nodes within rounding of the isovalue ([`Sides`]) | CPU, then GPU |
 //! | sub-cell cases, triangle and cut-edge counts (table uploaded from `mc::case_table`) | GPU |
 //! | prefix sums of both counts (compaction offsets) | GPU |
 //! | cut edges (key, end values) and triangles (as edge keys) at the scanned offsets | GPU |
 //! | sort + dedup of the cut-edge keys into E | CPU |
-//! | bisection of each edge of E and its gradient normal | GPU |
+//! | bisection of each edge of E (settled sides at finest nodes) and its gradient normal | GPU |
 //! | positions from the bisected interval in f64, triangle keys to E indices | CPU |
 //!
 //! The level's cells, node values and E stay on the device ([`LevelBuffers`]) for crack
@@ -20,6 +21,7 @@
 //! cell.
 
 use super::device::{gpu_error, Gpu};
+use super::sides::Sides;
 use super::sph::GpuField;
 use crate::adaptive::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
 use crate::adaptive::levels::{edge_point, LevelArrays};
@@ -52,7 +54,7 @@ pub(super) struct LevelUniform {
     pub count: u32,
     pub normals: u32,
     pub unit: f32,
-    pub pad: u32,
+    pub margin: f32,
 }
 
 /// `Scan` of scan.wgsl.
@@ -144,8 +146,9 @@ pub fn scan(gpu: &Gpu, data: &wgpu::Buffer, count: u64) -> Result<()> {
 }
 
 /// The arrays of `level` with every per-node and per-cell step on the GPU (see the module
-/// table), and the device buffers crack filling binds. `iso` is rounded to f32 as the
-/// kernels compare in f32; crack filling must use the same rounded value.
+/// table), and the device buffers crack filling binds. Nodes within rounding of the
+/// isovalue take the CPU's side through `sides` (shared by the levels of one
+/// extraction); crack filling must compare with `sides.iso32`.
 #[allow(clippy::too_many_arguments)]
 pub fn build_level(
     gpu: &Gpu,
@@ -153,7 +156,7 @@ pub fn build_level(
     grid: &CoarseGrid,
     levels: &[u8],
     level: u8,
-    iso: f32,
+    sides: &mut Sides,
     iterations: u32,
     normals: bool,
     progress: &mut Progress,
@@ -167,6 +170,8 @@ pub fn build_level(
     let mut out = LevelArrays {
         level,
         cells,
+        // The scan's extra entry, there with no cells too (as on the CPU).
+        triangle_offsets: vec![0],
         ..LevelArrays::default()
     };
     if out.cells.is_empty() {
@@ -188,7 +193,7 @@ pub fn build_level(
     }
     let mut uniform = LevelUniform {
         fine: grid.fine as f32,
-        iso,
+        iso: sides.iso32,
         k,
         step,
         shift: iterations,
@@ -198,25 +203,37 @@ pub fn build_level(
         count: 0,
         normals: normals as u32,
         unit: (grid.fine / (1u64 << iterations) as f64) as f32,
-        pad: 0,
+        margin: sides.margin,
     };
+    let settled_before = sides.evaluations;
     let source = level_source();
     let node_count = out.cells.len() as u64 * n * n * n;
     let sub_count = out.cells.len() as u64 * (k as u64).pow(3);
     let count = |c: u64| u32::try_from(c).map_err(gpu_error);
 
-    // Values at the nodes.
+    // Values at the nodes, settled.
     let cells_buf = gpu.upload("cells", &out.cells);
     let values = gpu.zeroed::<f32>("values", node_count as usize)?;
     uniform.count = count(node_count)?;
     let u = gpu.uniform("level", &uniform);
     let [f0, f1, f2] = field.bindings();
-    gpu.dispatch(
-        source,
-        "node_values",
-        &[f0, f1, f2, (3, &u), (4, &cells_buf), (5, &values)],
-        node_count,
-    )?;
+    sides.settle(gpu, |sides, pending, first| {
+        let settled = [
+            (3, &u),
+            (4, &cells_buf),
+            (5, &values),
+            (23, sides.table()),
+            (24, pending),
+        ];
+        if first {
+            let bindings = [
+                f0, f1, f2, settled[0], settled[1], settled[2], settled[3], settled[4],
+            ];
+            gpu.dispatch(source, "node_values", &bindings, node_count)
+        } else {
+            gpu.dispatch(source, "settle_values", &settled, node_count)
+        }
+    })?;
     progress.report(0.4)?;
 
     // Cases and counts; one extra zero entry so the scans end with the totals.
@@ -279,28 +296,41 @@ pub fn build_level(
     let bisect_out = gpu.zeroed::<[f32; 4]>("edge points", 2 * cut.len())?;
     uniform.count = count(cut.len() as u64)?;
     let u = gpu.uniform("level", &uniform);
-    gpu.dispatch(
-        source,
-        "bisect",
-        &[f0, f1, f2, (3, &u), (12, &bisect_in), (13, &bisect_out)],
-        cut.len() as u64,
-    )?;
+    sides.settle(gpu, |sides, pending, _| {
+        let bindings = [
+            f0,
+            f1,
+            f2,
+            (3, &u),
+            (12, &bisect_in),
+            (13, &bisect_out),
+            (23, sides.table()),
+            (24, pending),
+        ];
+        gpu.dispatch(source, "bisect", &bindings, cut.len() as u64)
+    })?;
     let bisected: Vec<[f32; 4]> = gpu.read(&bisect_out, 2 * cut.len())?;
-    let iso64 = iso as f64;
+    let iso64 = sides.iso;
     out.edges = cut.iter().map(|e| key([e[0], e[1]])).collect();
-    out.points = out
+    let sides = &*sides;
+    let (points, from_cpu): (Vec<_>, Vec<u64>) = out
         .edges
         .par_iter()
         .enumerate()
         .map(|(i, &key)| {
             let [lo, flo, fhi, _] = bisected[2 * i];
             let [nx, ny, nz, _] = bisected[2 * i + 1];
+            let start_inside = f32::from_bits(cut[i][2]) > sides.iso32;
             let ends = (flo as f64, fhi as f64);
-            edge_point(grid, key, iterations, lo as i64, ends, iso64, |_| {
+            let (lo, ends, evaluations) =
+                sides.last_interval(key, iterations, lo as i64, ends, start_inside);
+            let point = edge_point(grid, key, iterations, lo, ends, iso64, |_| {
                 DVec3::new(nx as f64, ny as f64, nz as f64)
-            })
+            });
+            (point, evaluations)
         })
-        .collect();
+        .unzip();
+    out.points = points;
     let edges = &out.edges;
     out.triangles = tri_keys
         .par_chunks(3)
@@ -313,7 +343,10 @@ pub fn build_level(
         })
         .collect();
     out.triangle_offsets = tri_total;
-    out.evaluations = node_count + cut.len() as u64 * (steps as u64 + normals as u64);
+    out.evaluations = node_count
+        + cut.len() as u64 * (steps as u64 + normals as u64)
+        + (sides.evaluations - settled_before)
+        + from_cpu.iter().sum::<u64>();
     progress.report(1.0)?;
     let buffers = LevelBuffers {
         cells: cells_buf,

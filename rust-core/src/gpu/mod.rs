@@ -4,8 +4,9 @@
 //! [`Backend::Gpu`] request is an error saying so, and [`Backend::Auto`] runs on the CPU.
 //!
 //! Kernels compute in f32 (WGSL has no portable f64): field values differ from the CPU's
-//! f64 ones by a relative ~1e-6, so GPU and CPU surfaces agree to within that except
-//! where a value lies that close to the isovalue (see `tests.rs` for the exact rule).
+//! f64 ones by a relative ~1e-6, and a finest node whose value lies that close to the
+//! isovalue takes the CPU's side from a table the host computes in f64 (`sides`), so
+//! GPU and CPU surfaces have the same triangles and positions within ~1e-6.
 
 use crate::error::{Error, Result};
 
@@ -34,6 +35,8 @@ pub mod level;
 pub mod register;
 #[cfg(feature = "gpu")]
 pub mod seeds;
+#[cfg(feature = "gpu")]
+pub mod sides;
 #[cfg(feature = "gpu")]
 pub mod sph;
 

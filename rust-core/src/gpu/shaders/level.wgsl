@@ -19,7 +19,7 @@ struct Level {
     count: u32,      // invocations that do work
     normals: u32,
     unit: f32,       // fine / 2^shift
-    pad: u32,
+    margin: f32,     // values this close to iso are settled (gpu/sides.rs)
 }
 
 @group(0) @binding(3) var<uniform> level: Level;
@@ -34,6 +34,11 @@ struct Level {
 @group(0) @binding(11) var<storage, read_write> tris_out: array<vec2<u32>>;
 @group(0) @binding(12) var<storage, read> bisect_in: array<vec4<u32>>;
 @group(0) @binding(13) var<storage, read_write> bisect_out: array<vec4<f32>>;
+// Settled nodes (gpu/sides.rs): (node key low, high, value bits, 0) sorted by key, then a
+// sentinel of all ones.
+@group(0) @binding(23) var<storage, read> sides: array<vec4<u32>>;
+// Word 0 counts the nodes met unsettled; their keys follow, two words each, as room allows.
+@group(0) @binding(24) var<storage, read_write> pending: array<atomic<u32>>;
 
 fn index_of(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * nwg.x * 64u;
@@ -69,18 +74,67 @@ fn edge_key(node: vec3<u32>, axis: u32) -> vec2<u32> {
     return vec2<u32>(axis | (node.x << 2u) | ((node.y & 0x3FFu) << 22u), (node.y >> 10u) | (node.z << 10u));
 }
 
+// `mc::VirtualGrid::key` of a finest node in two words (x | y << 20 | z << 40).
+fn node_key(node: vec3<u32>) -> vec2<u32> {
+    return vec2<u32>(node.x | (node.y << 20u), (node.y >> 12u) | (node.z << 8u));
+}
+
+// The value at finest node `node` whose f32 evaluation gave `v`, on the CPU's side of
+// the isovalue: `v` itself unless it lies within the margin, else the settled value, or
+// `v` for now with the node put on the pending list.
+fn settled(node: vec3<u32>, v: f32) -> f32 {
+    if abs(v - level.iso) > level.margin {
+        return v;
+    }
+    let key = node_key(node);
+    var lo = 0u;
+    var hi = arrayLength(&sides) - 1u;  // the sentinel is never a node
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        let e = sides[mid];
+        if e.y < key.y || (e.y == key.y && e.x < key.x) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    let e = sides[lo];
+    if e.x == key.x && e.y == key.y {
+        return bitcast<f32>(e.z);
+    }
+    let slot = atomicAdd(&pending[0], 1u);
+    if 2u * slot + 2u < arrayLength(&pending) {
+        atomicStore(&pending[2u * slot + 1u], key.x);
+        atomicStore(&pending[2u * slot + 2u], key.y);
+    }
+    return v;
+}
+
+// Finest node of entry `id` of `values`.
+fn value_node(id: u32) -> vec3<u32> {
+    let n = level.k + 1u;
+    let nnn = n * n * n;
+    return coarse_coords(cells[id / nnn]) * 4u + local_coords(id % nnn, n) * level.step;
+}
+
 @compute @workgroup_size(64)
 fn node_values(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let id = index_of(gid, nwg);
     if id >= level.count {
         return;
     }
-    let n = level.k + 1u;
-    let nnn = n * n * n;
-    let c = coarse_coords(cells[id / nnn]);
-    let l = local_coords(id % nnn, n);
-    let node = c * 4u + l * level.step;
-    values[id] = field_value(vec3<f32>(node << vec3<u32>(level.shift)) * level.unit);
+    let node = value_node(id);
+    values[id] = settled(node, field_value(vec3<f32>(node << vec3<u32>(level.shift)) * level.unit));
+}
+
+// `node_values` again for the nodes settled since, without evaluating the field.
+@compute @workgroup_size(64)
+fn settle_values(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let id = index_of(gid, nwg);
+    if id >= level.count {
+        return;
+    }
+    values[id] = settled(value_node(id), values[id]);
 }
 
 @compute @workgroup_size(64)
@@ -159,7 +213,12 @@ fn bisect(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let lo_inside = flo > level.iso;
     for (var s = 0u; s < level.steps; s++) {
         let mid = (lo + hi) / 2;
-        let fm = field_value(lattice_point(node, axis, mid));
+        var fm = field_value(lattice_point(node, axis, mid));
+        if (mid & ((1u << level.shift) - 1u)) == 0u {
+            var on = node;
+            on[axis] += mid >> level.shift;
+            fm = settled(on, fm);
+        }
         if (fm > level.iso) == lo_inside {
             lo = mid;
             flo = fm;
