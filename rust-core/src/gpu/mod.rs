@@ -4,9 +4,10 @@
 //! [`Backend::Gpu`] request is an error saying so, and [`Backend::Auto`] runs on the CPU.
 //!
 //! Kernels compute in f32 (WGSL has no portable f64): field values differ from the CPU's
-//! f64 ones by a relative ~1e-6, and a finest node whose value lies that close to the
-//! isovalue takes the CPU's side from a table the host computes in f64 (`sides`), so
-//! GPU and CPU surfaces have the same triangles and positions within ~1e-6.
+//! f64 ones by a relative ~1e-6. A finest node whose value lies within a margin (1/256 of
+//! the field's scale) of the isovalue takes the CPU's side from a table the host computes
+//! in f64 (`sides`), so GPU and CPU surfaces have the same triangles, their vertices
+//! within ~3e-6 on the shipped frames.
 
 use crate::error::{Error, Result};
 

@@ -30,12 +30,17 @@ use rayon::prelude::*;
 
 /// Margin around the isovalue, relative to the field's scale (see [`Sides::new`]): the
 /// f32 sum's error is ~1e-6 of it on ordinary domains and stays below 1e-4 with particle
-/// coordinates 2000 smoothing lengths from the grid origin.
+/// coordinates 2000 smoothing lengths from the grid origin. Two cases fall outside that
+/// bound: an isovalue below 1/256 of one particle's value puts every empty node in the
+/// margin (correct, but each is evaluated on the host), and a Shepard-normalised field
+/// where the sum of weights tends to zero at the fringe of the fluid, whose f32 quotient
+/// can be far off.
 const RELATIVE_MARGIN: f64 = 1.0 / 256.0;
 
-/// Rounds of [`Sides::settle`] before giving up: each resolves every node pending, and
-/// a rerun meets only nodes a settled value newly sent it to (bisection), so two or three
-/// suffice.
+/// Rounds of [`Sides::settle`] before giving up: each settles every node the pending
+/// list held (growing the list when more were met than it held), and a rerun meets only
+/// those left over and nodes a settled value newly sent it to (bisection), so two or
+/// three suffice.
 const MAX_ROUNDS: usize = 16;
 
 /// Nodes a pending list holds before the first round grows it.

@@ -167,9 +167,9 @@ fn level_difference(grid: &CoarseGrid, cpu: &LevelArrays, gpu: &LevelArrays) -> 
         return Some(format!("node values differ by {worst:e} relative"));
     }
     if let Some(s) = (0..cpu.cases.len()).find(|&s| cpu.cases[s] != gpu.cases[s]) {
-        let node = value_node(grid, cpu, 0);
+        let cell = cpu.cells[s / cpu.k().pow(3) as usize];
         return Some(format!(
-            "case of sub-cell {s} (level cells from node {node:?}): {} against {}",
+            "case of sub-cell {s} (coarse cell {cell}): {} against {}",
             cpu.cases[s], gpu.cases[s]
         ));
     }
@@ -307,6 +307,17 @@ fn level_arrays_equal_the_cpu_ones() {
     }
 }
 
+/// The cubic-spline [`body`] at isovalue 0.5 without normals, and its grid.
+fn body_without_normals() -> (SphField, Params, CoarseGrid) {
+    let field = body(Kernel::CubicSpline);
+    let p = Params {
+        normals: false,
+        ..params(0.5)
+    };
+    let grid = grid_for(&field, &p).unwrap();
+    (field, p, grid)
+}
+
 /// A finest node whose f32 value lies on the other side of the isovalue than its f64
 /// value takes the CPU's side (`gpu::sides`). The isovalue is set to the f64 value of a
 /// node whose f32 value rounds above it: once a node of level-3 cells (their cases),
@@ -316,12 +327,7 @@ fn level_arrays_equal_the_cpu_ones() {
 #[test]
 fn nodes_within_rounding_of_the_isovalue_take_the_cpus_side() {
     let Some(g) = gpu() else { return };
-    let field = body(Kernel::CubicSpline);
-    let p = Params {
-        normals: false,
-        ..params(0.5)
-    };
-    let grid = grid_for(&field, &p).unwrap();
+    let (field, p, grid) = body_without_normals();
     let striped = striped_levels(&grid);
     // Level 1 on the lower half along x, 2 on the upper: level-1 cells on the surface
     // (balancing the stripes leaves none there).
@@ -425,6 +431,65 @@ fn nodes_within_rounding_of_the_isovalue_take_the_cpus_side() {
         assert_same_extraction(&cpu, &gpu, extent(&grid), case);
         eprintln!("{case}: isovalue {iso}, {} nodes settled", sides.settled());
     }
+}
+
+/// `Sides::last_interval` on the CPU's level-3 points of the body, each on its interval
+/// [lo, lo + 1] strictly inside its finest edge with the field monotone over the units
+/// around it. Given f32 ends closer than the margin, on that interval the host's f64 ends
+/// give the CPU's point to the bit; on the unit below or above (a halving between finest
+/// nodes that went the other way in f32) it moves back to the CPU's interval first. Ends
+/// farther apart than the margin are kept as the kernel gave them.
+#[test]
+fn last_intervals_too_flat_for_f32_are_placed_on_f64_ends() {
+    let Some(g) = gpu() else { return };
+    let (field, p, grid) = body_without_normals();
+    let all_fine = vec![3u8; grid.cell_count()];
+    let cpu = cpu_level(&field, &grid, &all_fine, 3, &p);
+    let sides = Sides::new(g, &field, &grid, p.isovalue);
+    let (iso, shift) = (p.isovalue, p.bisection_iterations);
+    let units = 1i64 << shift;
+    let mut checked = 0;
+    for (&key, point) in cpu.edges.iter().zip(&cpu.points) {
+        let (node, axis) = crate::mc::edge_node_axis(key);
+        let along = |t: i64| levels::along(&grid, key, shift, t);
+        let t = (point.position[axis] - along(0)[axis]) / (along(1)[axis] - along(0)[axis]);
+        let lo = t.floor() as i64;
+        let start_inside = field.value(along(0)) > iso;
+        let side = |t: i64| field.value(along(t)) > iso;
+        if lo < 1
+            || lo + 2 >= units
+            || (t - t.floor()).min(t.ceil() - t) < 1e-6
+            || side(lo - 1) != start_inside
+            || side(lo + 2) == start_inside
+        {
+            continue;
+        }
+        assert_eq!(
+            node,
+            crate::mc::edge_node_axis(point.id).0,
+            "a level-3 edge is finest"
+        );
+        let flat = (iso, iso);
+        for given in [lo - 1, lo, lo + 1] {
+            let (got, ends, evaluations) =
+                sides.last_interval(key, shift, given, flat, start_inside);
+            assert_eq!(got, lo, "edge {key}: from unit {given}");
+            assert_eq!(evaluations, if given == lo { 2 } else { 3 });
+            let placed = levels::edge_point(&grid, key, shift, got, ends, iso, |_| DVec3::ZERO);
+            assert_eq!(placed.id, point.id);
+            assert_eq!(
+                placed.position, point.position,
+                "edge {key}: from unit {given}"
+            );
+        }
+        let steep = (iso - 1.0, iso + 1.0);
+        assert_eq!(
+            sides.last_interval(key, shift, lo, steep, start_inside),
+            (lo, steep, 0)
+        );
+        checked += 1;
+    }
+    assert!(checked > 100, "{checked} points checked");
 }
 
 /// Whole extractions: same triangles (vertices are ordered by finest-edge identity, so
