@@ -205,7 +205,7 @@ pub fn build_level(
         unit: (grid.fine / (1u64 << iterations) as f64) as f32,
         margin: sides.margin,
     };
-    let settled_before = sides.evaluations;
+    let settled_before = sides.settled();
     let source = level_source();
     let node_count = out.cells.len() as u64 * n * n * n;
     let sub_count = out.cells.len() as u64 * (k as u64).pow(3);
@@ -345,7 +345,7 @@ pub fn build_level(
     out.triangle_offsets = tri_total;
     out.evaluations = node_count
         + cut.len() as u64 * (steps as u64 + normals as u64)
-        + (sides.evaluations - settled_before)
+        + (sides.settled() - settled_before) as u64
         + from_cpu.iter().sum::<u64>();
     progress.report(1.0)?;
     let buffers = LevelBuffers {

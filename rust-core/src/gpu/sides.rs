@@ -60,8 +60,6 @@ pub struct Sides<'a> {
     known: Vec<(u64, f32)>,
     /// `known` as level.wgsl's `sides` reads it, with a sentinel after the last entry.
     table: wgpu::Buffer,
-    /// Field evaluations made on the CPU.
-    pub evaluations: u64,
 }
 
 impl<'a> Sides<'a> {
@@ -89,7 +87,6 @@ impl<'a> Sides<'a> {
             margin: (RELATIVE_MARGIN * iso.abs().max(largest)) as f32,
             known: Vec::new(),
             table: table(gpu, &[]),
-            evaluations: 0,
         }
     }
 
@@ -98,7 +95,7 @@ impl<'a> Sides<'a> {
         &self.table
     }
 
-    /// How many nodes have been settled.
+    /// How many nodes have been settled: one host evaluation each.
     pub fn settled(&self) -> usize {
         self.known.len()
     }
@@ -140,7 +137,6 @@ impl<'a> Sides<'a> {
             .collect();
         new.sort_unstable();
         new.dedup();
-        self.evaluations += new.len() as u64;
         let settled: Vec<(u64, f32)> = new
             .par_iter()
             .map(|&key| (key, self.settled_value(key)))
