@@ -603,6 +603,17 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     /// brick lookup either way).
     #[inline]
     pub fn get_or_insert(&mut self, key: u64, value: T) -> &mut T {
+        let (slot, new) = self.entry(key);
+        if new {
+            *slot = value;
+        }
+        slot
+    }
+
+    /// The slot of `key`, made present (its brick, chunk and presence bit), and whether
+    /// it was absent before: what `insert` and `get_or_insert` share.
+    #[inline(always)]
+    fn entry(&mut self, key: u64) -> (&mut T, bool) {
         let (brick, local) = BrickShape::<S, C>::split(key);
         let i = self.brick_index_or_insert(brick) as usize;
         let m = &mut self.meta[i];
@@ -613,13 +624,11 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         let slot = BrickShape::<S, C>::slot_or_make(&mut m.chunks, map, &mut self.values[i], local);
         let word = &mut m.present[local / 64];
         let bit = 1u64 << (local % 64);
-        if *word & bit == 0 {
-            *word |= bit;
-            m.count += 1;
-            self.len += 1;
-            self.values[i][slot] = value;
-        }
-        &mut self.values[i][slot]
+        let new = *word & bit == 0;
+        *word |= bit;
+        m.count += new as u32;
+        self.len += new as usize;
+        (&mut self.values[i][slot], new)
     }
 
     /// Every (key, value) present, brick by brick (not in key order).
@@ -670,21 +679,8 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     /// Sets `key` to `value`; returns true when the key was not present before.
     #[inline]
     pub fn insert(&mut self, key: u64, value: T) -> bool {
-        let (brick, local) = BrickShape::<S, C>::split(key);
-        let i = self.brick_index_or_insert(brick) as usize;
-        let m = &mut self.meta[i];
-        let map: &mut [u8] = match self.chunk_maps.get_mut(i) {
-            Some(map) => map,
-            None => &mut [],
-        };
-        let slot = BrickShape::<S, C>::slot_or_make(&mut m.chunks, map, &mut self.values[i], local);
-        let word = &mut m.present[local / 64];
-        let bit = 1u64 << (local % 64);
-        let new = *word & bit == 0;
-        *word |= bit;
-        m.count += new as u32;
-        self.values[i][slot] = value;
-        self.len += new as usize;
+        let (slot, new) = self.entry(key);
+        *slot = value;
         new
     }
 
