@@ -18,6 +18,16 @@ def _fluid(context):
     return obj if importer.is_fluid(obj) else None
 
 
+class _FluidPart(_Sidebar):
+    """A sub-panel of the fluid surface panel, shown while a fluid surface is active."""
+
+    bl_parent_id = "ISOBAR_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return _fluid(context) is not None
+
+
 class ISOBAR_PT_main(_Sidebar, bpy.types.Panel):
     bl_label = "Fluid Surface"
     bl_idname = "ISOBAR_PT_main"
@@ -44,13 +54,8 @@ class ISOBAR_PT_main(_Sidebar, bpy.types.Panel):
         box.operator("isobar.export_usd", text="Export USD", icon="EXPORT")
 
 
-class ISOBAR_PT_source(_Sidebar, bpy.types.Panel):
+class ISOBAR_PT_source(_FluidPart, bpy.types.Panel):
     bl_label = "Particles"
-    bl_parent_id = "ISOBAR_PT_main"
-
-    @classmethod
-    def poll(cls, context):
-        return _fluid(context) is not None
 
     def draw(self, context):
         settings = _fluid(context).isobar
@@ -71,13 +76,8 @@ class ISOBAR_PT_source(_Sidebar, bpy.types.Panel):
                 layout.prop(settings, "particle_system")
 
 
-class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
+class ISOBAR_PT_surface(_FluidPart, bpy.types.Panel):
     bl_label = "Surface"
-    bl_parent_id = "ISOBAR_PT_main"
-
-    @classmethod
-    def poll(cls, context):
-        return _fluid(context) is not None
 
     def draw(self, context):
         settings = _fluid(context).isobar
@@ -110,14 +110,9 @@ class ISOBAR_PT_surface(_Sidebar, bpy.types.Panel):
             col.prop(settings, "trim_vertex")
 
 
-class ISOBAR_PT_attributes(_Sidebar, bpy.types.Panel):
+class ISOBAR_PT_attributes(_FluidPart, bpy.types.Panel):
     bl_label = "Attributes"
-    bl_parent_id = "ISOBAR_PT_main"
     bl_options = {"DEFAULT_CLOSED"}
-
-    @classmethod
-    def poll(cls, context):
-        return _fluid(context) is not None
 
     def draw(self, context):
         settings = _fluid(context).isobar
@@ -133,13 +128,8 @@ class ISOBAR_PT_attributes(_Sidebar, bpy.types.Panel):
         layout.label(text="Shader: Attribute node, name sph_<array>", icon="NODE")
 
 
-class ISOBAR_PT_cache(_Sidebar, bpy.types.Panel):
+class ISOBAR_PT_cache(_FluidPart, bpy.types.Panel):
     bl_label = "Bake"
-    bl_parent_id = "ISOBAR_PT_main"
-
-    @classmethod
-    def poll(cls, context):
-        return _fluid(context) is not None
 
     def draw(self, context):
         settings = _fluid(context).isobar
