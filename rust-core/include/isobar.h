@@ -634,10 +634,6 @@ enum IsobarStatus isobar_surface_write(const struct IsobarSurface *s, const char
 // Frees a surface (NULL is ignored).
 void isobar_surface_free(struct IsobarSurface *s);
 
-extern int32_t mprotect(void *addr, size_t len, int32_t prot);
-
-extern long sysconf(int32_t name);
-
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

@@ -157,3 +157,20 @@ def test_error_message_is_per_call():
     isobar.extract(cube(), 0.5, h=0.1)
     with pytest.raises(isobar.InvalidInputError, match="'zz'"):
         isobar.extract(cube(), 0.5, h=0.1, field="zz")
+
+
+def test_closing_the_particles_from_their_own_progress_callback_is_refused():
+    """The core reads the particles while it reports progress: closing them there used to
+    free them under it (a segfault). The close is refused, the extraction ends with that
+    error, and the particles still work afterwards."""
+    particles = cube()
+
+    def close_them(fraction, phase):
+        particles.close()
+
+    with pytest.raises(isobar.InvalidArgumentError, match="in use"):
+        isobar.extract(particles, 0.5, h=0.1, progress=close_them)
+    assert not particles.closed
+    assert isobar.extract(particles, 0.5, h=0.1).n_triangles > 0
+    particles.close()
+    assert particles.closed

@@ -213,3 +213,36 @@ def test_builds_within_a_small_memory_budget_write_the_same_store(tmp_path):
     assert not (tmp_path / "refused.isoslider").exists()
     with pytest.raises(isobar.InvalidArgumentError):
         isobar.Slider.build_array(vol, tmp_path / "bad.isoslider", memory_budget=-1)
+
+
+def test_updates_from_several_threads_take_turns(tmp_path):
+    """Eight threads sliding one slider at once: each update is whole (the surface of its
+    own isovalue, as a lone slider gives it), and the process survives (it used to corrupt
+    the core's state: a panic, then a double free)."""
+    import threading
+
+    vol = _volume()
+    store = tmp_path / "t.isoslider"
+    isobar.Slider.build_array(vol, store)
+    isos = [4.5 + 0.25 * i for i in range(8)]
+    with isobar.Slider(store) as alone:
+        expect = {iso: len(alone.set_isovalue(iso).triangles) for iso in isos}
+    slider = isobar.Slider(store)
+    seen, errors = [], []
+
+    def work(k):
+        try:
+            for step in range(6):
+                iso = isos[(k + step) % len(isos)]
+                seen.append((iso, len(slider.set_isovalue(iso).triangles)))
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert len(seen) == 48 and all(n == expect[iso] for iso, n in seen)
+    slider.close()

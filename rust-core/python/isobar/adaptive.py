@@ -91,14 +91,15 @@ def extract_adaptive(
     adaptive.backend = BACKENDS[backend]
     stats = AdaptiveStats()
     stats.struct_size = sizeof(AdaptiveStats)
-    surface = _run(
-        lambda callback, handle: lib.isobar_adaptive_extract(
-            particles._handle, byref(params), byref(adaptive), callback, None,
-            byref(handle), byref(stats)
-        ),
-        progress,
-        normals,
-    )
+    with particles._in_use() as source:
+        surface = _run(
+            lambda callback, handle: lib.isobar_adaptive_extract(
+                source, byref(params), byref(adaptive), callback, None,
+                byref(handle), byref(stats)
+            ),
+            progress,
+            normals,
+        )
     del keep
     info = {name: getattr(stats, name) for name, _ in AdaptiveStats._fields_ if name != "struct_size"}
     info["cells_per_level"] = list(stats.cells_per_level)

@@ -14,6 +14,7 @@ The store is memory-mapped: the volume stays mostly on disk.
 
 from __future__ import annotations
 
+import threading
 import weakref
 from ctypes import POINTER, byref, c_double, c_float, c_size_t, c_uint32, c_uint64
 from typing import Optional
@@ -99,9 +100,12 @@ class Slider:
     exact arrays of :meth:`set_isovalue` do not depend on them.
     """
 
-    __slots__ = ("_handle", "_finalizer", "path", "__weakref__")
+    __slots__ = ("_handle", "_finalizer", "_lock", "path", "__weakref__")
 
     def __init__(self, path, lod_error_bound: float = 0.0, lod_max_level: int = 0) -> None:
+        # The core's slider is one mutable state: calls from several threads take turns
+        # (an update from two threads at once corrupted it), and close waits for them.
+        self._lock = threading.RLock()
         handle = POINTER(SliderHandle)()
         check(lib.isobar_slider_open(encode(path, "store path"), byref(handle)))
         self._handle = handle
@@ -181,18 +185,24 @@ class Slider:
     def value_range(self) -> tuple:
         """(min, max) of the volume's values."""
         lo, hi = c_double(), c_double()
-        check(lib.isobar_slider_value_range(self._live(), byref(lo), byref(hi)))
+        with self._lock:
+            check(lib.isobar_slider_value_range(self._live(), byref(lo), byref(hi)))
         return lo.value, hi.value
 
     @property
     def stats(self) -> dict:
         """Updates applied so far and their total time in seconds."""
         n, t = c_uint64(), c_double()
-        check(lib.isobar_slider_stats(self._live(), byref(n), byref(t)))
+        with self._lock:
+            check(lib.isobar_slider_stats(self._live(), byref(n), byref(t)))
         return {"updates": n.value, "seconds": t.value}
 
     def set_isovalue(self, iso: float) -> SliderUpdate:
         """Moves the surface to `iso` and returns the new arrays and the change."""
+        with self._lock:
+            return self._set_isovalue(iso)
+
+    def _set_isovalue(self, iso: float) -> SliderUpdate:
         h = self._live()
         change = SliderChange()
         check(lib.isobar_slider_set_isovalue(h, float(iso), _NO_PROGRESS, None, byref(change)))
@@ -224,11 +234,13 @@ class Slider:
         levels (0: default 3, at most 6). Raises InvalidArgumentError out of range."""
         if isinstance(max_level, bool) or int(max_level) != max_level or not 0 <= max_level <= 2**32 - 1:
             raise InvalidArgumentError(f"lod max_level must be an integer >= 0, got {max_level!r}")
-        check(lib.isobar_slider_set_lod(self._live(), float(error_bound), int(max_level)))
+        with self._lock:
+            check(lib.isobar_slider_set_lod(self._live(), float(error_bound), int(max_level)))
 
     def _lod(self) -> tuple:
         bound, level = c_double(), c_uint32()
-        check(lib.isobar_slider_get_lod(self._live(), byref(bound), byref(level)))
+        with self._lock:
+            check(lib.isobar_slider_get_lod(self._live(), byref(bound), byref(level)))
         return bound.value, level.value
 
     @property
@@ -252,6 +264,10 @@ class Slider:
     def lod_mesh(self) -> SliderLodMesh:
         """The level-of-detail mesh of the current surface at :attr:`lod_error_bound`
         (computed by the core on the first call after an update, O(surface))."""
+        with self._lock:
+            return self._lod_mesh()
+
+    def _lod_mesh(self) -> SliderLodMesh:
         h = self._live()
         nv, nt = c_size_t(), c_size_t()
         p, n, t = POINTER(c_float)(), POINTER(c_float)(), POINTER(c_uint32)()
@@ -265,7 +281,8 @@ class Slider:
 
     def close(self) -> None:
         """Frees the core's state and unmaps the store (also done on garbage collection)."""
-        self._finalizer()
+        with self._lock:
+            self._finalizer()
 
     def __enter__(self) -> "Slider":
         return self

@@ -145,13 +145,14 @@ def extract(
                                density_array, mass, mass_array, shepard, memory_budget,
                                full_grid, lattice, clip)
     params.backend = BACKENDS[backend]
-    surface = _run(
-        lambda callback, handle: lib.isobar_sph_extract(
-            particles._handle, byref(params), callback, None, byref(handle)
-        ),
-        progress,
-        normals,
-    )
+    with particles._in_use() as source:
+        surface = _run(
+            lambda callback, handle: lib.isobar_sph_extract(
+                source, byref(params), callback, None, byref(handle)
+            ),
+            progress,
+            normals,
+        )
     del keep
     return surface
 

@@ -49,6 +49,9 @@ pub const DEFAULT_MAX_ERROR: f64 = 0.4;
 /// fine where their surface needs it (`bench/results/adaptive_splash.md`, session 25).
 pub const DEFAULT_SPLASH_THRESHOLD: u32 = 0;
 
+/// Most layers [`Params::splash_dilation`] may ask for.
+pub(crate) const MAX_SPLASH_DILATION: u32 = 8;
+
 /// Parameters of an adaptive extraction. The field itself (kernel, h, h-scale, which
 /// quantity) is chosen with `SphSettings`, as for Marching Correctors.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,6 +128,18 @@ impl Params {
                 format!(
                     "must be 0 (off) or a positive number of finest cells, got {}",
                     self.max_error
+                ),
+            );
+        }
+        // Each layer is a coarse cell (four finest cells) around a splash cell; the kernel
+        // support a layer is meant to cover is one or two of them, and each layer costs a
+        // pass over every cell of the grid.
+        if self.splash_dilation > MAX_SPLASH_DILATION {
+            return bad(
+                "splash_dilation",
+                format!(
+                    "must lie in 0..={MAX_SPLASH_DILATION} layers of coarse cells, got {}",
+                    self.splash_dilation
                 ),
             );
         }

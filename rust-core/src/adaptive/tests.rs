@@ -387,6 +387,15 @@ fn bad_parameters_and_level_maps_are_refused() {
     };
     let e = extract_sph(&field, &bad, &mut Progress::none()).unwrap_err();
     assert!(e.to_string().contains("bisection_iterations"), "{e}");
+    // A dilation of u32::MAX (a host's wrapped -1) ran for minutes, a pass a layer.
+    for splash_dilation in [MAX_SPLASH_DILATION + 1, u32::MAX] {
+        let bad = Params {
+            splash_dilation,
+            ..Params::default()
+        };
+        let e = extract_sph(&field, &bad, &mut Progress::none()).unwrap_err();
+        assert!(e.to_string().contains("splash_dilation"), "{e}");
+    }
     let params = Params::default();
     let grid = grid_for(&field, &params).unwrap();
     let mut levels = vec![1u8; grid.cell_count()];

@@ -377,12 +377,6 @@ pub extern "C" fn isobar_version() -> *const c_char {
 mod tests {
     use super::*;
     use crate::capi::{IsobarFeParams, IsobarFeStats};
-    use std::ffi::c_void;
-
-    extern "C" {
-        fn mprotect(addr: *mut c_void, len: usize, prot: i32) -> i32;
-        fn sysconf(name: i32) -> std::ffi::c_long;
-    }
 
     /// Two pages, the second inaccessible: a struct placed flush against the end of the
     /// first has nothing readable or writable after it, so any access past its
@@ -394,11 +388,12 @@ mod tests {
 
     impl Guarded {
         fn new() -> Guarded {
-            // SAFETY: sysconf(_SC_PAGESIZE) (30 on Linux) has no preconditions.
-            let page = unsafe { sysconf(30) } as usize;
+            // SAFETY: sysconf(_SC_PAGESIZE) has no preconditions.
+            let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) } as usize;
             let mut map = memmap2::MmapMut::map_anon(2 * page).unwrap();
-            // SAFETY: the second page of our own mapping; PROT_NONE is 0.
-            let rc = unsafe { mprotect(map.as_mut_ptr().add(page).cast(), page, 0) };
+            // SAFETY: the second page of our own mapping.
+            let rc =
+                unsafe { libc::mprotect(map.as_mut_ptr().add(page).cast(), page, libc::PROT_NONE) };
             assert_eq!(rc, 0);
             Guarded { map, page }
         }

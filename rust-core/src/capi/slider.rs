@@ -95,6 +95,7 @@ pub extern "C" fn isobar_slider_build_file(
         let input = required(volume_path, "volume_path")?;
         let output = required(store_path, "store_path")?;
         let array = opt_str(array, "array")?;
+        crate::slider::build::check_store_path(Path::new(&input), Path::new(&output))?;
         let volume = crate::io::read_volume(Path::new(&input), array.as_deref(), None)?;
         let params = build_params(threshold, max_levels, memory_budget);
         build_to(&volume, &output, params, progress, user)

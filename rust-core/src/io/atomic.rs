@@ -22,6 +22,16 @@ where
     let file_name = path
         .file_name()
         .ok_or_else(|| Error::InvalidInput(format!("{}: not a file path", path.display())))?;
+    // A rename replaces whatever the name points at: a device, a FIFO or a folder there
+    // is something the user has, not an earlier output, and is left alone.
+    if let Ok(meta) = fs::symlink_metadata(path) {
+        if !meta.is_file() {
+            return Err(Error::io(
+                path,
+                std::io::Error::other("exists and is not a regular file; not replaced"),
+            ));
+        }
+    }
     let dir = parent_dir(path);
     let (tmp, file) =
         create_temporary(&dir, &file_name.to_string_lossy()).map_err(|e| Error::io(path, e))?;
@@ -38,6 +48,32 @@ where
         return Err(Error::io(path, e));
     }
     Ok(())
+}
+
+/// The bytes of `path`, which must be a regular file (after links): a FIFO would block the
+/// read forever and a device such as /dev/zero never ends.
+pub(crate) fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut open_regular(path)?, &mut bytes)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(bytes)
+}
+
+/// Opens `path` for reading if it is a regular file (after links), checked before opening
+/// (opening a FIFO blocks until something writes to it) and again on the open file.
+pub(crate) fn open_regular(path: &Path) -> Result<File> {
+    let regular = |meta: std::io::Result<fs::Metadata>| match meta {
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(_) => Err(Error::io(
+            path,
+            std::io::Error::other("not a regular file (a folder, device or pipe)"),
+        )),
+        Err(e) => Err(Error::io(path, e)),
+    };
+    regular(fs::metadata(path))?;
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    regular(file.metadata())?;
+    Ok(file)
 }
 
 /// The folder `path` is in (`.` for a bare file name): where its temporaries go.
@@ -99,6 +135,25 @@ mod tests {
         write_atomically(&path, |w| w.write_all(b"new")).unwrap();
         assert_eq!(fs::read(&path).unwrap(), b"new");
         assert!(leftovers(&dir).is_empty());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn folders_and_pipes_are_neither_replaced_nor_read() {
+        let dir = std::env::temp_dir().join(format!("isobar-atomic-nf-{}", std::process::id()));
+        let folder = dir.join("out.ply");
+        fs::create_dir_all(&folder).unwrap();
+        let e = write_atomically(&folder, |w| w.write_all(b"mesh")).unwrap_err();
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+        assert!(folder.is_dir(), "the folder is still there");
+        assert!(leftovers(&dir).is_empty());
+        // A FIFO: reading it would block until a writer came; refused before opening.
+        let fifo = dir.join("frame.vtk");
+        let name = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+        let e = read_regular_file(&fifo).unwrap_err();
+        assert!(e.to_string().contains("frame.vtk"), "{e}");
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -46,7 +46,7 @@ use std::io::Read;
 use std::path::Path;
 
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
-pub(crate) use atomic::{parent_dir, write_atomically};
+pub(crate) use atomic::{open_regular, parent_dir, read_regular_file, write_atomically};
 pub use sequence::{expand_sequence, fill_frame, frame_number};
 pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};
@@ -66,7 +66,7 @@ pub fn read_particles(path: &Path) -> Result<ParticleData> {
     if format.is_empty() {
         return Err(unknown_particle_format(&path.display().to_string(), ""));
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_regular_file(path)?;
     read_particles_from_bytes(&bytes, &format, &path.display().to_string())
 }
 
@@ -147,7 +147,7 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
             ),
         ));
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_regular_file(path)?;
     if bytes.is_empty() {
         return Err(Error::format(path, "the file is empty"));
     }
@@ -198,7 +198,7 @@ pub fn read_fe_mesh(path: &Path) -> Result<crate::field::fe::FeMesh> {
             format!("cannot read finite elements from '.{format}'; supported: .vtu, .msh"),
         ));
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_regular_file(path)?;
     if bytes.is_empty() {
         return Err(Error::format(path, "the file is empty"));
     }

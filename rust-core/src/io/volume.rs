@@ -101,7 +101,7 @@ pub fn read_volume(path: &Path, array: Option<&str>, raw: Option<RawLayout>) -> 
             "a .raw volume needs its dimensions and element type (--raw-dims, --raw-type)",
         ));
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_regular_file(path)?;
     match ext.as_str() {
         "vti" => read_vti(&bytes, &name, array),
         "nrrd" => read_nrrd(&bytes, &name),
@@ -512,5 +512,20 @@ mod tests {
         assert!(e.to_string().contains("no point array 'nope'"), "{e}");
         let e = read_vti(vti.as_bytes(), "a.vti", Some("other")).unwrap_err();
         assert!(e.to_string().contains("3 components"), "{e}");
+    }
+
+    /// A header claiming 10^15 nodes over three values is refused by what the file
+    /// holds, before anything is sized by the claim (it used to abort the process on an
+    /// 8 PB allocation).
+    #[test]
+    fn a_vti_extent_beyond_its_data_is_refused_before_allocating() {
+        let vti = r#"<?xml version="1.0"?>
+<VTKFile type="ImageData" version="0.1" byte_order="LittleEndian">
+<ImageData WholeExtent="0 99999 0 99999 0 99999" Origin="0 0 0" Spacing="1 1 1">
+<Piece Extent="0 99999 0 99999 0 99999"><PointData Scalars="s">
+<DataArray type="Float32" Name="s" format="ascii">0 1 2</DataArray>
+</PointData></Piece></ImageData></VTKFile>"#;
+        let e = read_vti(vti.as_bytes(), "huge.vti", None).unwrap_err();
+        assert!(e.to_string().contains("huge.vti"), "{e}");
     }
 }

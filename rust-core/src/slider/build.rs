@@ -42,6 +42,27 @@ impl Default for BuildParams {
     }
 }
 
+/// Refuses a store path that names the volume it is built from: the store's rename would
+/// replace the user's data.
+pub fn check_store_path(volume: &Path, store: &Path) -> Result<()> {
+    let same = match (std::fs::canonicalize(volume), std::fs::canonicalize(store)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same {
+        return Err(Error::InvalidInput(format!(
+            "{}: the store would replace the volume it is built from; name another store path",
+            store.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Most skip-list levels a build may ask for: each level at least halves the blocks of
+/// the one below, so 64 cover any node count; each asked-for level holds its own buffers,
+/// which is why an absurd count is refused rather than clamped silently.
+pub(crate) const MAX_LEVELS: usize = 64;
+
 /// What a build produced.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct BuildStats {
@@ -313,6 +334,16 @@ fn build_store_sorted(
         return Err(Error::InvalidParameter {
             name: "threshold",
             message: format!("must be positive, got {}", params.threshold),
+        });
+    }
+    if params.max_levels > MAX_LEVELS {
+        return Err(Error::InvalidParameter {
+            name: "max_levels",
+            message: format!(
+                "must be at most {MAX_LEVELS} (a level's blocks hold two or more of the level \
+                 below, so more levels than that can never fill), got {}",
+                params.max_levels
+            ),
         });
     }
     let lattice = volume.lattice;
@@ -612,5 +643,30 @@ mod tests {
             assert_eq!(sorted_runs, runs, "{plan:?}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// An absurd level count (a wrapped -1 from a host) is refused by name before any
+    /// level's buffers exist; it used to allocate them all and abort.
+    #[test]
+    fn absurd_level_counts_are_refused() {
+        let lattice = Lattice::new([2, 2, 2], DVec3::ZERO, DVec3::ONE).unwrap();
+        let volume = Volume::new(lattice, Values::F32((0..8).map(|i| i as f32).collect())).unwrap();
+        let path =
+            std::env::temp_dir().join(format!("isobar-levels-{}.isoslider", std::process::id()));
+        for max_levels in [MAX_LEVELS + 1, u32::MAX as usize, usize::MAX] {
+            let params = BuildParams {
+                max_levels,
+                ..BuildParams::default()
+            };
+            let e = build_store(&volume, &path, &params, &mut Progress::none()).unwrap_err();
+            assert!(e.to_string().contains("max_levels"), "{e}");
+            assert!(!path.exists(), "nothing written");
+        }
+        let params = BuildParams {
+            max_levels: MAX_LEVELS,
+            ..BuildParams::default()
+        };
+        build_store(&volume, &path, &params, &mut Progress::none()).unwrap();
+        std::fs::remove_file(&path).unwrap();
     }
 }

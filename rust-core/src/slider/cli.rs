@@ -149,11 +149,12 @@ pub struct SlideArgs {
 
 /// Runs `slide-build`.
 pub fn run_build(args: &BuildArgs) -> Result<()> {
-    let volume = args.volume.read(&args.input)?;
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| default_store_path(&args.input));
+    super::build::check_store_path(&args.input, &output)?;
+    let volume = args.volume.read(&args.input)?;
     let stats = build_with_progress(&volume, &output, &args.build.params(), args.quiet)?;
     let [nx, ny, nz] = volume.lattice.dims;
     let volume_bytes = volume.values.len() * volume.values.value_type().size();
@@ -257,7 +258,7 @@ fn store_for(args: &SlideArgs) -> Result<Slider> {
 /// Whether `path` starts with a store's magic (a missing file is an error naming it).
 fn is_store(path: &Path) -> Result<bool> {
     let mut head = [0u8; 8];
-    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = crate::io::open_regular(path)?;
     let n = file.read(&mut head).map_err(|e| Error::io(path, e))?;
     Ok(n == head.len() && &head == MAGIC)
 }

@@ -168,7 +168,7 @@ impl Store {
     /// with an error naming the file; data chunks are checked when first read (or all at
     /// once by [`Store::verify`]).
     pub fn open(path: &Path) -> Result<Store> {
-        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let file = crate::io::open_regular(path)?;
         // SAFETY: the map is read-only; isobar writes stores by rename, never in place, so
         // the mapped file does not change under us unless someone else truncates it.
         let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;

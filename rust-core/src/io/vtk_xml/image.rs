@@ -46,7 +46,9 @@ pub(crate) fn read_image(bytes: &[u8], name: &str, array: Option<&str>) -> Resul
         .checked_mul(dims[1])
         .and_then(|n| n.checked_mul(dims[2]))
         .ok_or_else(|| err("WholeExtent is impossibly large".into()))?;
-    let mut values = vec![0.0; total];
+    // The pieces are decoded before the volume is allocated: a header can claim any
+    // extent, and only data actually in the file may size an allocation.
+    let mut decoded: Vec<([i64; 6], [usize; 3], Vec<f64>)> = Vec::new();
     let mut covered = 0usize;
     let mut chosen: Option<(String, Scalar)> = None;
     for (k, piece) in doc.pieces.iter().enumerate() {
@@ -98,17 +100,7 @@ pub(crate) fn read_image(bytes: &[u8], name: &str, array: Option<&str>) -> Resul
         }
         let ty = a.ty.unwrap_or(Scalar::F64);
         chosen.get_or_insert((a.name.clone(), ty));
-        let data = doc.values(a, points)?;
-        for z in 0..pd[2] {
-            for y in 0..pd[1] {
-                let gy = (e[2] - we[2]) as usize + y;
-                let gz = (e[4] - we[4]) as usize + z;
-                let gx = (e[0] - we[0]) as usize;
-                let dst = gx + dims[0] * (gy + dims[1] * gz);
-                let src = pd[0] * (y + pd[1] * z);
-                values[dst..dst + pd[0]].copy_from_slice(&data[src..src + pd[0]]);
-            }
-        }
+        decoded.push((e, pd, doc.values(a, points)?));
         covered += points;
     }
     if covered < total {
@@ -116,6 +108,26 @@ pub(crate) fn read_image(bytes: &[u8], name: &str, array: Option<&str>) -> Resul
             "the pieces cover {covered} of the {total} nodes of the WholeExtent"
         )));
     }
+    let values = match decoded.pop() {
+        // One piece over the whole extent (the usual file) is the volume as it is.
+        Some((_, pd, data)) if decoded.is_empty() && pd == dims => data,
+        last => {
+            let mut values = vec![0.0; total];
+            for (e, pd, data) in decoded.into_iter().chain(last) {
+                for z in 0..pd[2] {
+                    for y in 0..pd[1] {
+                        let gy = (e[2] - we[2]) as usize + y;
+                        let gz = (e[4] - we[4]) as usize + z;
+                        let gx = (e[0] - we[0]) as usize;
+                        let dst = gx + dims[0] * (gy + dims[1] * gz);
+                        let src = pd[0] * (y + pd[1] * z);
+                        values[dst..dst + pd[0]].copy_from_slice(&data[src..src + pd[0]]);
+                    }
+                }
+            }
+            values
+        }
+    };
     let (array, ty) = chosen.ok_or_else(|| err("no pieces".into()))?;
     let origin =
         std::array::from_fn(|a| geometry.origin[a] + we[2 * a] as f64 * geometry.spacing[a]);
