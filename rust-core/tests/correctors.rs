@@ -445,6 +445,24 @@ fn bad_input_gets_a_clear_error() {
     )
     .unwrap_err();
     assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+    // Far finer still, each pair's segment crosses thousands of cells: the seed list is
+    // refused as it passes the budget (it used to grow to gigabytes first).
+    let err = correctors::extract(
+        &field,
+        &good,
+        &Params {
+            isovalues: vec![500.0],
+            grid_factor: 1e-4,
+            memory_budget: 1 << 20,
+            ..Params::default()
+        },
+        &mut Progress::none(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(err, Error::OverBudget { .. }) && err.to_string().contains("seed cells"),
+        "{err}"
+    );
     let none = Params::default();
     assert!(
         correctors::extract(&field, &good, &none, &mut Progress::none())

@@ -317,7 +317,7 @@ pub fn extract(
     progress.phase("seed cells", 0.0, 0.0)?;
     let t = Instant::now();
     stats.backend = params.backend.resolve()?;
-    let search = seeds::SeedSearch::new(field)?;
+    let search = seeds::SeedSearch::new(field, params.memory_budget)?;
     let neighbours = Neighbours::new(field, stats.backend)?;
     stats.field_evaluations += field.len() as u64;
     stats.timings.seeds += t.elapsed().as_secs_f64();

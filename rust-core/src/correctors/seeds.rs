@@ -23,13 +23,13 @@
 //!
 //! [`Kernel::linear_crossing_error`]: crate::field::kernel::Kernel::linear_crossing_error
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::field::neighbours::NeighbourGrid;
 use crate::field::sph::SphField;
-use crate::field::DEFAULT_MEMORY_BUDGET;
 use crate::mc::{radix, VirtualGrid};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Least half-width, in cells, of the stretch of a segment seeded around its estimated
 /// crossing.
@@ -44,16 +44,19 @@ pub struct SeedSearch {
     positions: Vec<DVec3>,
     pairs: NeighbourGrid,
     smoothed: Vec<f64>,
+    /// Bytes the seed list may take (with its sort buffer).
+    memory_budget: u64,
 }
 
 impl SeedSearch {
-    /// Builds the search for `field`; costs one field evaluation per particle.
-    pub fn new(field: &SphField) -> Result<Self> {
+    /// Builds the search for `field`; costs one field evaluation per particle. The seed
+    /// lists it makes stay within `memory_budget` bytes or are refused.
+    pub fn new(field: &SphField, memory_budget: u64) -> Result<Self> {
         let positions: Vec<DVec3> = (0..field.len()).map(|i| field.position(i)).collect();
         let max_radius = (0..field.len())
             .map(|i| side_radius(field, i))
             .fold(0.0, f64::max);
-        let pairs = NeighbourGrid::build(&positions, max_radius, DEFAULT_MEMORY_BUDGET)?;
+        let pairs = NeighbourGrid::build(&positions, max_radius, memory_budget)?;
         let smoothed = positions
             .par_iter()
             .map(|&x| field.value_and_weight(x).0)
@@ -62,6 +65,7 @@ impl SeedSearch {
             positions,
             pairs,
             smoothed,
+            memory_budget,
         })
     }
 }
@@ -109,8 +113,16 @@ pub fn seed_cells_with(
     let SeedSearch {
         positions,
         smoothed,
+        memory_budget,
         ..
     } = search;
+    // A grid far finer than the particles puts thousands of cells on each segment, most
+    // of them listed again by the neighbouring pairs. Each thread's list is deduplicated
+    // whenever it has doubled, and the keys held across the lists are counted: past the
+    // budget (8 bytes a key, about four copies at the peak: the lists, their
+    // concatenation, the sort's buffer) the search stops and is refused.
+    let most_keys = memory_budget / 32;
+    let held = AtomicU64::new(0);
     // Each particle is classified twice, by its raw and by its smoothed value; a pair
     // straddles when either classification differs.
     let class = |i: usize| (field.raw_value(i) > iso) as u8 | ((smoothed[i] > iso) as u8) << 1;
@@ -127,7 +139,12 @@ pub fn seed_cells_with(
     let window = |length: f64| (WINDOW_CELLS * grid.cell_size).max(fraction * length);
     let mut seeds: Vec<u64> = (0..field.len())
         .into_par_iter()
-        .fold(Vec::new, |mut out, i| {
+        .fold(Seeds::default, |mut seeds, i| {
+            if held.load(Ordering::Relaxed) > most_keys {
+                return seeds;
+            }
+            let before = seeds.keys.len();
+            let out = &mut seeds.keys;
             let xi = positions[i];
             let ci = class(i);
             let r2 = pair_radius(field, i).powi(2);
@@ -160,7 +177,7 @@ pub fn seed_cells_with(
                             (field.raw_value(i), field.raw_value(j)),
                         );
                         let (a, b) = crossing_window(xi, positions[j], values, iso, window);
-                        cells_on_segment(grid, a, b, &mut out);
+                        cells_on_segment(grid, a, b, out);
                     }
                 }
             });
@@ -173,16 +190,56 @@ pub fn seed_cells_with(
                         let values =
                             ends(ci, outside, (smoothed[i], 0.0), (field.raw_value(i), 0.0));
                         let (a, b) = crossing_window(xi, far, values, iso, window);
-                        cells_on_segment(grid, a, b, &mut out);
+                        cells_on_segment(grid, a, b, out);
                     }
                 }
             }
-            out
+            seeds.deduplicate_if_doubled();
+            let after = seeds.keys.len();
+            if after >= before {
+                held.fetch_add((after - before) as u64, Ordering::Relaxed);
+            } else {
+                held.fetch_sub((before - after) as u64, Ordering::Relaxed);
+            }
+            seeds
         })
-        .flatten_iter()
+        .flat_map_iter(|seeds| seeds.keys)
         .collect();
+    let held = held.into_inner();
+    if held > most_keys {
+        return Err(Error::OverBudget {
+            what: format!(
+                "the seed cells of a grid with cells of {} (over {held} distinct ones found before stopping)",
+                grid.cell_size
+            ),
+            needed_bytes: held.saturating_mul(32),
+            budget_bytes: *memory_budget,
+        });
+    }
     radix::sort_unique(&mut seeds);
     Ok(seeds)
+}
+
+/// One thread's seed keys, deduplicated whenever they have doubled since the last time:
+/// neighbouring pairs list the same cells again and again.
+#[derive(Default)]
+struct Seeds {
+    keys: Vec<u64>,
+    /// Length right after the last deduplication.
+    distinct: usize,
+}
+
+impl Seeds {
+    /// Lists shorter than this are left as they are until the final sort.
+    const DEDUPLICATE_FROM: usize = 1 << 16;
+
+    fn deduplicate_if_doubled(&mut self) {
+        if self.keys.len() >= Self::DEDUPLICATE_FROM.max(2 * self.distinct) {
+            self.keys.sort_unstable();
+            self.keys.dedup();
+            self.distinct = self.keys.len();
+        }
+    }
 }
 
 /// The part of segment p–q within `window` of where the linear interpolant of its end

@@ -809,7 +809,7 @@ fn gpu_seed_cells_equal_cpu_seed_cells() {
         (frame(FRAMES[1]), vec![0.6]),
     ];
     for (k, (field, isos)) in cases.iter().enumerate() {
-        let search = seeds::SeedSearch::new(field).unwrap();
+        let search = seeds::SeedSearch::new(field, crate::field::DEFAULT_MEMORY_BUDGET).unwrap();
         let on_device = GpuField::new(g, field, field.bounds().0).unwrap();
         let candidates = super::seeds::Candidates::new(g, &on_device, field).unwrap();
         for &iso in isos {

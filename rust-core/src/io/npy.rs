@@ -100,6 +100,14 @@ pub(crate) fn read_npz(bytes: &[u8], name: &str) -> Result<ParticleData> {
                 ),
             ));
         }
+        // Read to the declared size, not to the end, so the zip reader's own CRC check
+        // never runs: checked here (a flipped bit in an array must not pass as data).
+        if crc32fast::hash(&data) != entry.crc32() {
+            return Err(Error::format(
+                name,
+                format!("array '{key}' fails its CRC-32 check (corrupt archive)"),
+            ));
+        }
         let parsed = Array::parse(&data, name, Some(&key));
         arrays.push((key, parsed));
     }
@@ -444,6 +452,21 @@ pub(crate) mod tests {
             ],
             deflate,
         )
+    }
+
+    /// A flipped bit inside a stored array is a CRC failure naming the array, not
+    /// particles at altered positions.
+    #[test]
+    fn npz_arrays_are_checked_against_their_crc() {
+        let mut bytes = sample_npz(false);
+        let three = 3.0f64.to_le_bytes();
+        let at = bytes.windows(8).position(|w| w == three).unwrap();
+        bytes[at + 6] ^= 0x01; // 3.0 -> 3.0000000000000004-ish
+        let e = read_particles_from_bytes(&bytes, "npz", "s.npz").unwrap_err();
+        assert!(
+            e.to_string().contains("'positions' fails its CRC-32"),
+            "{e}"
+        );
     }
 
     #[test]

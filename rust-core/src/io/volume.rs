@@ -317,10 +317,22 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
         "raw" => payload.into(),
         "gzip" | "gz" => {
             let mut out = Vec::with_capacity(count.min(payload.len().saturating_mul(16)));
-            flate2::read::MultiGzDecoder::new(payload)
+            let mut gz = flate2::read::MultiGzDecoder::new(payload);
+            (&mut gz)
                 .take(count as u64)
                 .read_to_end(&mut out)
                 .map_err(|e| err(format!("gzip data: {e}")))?;
+            // The decoder checks a member's CRC-32 only at its end: read on to the end
+            // (a flipped bit must not pass as values), but not through a stream that
+            // holds far more than the sizes declare.
+            let limit = count as u64 + 1;
+            let beyond = std::io::copy(&mut (&mut gz).take(limit), &mut std::io::sink())
+                .map_err(|e| err(format!("gzip data: {e}")))?;
+            if beyond == limit {
+                return Err(err(format!(
+                    "the gzip data holds more than the {count} bytes its sizes declare"
+                )));
+            }
             out.into()
         }
         other => {
@@ -484,6 +496,13 @@ mod tests {
         assert!(cut.to_string().contains("truncated"), "{cut}");
         let cut = read_nrrd(&gz[..gz.len() - 10], "a.nrrd").unwrap_err();
         assert!(cut.to_string().contains("a.nrrd"), "{cut}");
+        // The member's CRC-32 (the trailer's first four bytes) is checked: a stream whose
+        // data and CRC disagree is refused, not read as values.
+        let mut flipped = gz.clone();
+        let crc_at = flipped.len() - 8;
+        flipped[crc_at] ^= 0x01;
+        let bad = read_nrrd(&flipped, "a.nrrd").unwrap_err();
+        assert!(bad.to_string().contains("gzip data"), "{bad}");
 
         let npy = super::super::npy::tests::npy("<u2", "(5, 4, 3)", false, &le);
         let (d, ty, endian, data) = super::super::npy::read_npy_volume(&npy, "a.npy").unwrap();
