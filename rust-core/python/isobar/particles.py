@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import threading
 import weakref
 from ctypes import POINTER, byref, c_char_p, c_double, c_float, c_size_t
 from typing import Dict, Iterator, List, Mapping, Optional, Tuple
@@ -34,7 +35,7 @@ class Particles:
     (also on leaving a ``with`` block).
     """
 
-    __slots__ = ("_handle", "_finalizer", "_uses", "__weakref__")
+    __slots__ = ("_handle", "_finalizer", "_uses", "_uses_lock", "__weakref__")
 
     def __init__(self, handle):
         """Wraps a core handle (internal; use :meth:`from_arrays` or :meth:`read`)."""
@@ -42,6 +43,7 @@ class Particles:
             raise InvalidArgumentError("Particles needs a non-NULL core handle")
         self._handle = handle
         self._uses = 0
+        self._uses_lock = threading.Lock()
         self._finalizer = weakref.finalize(self, lib.isobar_particles_free, handle)
 
     # -- construction -----------------------------------------------------------------
@@ -184,22 +186,25 @@ class Particles:
         """Frees the core's copy now (later use raises isobar.InvalidArgumentError).
         Refused while an extraction is reading the particles (from its progress
         callback): the core would go on reading freed memory."""
-        if self._uses:
-            raise InvalidArgumentError(
-                "these Particles are in use by an extraction in progress; close them after it returns"
-            )
-        self._finalizer()
-        self._handle = None
+        with self._uses_lock:
+            if self._uses:
+                raise InvalidArgumentError(
+                    "these Particles are in use by an extraction in progress; close them after it returns"
+                )
+            self._finalizer()
+            self._handle = None
 
     @contextlib.contextmanager
     def _in_use(self):
         """The core handle, kept from :meth:`close` while the block runs."""
-        self._check_open()
-        self._uses += 1
+        with self._uses_lock:
+            self._check_open()
+            self._uses += 1
         try:
             yield self._handle
         finally:
-            self._uses -= 1
+            with self._uses_lock:
+                self._uses -= 1
 
     @property
     def closed(self) -> bool:

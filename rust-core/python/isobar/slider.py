@@ -14,6 +14,7 @@ The store is memory-mapped: the volume stays mostly on disk.
 
 from __future__ import annotations
 
+import functools
 import threading
 import weakref
 from ctypes import POINTER, byref, c_double, c_float, c_size_t, c_uint32, c_uint64
@@ -33,6 +34,19 @@ def _budget(memory_budget) -> int:
     if isinstance(memory_budget, bool) or not isinstance(memory_budget, int) or not 0 <= memory_budget < 2**64:
         raise InvalidArgumentError(f"memory_budget must be an integer number of bytes >= 0, got {memory_budget!r}")
     return memory_budget
+
+
+def _one_at_a_time(method):
+    """Runs a Slider method under the slider's lock: the core's slider is one mutable
+    state, so calls from several threads take turns (two updates at once corrupted it),
+    and close waits for a call in progress."""
+
+    @functools.wraps(method)
+    def locked(self, *args, **kwargs):
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return locked
 
 
 class SliderUpdate:
@@ -103,8 +117,6 @@ class Slider:
     __slots__ = ("_handle", "_finalizer", "_lock", "path", "__weakref__")
 
     def __init__(self, path, lod_error_bound: float = 0.0, lod_max_level: int = 0) -> None:
-        # The core's slider is one mutable state: calls from several threads take turns
-        # (an update from two threads at once corrupted it), and close waits for them.
         self._lock = threading.RLock()
         handle = POINTER(SliderHandle)()
         check(lib.isobar_slider_open(encode(path, "store path"), byref(handle)))
@@ -182,27 +194,24 @@ class Slider:
         return self._handle
 
     @property
+    @_one_at_a_time
     def value_range(self) -> tuple:
         """(min, max) of the volume's values."""
         lo, hi = c_double(), c_double()
-        with self._lock:
-            check(lib.isobar_slider_value_range(self._live(), byref(lo), byref(hi)))
+        check(lib.isobar_slider_value_range(self._live(), byref(lo), byref(hi)))
         return lo.value, hi.value
 
     @property
+    @_one_at_a_time
     def stats(self) -> dict:
         """Updates applied so far and their total time in seconds."""
         n, t = c_uint64(), c_double()
-        with self._lock:
-            check(lib.isobar_slider_stats(self._live(), byref(n), byref(t)))
+        check(lib.isobar_slider_stats(self._live(), byref(n), byref(t)))
         return {"updates": n.value, "seconds": t.value}
 
+    @_one_at_a_time
     def set_isovalue(self, iso: float) -> SliderUpdate:
         """Moves the surface to `iso` and returns the new arrays and the change."""
-        with self._lock:
-            return self._set_isovalue(iso)
-
-    def _set_isovalue(self, iso: float) -> SliderUpdate:
         h = self._live()
         change = SliderChange()
         check(lib.isobar_slider_set_isovalue(h, float(iso), _NO_PROGRESS, None, byref(change)))
@@ -227,6 +236,7 @@ class Slider:
         u.seconds = change.seconds
         return u
 
+    @_one_at_a_time
     def set_lod(self, error_bound: float, max_level: int = 0) -> None:
         """Sets the level of detail of :meth:`lod_mesh`: `error_bound` in [0, 1) is the
         largest deviation of a merged cell from the samples it replaces, as a fraction of
@@ -234,13 +244,12 @@ class Slider:
         levels (0: default 3, at most 6). Raises InvalidArgumentError out of range."""
         if isinstance(max_level, bool) or int(max_level) != max_level or not 0 <= max_level <= 2**32 - 1:
             raise InvalidArgumentError(f"lod max_level must be an integer >= 0, got {max_level!r}")
-        with self._lock:
-            check(lib.isobar_slider_set_lod(self._live(), float(error_bound), int(max_level)))
+        check(lib.isobar_slider_set_lod(self._live(), float(error_bound), int(max_level)))
 
+    @_one_at_a_time
     def _lod(self) -> tuple:
         bound, level = c_double(), c_uint32()
-        with self._lock:
-            check(lib.isobar_slider_get_lod(self._live(), byref(bound), byref(level)))
+        check(lib.isobar_slider_get_lod(self._live(), byref(bound), byref(level)))
         return bound.value, level.value
 
     @property
@@ -261,13 +270,10 @@ class Slider:
     def lod_max_level(self, value: int) -> None:
         self.set_lod(self._lod()[0], value)
 
+    @_one_at_a_time
     def lod_mesh(self) -> SliderLodMesh:
         """The level-of-detail mesh of the current surface at :attr:`lod_error_bound`
         (computed by the core on the first call after an update, O(surface))."""
-        with self._lock:
-            return self._lod_mesh()
-
-    def _lod_mesh(self) -> SliderLodMesh:
         h = self._live()
         nv, nt = c_size_t(), c_size_t()
         p, n, t = POINTER(c_float)(), POINTER(c_float)(), POINTER(c_uint32)()
@@ -279,10 +285,10 @@ class Slider:
         m.triangles = _copy(t, 3 * nt.value, np.uint32).reshape(nt.value, 3)
         return m
 
+    @_one_at_a_time
     def close(self) -> None:
         """Frees the core's state and unmaps the store (also done on garbage collection)."""
-        with self._lock:
-            self._finalizer()
+        self._finalizer()
 
     def __enter__(self) -> "Slider":
         return self

@@ -44,7 +44,7 @@ pub struct SeedSearch {
     positions: Vec<DVec3>,
     pairs: NeighbourGrid,
     smoothed: Vec<f64>,
-    /// Bytes the seed list may take (with its sort buffer).
+    /// Bytes the seed lists may take ([`seed_cells_with`] counts four copies).
     memory_budget: u64,
 }
 
@@ -209,7 +209,7 @@ pub fn seed_cells_with(
     if held > most_keys {
         return Err(Error::OverBudget {
             what: format!(
-                "the seed cells of a grid with cells of {} (over {held} distinct ones found before stopping)",
+                "the seed cells of a grid with cells of {} (over {held} held before stopping)",
                 grid.cell_size
             ),
             needed_bytes: held.saturating_mul(32),

@@ -23,8 +23,9 @@ where
         .file_name()
         .ok_or_else(|| Error::InvalidInput(format!("{}: not a file path", path.display())))?;
     // A rename replaces whatever the name points at: a device, a FIFO or a folder there
-    // is something the user has, not an earlier output, and is left alone.
-    if let Ok(meta) = fs::symlink_metadata(path) {
+    // is something the user has, not an earlier output, and is left alone. (A link to a
+    // regular file is replaced, as before.)
+    if let Ok(meta) = fs::metadata(path) {
         if !meta.is_file() {
             return Err(Error::io(
                 path,
@@ -147,6 +148,13 @@ mod tests {
         assert!(e.to_string().contains("not a regular file"), "{e}");
         assert!(folder.is_dir(), "the folder is still there");
         assert!(leftovers(&dir).is_empty());
+        // A link to an earlier output is still written through, as before.
+        let earlier = dir.join("earlier.ply");
+        fs::write(&earlier, b"old").unwrap();
+        let link = dir.join("link.ply");
+        std::os::unix::fs::symlink(&earlier, &link).unwrap();
+        write_atomically(&link, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(fs::read(&link).unwrap(), b"new");
         // A FIFO: reading it would block until a writer came; refused before opening.
         let fifo = dir.join("frame.vtk");
         let name = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();

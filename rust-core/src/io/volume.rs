@@ -545,6 +545,9 @@ mod tests {
 <DataArray type="Float32" Name="s" format="ascii">0 1 2</DataArray>
 </PointData></Piece></ImageData></VTKFile>"#;
         let e = read_vti(vti.as_bytes(), "huge.vti", None).unwrap_err();
-        assert!(e.to_string().contains("huge.vti"), "{e}");
+        assert!(
+            e.to_string().contains("huge.vti") && e.to_string().contains("holds 3"),
+            "{e}"
+        );
     }
 }

@@ -47,7 +47,9 @@ pub(crate) fn read_image(bytes: &[u8], name: &str, array: Option<&str>) -> Resul
         .and_then(|n| n.checked_mul(dims[2]))
         .ok_or_else(|| err("WholeExtent is impossibly large".into()))?;
     // The pieces are decoded before the volume is allocated: a header can claim any
-    // extent, and only data actually in the file may size an allocation.
+    // extent, and only data actually in the file may size an allocation. A file of
+    // several pieces then holds them and the volume at once (twice the volume at the
+    // peak); the usual single piece becomes the volume without a copy.
     let mut decoded: Vec<([i64; 6], [usize; 3], Vec<f64>)> = Vec::new();
     let mut covered = 0usize;
     let mut chosen: Option<(String, Scalar)> = None;
