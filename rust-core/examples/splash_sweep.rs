@@ -119,7 +119,7 @@ fn main() {
         let dilation = arg(&p, p.len() - 2) as u32;
         let max_error = arg(&p, p.len() - 1);
         let splash = levels.iter().filter(|&&l| l == 3).count();
-        grid::dilate(&g, &mut levels, dilation);
+        grid::dilate(&g, &mut levels, dilation, &mut Progress::none()).expect("dilate");
         if std::env::var("NO_HIDDEN").is_err() {
             refine::hidden_surfaces(&field, &g, &positions, &mut levels, ISO);
         }
@@ -133,9 +133,10 @@ fn main() {
             max_error,
             &mut lattice,
             u64::MAX,
+            &mut Progress::none(),
         )
         .expect("refine");
-        grid::balance(&g, &mut levels);
+        grid::balance(&g, &mut levels, &mut Progress::none()).expect("balance");
         let levels_s = t.elapsed().as_secs_f64();
         let out = adaptive::extract(&field, &g, &levels, &params, &mut Progress::none())
             .expect("adaptive");

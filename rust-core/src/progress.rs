@@ -52,6 +52,17 @@ impl<'a> Progress<'a> {
         self.report(0.0)
     }
 
+    /// Runs `work` with the current phase narrowed to its fraction `from..to`, so that a
+    /// step reporting 0..1 of its own lands there; the phase is restored afterwards.
+    pub fn nested<T>(&mut self, from: f64, to: f64, work: impl FnOnce(&mut Self) -> T) -> T {
+        let span = self.span;
+        let (a, b) = span;
+        self.span = (a + (b - a) * from, a + (b - a) * to);
+        let out = work(self);
+        self.span = span;
+        out
+    }
+
     /// Reports `fraction` of the current phase done; Err(Cancelled) when asked to stop.
     pub fn report(&mut self, fraction: f64) -> Result<()> {
         let (a, b) = self.span;
@@ -91,13 +102,41 @@ pub fn for_chunks<T: Sync, R>(
     items: &[T],
     progress: &mut Progress,
     work: impl Fn(usize, &[T]) -> R + Sync,
+    sink: impl FnMut(R),
+) -> Result<()> {
+    for_ranges(
+        items.len(),
+        progress,
+        |range| work(range.start, &items[range]),
+        sink,
+    )
+}
+
+/// [`for_chunks`] over the indices `0..len`: for passes over a grid's cells that build
+/// no list of them first.
+pub fn for_ranges<R>(
+    len: usize,
+    progress: &mut Progress,
+    work: impl Fn(std::ops::Range<usize>) -> R + Sync,
     mut sink: impl FnMut(R),
 ) -> Result<()> {
     // Chunks big enough to keep threads busy, small enough to answer a cancel quickly.
-    let chunk = (items.len() / 64).clamp(4096, 1 << 18);
-    for (i, part) in items.chunks(chunk).enumerate() {
-        sink(work(i * chunk, part));
-        progress.report(((i + 1) * chunk).min(items.len()) as f64 / items.len().max(1) as f64)?;
+    let chunk = (len / 64).clamp(4096, 1 << 18);
+    for start in (0..len).step_by(chunk) {
+        let end = (start + chunk).min(len);
+        sink(work(start..end));
+        progress.report(end as f64 / len as f64)?;
     }
     Ok(())
+}
+
+/// [`for_ranges`] concatenating each range's list, in order.
+pub fn collect_ranges<R>(
+    len: usize,
+    progress: &mut Progress,
+    work: impl Fn(std::ops::Range<usize>) -> Vec<R> + Sync,
+) -> Result<Vec<R>> {
+    let mut out = Vec::new();
+    for_ranges(len, progress, work, |part| out.extend(part))?;
+    Ok(out)
 }

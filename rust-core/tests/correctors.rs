@@ -463,6 +463,26 @@ fn bad_input_gets_a_clear_error() {
         matches!(err, Error::OverBudget { .. }) && err.to_string().contains("seed cells"),
         "{err}"
     );
+    // Between the two, the seeds fit but their eight corners each do not: the first wave
+    // is refused before its bricks are allocated (it used to take gigabytes of node
+    // cache before the check after the wave).
+    let err = correctors::extract(
+        &field,
+        &good,
+        &Params {
+            isovalues: vec![500.0],
+            grid_factor: 0.008,
+            memory_budget: 1 << 20,
+            ..Params::default()
+        },
+        &mut Progress::none(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(err, Error::OverBudget { needed_bytes, .. } if needed_bytes > 1 << 20)
+            && err.to_string().contains("0 cells found so far"),
+        "{err}"
+    );
     let none = Params::default();
     assert!(
         correctors::extract(&field, &good, &none, &mut Progress::none())

@@ -7,6 +7,7 @@
 //! quarter of a coarse cell, so every grid vertex of every level is a finest-lattice node.
 
 use crate::error::{Error, Result};
+use crate::progress::{collect_ranges, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -225,27 +226,36 @@ pub fn split(counts: &[u32], threshold: u32) -> Vec<u8> {
 /// (support 2h = one coarse cell at the default grid factor), so its droplet surface
 /// spills into those neighbours; at level 1 or 2 they would contour a sphere of one or
 /// two cells' radius, far off the finest surface. 0 keeps the paper's criterion alone.
-pub fn dilate(grid: &CoarseGrid, levels: &mut [u8], rings: u32) {
+pub fn dilate(
+    grid: &CoarseGrid,
+    levels: &mut [u8],
+    rings: u32,
+    progress: &mut Progress,
+) -> Result<()> {
     for _ in 0..rings {
-        let next: Vec<u8> = (0..levels.len())
-            .into_par_iter()
-            .map(|i| {
-                let c = grid.coords(i);
-                let mut l = levels[i];
-                for d in 0..27usize {
-                    let o = [d % 3, d / 3 % 3, d / 9].map(|x| x as i64 - 1);
-                    let n: [i64; 3] = std::array::from_fn(|a| c[a] as i64 + o[a]);
-                    if (0..3).all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
-                        && levels[grid.index(n.map(|x| x as u32))] == 3
-                    {
-                        l = 3;
+        let now = &*levels;
+        let next: Vec<u8> = collect_ranges(levels.len(), progress, |cells| {
+            cells
+                .into_par_iter()
+                .map(|i| {
+                    let c = grid.coords(i);
+                    let mut l = now[i];
+                    for d in 0..27usize {
+                        let o = [d % 3, d / 3 % 3, d / 9].map(|x| x as i64 - 1);
+                        let n: [i64; 3] = std::array::from_fn(|a| c[a] as i64 + o[a]);
+                        if (0..3).all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
+                            && now[grid.index(n.map(|x| x as u32))] == 3
+                        {
+                            l = 3;
+                        }
                     }
-                }
-                l
-            })
-            .collect();
+                    l
+                })
+                .collect()
+        })?;
         levels.copy_from_slice(&next);
     }
+    Ok(())
 }
 
 /// Step 3, extended to a fixed point: raises levels until (a) cells sharing a face differ
@@ -259,23 +269,29 @@ pub fn dilate(grid: &CoarseGrid, levels: &mut [u8], rings: u32) {
 /// blocks of the cells that changed are looked at again: the same passes, the same
 /// result, without sweeping every coarse cell per pass (balancing was a tenth of an
 /// adaptive extraction's time).
-pub fn balance(grid: &CoarseGrid, levels: &mut [u8]) {
-    let mut dirty: Vec<usize> = (0..levels.len()).collect();
+pub fn balance(grid: &CoarseGrid, levels: &mut [u8], progress: &mut Progress) -> Result<()> {
+    // The first pass sweeps every cell without listing them (a list of all cells would
+    // take 8 bytes a cell, more than the grid's own arrays), reporting as it goes.
+    let mut dirty: Option<Vec<usize>> = None;
     loop {
-        let changes: Vec<(usize, u8)> = dirty
-            .par_iter()
-            .filter_map(|&i| {
-                let need = required_level(grid, levels, i);
-                (need != levels[i]).then_some((i, need))
-            })
-            .collect();
+        let now = &*levels;
+        let need = |i: usize| {
+            let need = required_level(grid, now, i);
+            (need != now[i]).then_some((i, need))
+        };
+        let changes: Vec<(usize, u8)> = match &dirty {
+            None => collect_ranges(now.len(), progress, |cells| {
+                cells.into_par_iter().filter_map(need).collect()
+            })?,
+            Some(cells) => cells.par_iter().filter_map(|&i| need(i)).collect(),
+        };
         if changes.is_empty() {
-            return;
+            return Ok(());
         }
         for &(i, need) in &changes {
             levels[i] = need;
         }
-        dirty = changes
+        let mut next: Vec<usize> = changes
             .par_iter()
             .flat_map_iter(|&(i, _)| {
                 let c = grid.coords(i);
@@ -289,8 +305,9 @@ pub fn balance(grid: &CoarseGrid, levels: &mut [u8]) {
                 })
             })
             .collect();
-        dirty.par_sort_unstable();
-        dirty.dedup();
+        next.par_sort_unstable();
+        next.dedup();
+        dirty = Some(next);
     }
 }
 
@@ -453,7 +470,7 @@ mod tests {
         let mut levels = split(&counts, 1);
         assert_eq!(levels[g.index([2, 2, 2])], 3);
         assert_eq!(levels[g.index([0, 0, 0])], 1);
-        balance(&g, &mut levels);
+        balance(&g, &mut levels, &mut Progress::none()).unwrap();
         for n in g.face_neighbours(g.index([2, 2, 2])).into_iter().flatten() {
             assert_eq!(levels[n], 2);
         }
@@ -469,7 +486,7 @@ mod tests {
         counts[g.index([2, 2, 2])] = 1;
         counts[g.index([3, 3, 2])] = 1;
         let mut levels = split(&counts, 1);
-        balance(&g, &mut levels);
+        balance(&g, &mut levels, &mut Progress::none()).unwrap();
         assert_eq!(levels[g.index([3, 2, 2])], 3);
         assert_eq!(levels[g.index([2, 3, 2])], 3);
         check_levels(&g, &levels).unwrap();
@@ -508,7 +525,7 @@ mod tests {
                 swept = pass;
             }
             let mut levels = start.clone();
-            balance(&g, &mut levels);
+            balance(&g, &mut levels, &mut Progress::none()).unwrap();
             assert_eq!(levels, swept, "density {density}");
             check_levels(&g, &levels).unwrap();
             assert!(levels.iter().zip(&start).all(|(a, b)| a >= b));

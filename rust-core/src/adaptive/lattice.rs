@@ -16,6 +16,7 @@
 use super::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
 use crate::error::{Error, Result};
 use crate::field::{ScalarField, TILE};
+use crate::progress::{for_ranges, Progress};
 use rayon::prelude::*;
 
 const TILE3: usize = TILE * TILE * TILE;
@@ -71,12 +72,13 @@ impl Lattice {
     /// Evaluates the field at every coarse node (node by node: most lie far from any
     /// surface, where a tile would be wasted), unless done already; returns the
     /// evaluations made. Refuses, before allocating, to take the store past `budget`
-    /// bytes.
+    /// bytes. Reports as it goes.
     pub fn cover_corners<F: ScalarField + ?Sized>(
         &mut self,
         field: &F,
         grid: &CoarseGrid,
         budget: u64,
+        progress: &mut Progress,
     ) -> Result<u64> {
         if !self.corners.is_empty() {
             return Ok(0);
@@ -95,13 +97,23 @@ impl Lattice {
             });
         }
         let n = self.cells.map(|c| c + 1);
-        self.corners = (0..n[0] * n[1] * n[2])
-            .into_par_iter()
-            .map(|v| {
-                let c = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
-                field.value(grid.point(c.map(|x| (x * FINE_PER_COARSE as usize) as i64), 0))
-            })
-            .collect();
+        let mut corners = Vec::with_capacity(n[0] * n[1] * n[2]);
+        for_ranges(
+            n[0] * n[1] * n[2],
+            progress,
+            |nodes| -> Vec<f64> {
+                nodes
+                    .into_par_iter()
+                    .map(|v| {
+                        let c = [v % n[0], v / n[0] % n[1], v / (n[0] * n[1])];
+                        let node = c.map(|x| (x * FINE_PER_COARSE as usize) as i64);
+                        field.value(grid.point(node, 0))
+                    })
+                    .collect()
+            },
+            |part| corners.extend(part),
+        )?;
+        self.corners = corners;
         Ok(self.corners.len() as u64)
     }
 
@@ -122,22 +134,23 @@ impl Lattice {
         levels: &[u8],
         level: u8,
         budget: u64,
+        progress: &mut Progress,
     ) -> Result<u64> {
         if level == 1 {
-            return self.cover_corners(field, grid, budget);
+            return self.cover_corners(field, grid, budget, progress);
         }
         let cells: Vec<usize> = (0..levels.len())
             .into_par_iter()
             .filter(|&i| levels[i] == level)
             .collect();
         let stride = FINE_PER_COARSE / subdivisions(level);
-        self.cover(field, grid, &cells, stride as usize, budget)
+        self.cover(field, grid, &cells, stride as usize, budget, progress)
     }
 
     /// Evaluates the nodes of the coarse cells `cells` on every `stride`-th finest node
     /// (1, 2 or 4) not stored yet, tile by tile in parallel; returns the evaluations
     /// made. Refuses, before allocating, tiles that would take the store past `budget`
-    /// bytes.
+    /// bytes. Reports between blocks of tiles (a fine grid's cover takes tens of seconds).
     pub fn cover<F: ScalarField + ?Sized>(
         &mut self,
         field: &F,
@@ -145,6 +158,7 @@ impl Lattice {
         cells: &[usize],
         stride: usize,
         budget: u64,
+        progress: &mut Progress,
     ) -> Result<u64> {
         assert!(TILE.is_multiple_of(stride) && (FINE_PER_COARSE as usize).is_multiple_of(stride));
         let tiles = self.tiles;
@@ -202,10 +216,35 @@ impl Lattice {
         for (t, rows) in wanted {
             work[self.slot[t] as usize] = Some((t, rows));
         }
-        let evaluations = self
+        // Blocks of slots, each spread over the threads, a report after each.
+        const BLOCK: usize = 4096;
+        let mut evaluations = 0;
+        let blocks = self
             .values
+            .chunks_mut(TILE3 * BLOCK)
+            .zip(self.marked.chunks_mut(BLOCK))
+            .zip(work.chunks(BLOCK));
+        let count = work.len().div_ceil(BLOCK);
+        for (b, ((values, marked), work)) in blocks.enumerate() {
+            evaluations += Self::evaluate(field, grid, tiles, values, marked, work);
+            progress.report((b + 1) as f64 / count as f64)?;
+        }
+        Ok(evaluations)
+    }
+
+    /// Evaluates the marked nodes of the tiles in `work` into their slots' `values`,
+    /// adding them to `marked`; returns the evaluations made.
+    fn evaluate<F: ScalarField + ?Sized>(
+        field: &F,
+        grid: &CoarseGrid,
+        tiles: [usize; 3],
+        values: &mut [f64],
+        marked: &mut [Rows],
+        work: &[Option<(usize, Rows)>],
+    ) -> u64 {
+        values
             .par_chunks_mut(TILE3)
-            .zip(self.marked.par_iter_mut())
+            .zip(marked.par_iter_mut())
             .zip(work.par_iter())
             .map(|((out, marked), work)| {
                 let Some((t, rows)) = work else { return 0 };
@@ -222,8 +261,7 @@ impl Lattice {
                 }
                 rows.iter().map(|r| r.count_ones() as u64).sum::<u64>()
             })
-            .sum();
-        Ok(evaluations)
+            .sum()
     }
 
     /// Marks in `rows` the nodes of coarse cell `cell` on every `stride`-th finest node
@@ -372,7 +410,14 @@ mod tests {
         let cells = [0usize, 7, 6, grid.cell_count() - 1];
         let mut lattice = Lattice::new(&grid);
         let made = lattice
-            .cover(&Wavy, &grid, &cells[..2], 1, u64::MAX)
+            .cover(
+                &Wavy,
+                &grid,
+                &cells[..2],
+                1,
+                u64::MAX,
+                &mut Progress::none(),
+            )
             .unwrap();
         assert_eq!(made, nodes_of(&cells[..2]).len() as u64);
         assert_eq!(
@@ -380,12 +425,19 @@ mod tests {
             None,
             "a node of the third cell only"
         );
-        let made = lattice.cover(&Wavy, &grid, &cells, 1, u64::MAX).unwrap();
+        let made = lattice
+            .cover(&Wavy, &grid, &cells, 1, u64::MAX, &mut Progress::none())
+            .unwrap();
         assert_eq!(
             made,
             (nodes_of(&cells).len() - nodes_of(&cells[..2]).len()) as u64
         );
-        assert_eq!(lattice.cover(&Wavy, &grid, &cells, 1, u64::MAX).unwrap(), 0);
+        assert_eq!(
+            lattice
+                .cover(&Wavy, &grid, &cells, 1, u64::MAX, &mut Progress::none())
+                .unwrap(),
+            0
+        );
         for &i in &cells {
             let c = grid.coords(i);
             let mut values = [0.0; M * M * M];
@@ -404,7 +456,9 @@ mod tests {
         assert_eq!(lattice.get([6, 2, 6]), None);
         assert_eq!(lattice.get([12, 4, 8]), None);
         assert_eq!(
-            lattice.cover_corners(&Wavy, &grid, u64::MAX).unwrap(),
+            lattice
+                .cover_corners(&Wavy, &grid, u64::MAX, &mut Progress::none())
+                .unwrap(),
             6 * 4 * 5
         );
         assert_eq!(
@@ -429,6 +483,7 @@ mod tests {
                 &(0..grid.cell_count()).collect::<Vec<_>>(),
                 1,
                 10_000,
+                &mut Progress::none(),
             )
             .unwrap_err();
         assert!(matches!(err, Error::OverBudget { .. }), "{err}");

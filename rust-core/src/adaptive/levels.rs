@@ -391,7 +391,14 @@ mod tests {
         for level in 1..=3u8 {
             let mut lattice = Lattice::new(&grid);
             let covering = lattice
-                .cover_level(&Below, &grid, &levels, level, u64::MAX)
+                .cover_level(
+                    &Below,
+                    &grid,
+                    &levels,
+                    level,
+                    u64::MAX,
+                    &mut Progress::none(),
+                )
                 .unwrap();
             let a = build_level(
                 &Below,

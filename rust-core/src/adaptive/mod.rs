@@ -213,7 +213,7 @@ pub fn grid_for(field: &SphField, params: &Params) -> Result<CoarseGrid> {
 
 /// Steps 1–3 on `field`'s particles: registration, splitting, level adjustment.
 pub fn levels_for(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Vec<u8>> {
-    Ok(levels_and_refined(field, grid, params)?.levels)
+    Ok(levels_and_refined(field, grid, params, &mut Progress::none())?.levels)
 }
 
 /// The cell levels and what came with them.
@@ -228,22 +228,48 @@ pub struct Levels {
 }
 
 /// [`levels_for`] and what came with them.
-fn levels_and_refined(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<Levels> {
+fn levels_and_refined(
+    field: &SphField,
+    grid: &CoarseGrid,
+    params: &Params,
+    progress: &mut Progress,
+) -> Result<Levels> {
     check_grid_budget(grid, params)?;
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
     let counts = grid::register(grid, &positions)?;
-    levels_from_counts(field, grid, &positions, &counts, params)
+    progress.report(0.1)?;
+    levels_from_counts(field, grid, &positions, &counts, params, progress)
 }
 
-/// Refuses a coarse grid whose counts and levels (5 bytes a cell) exceed the budget.
+/// Bytes per coarse cell held while the levels are chosen: the particle count (4), the
+/// level (1), and one byte more for a pass's copy (dilation) or the corner signs (the
+/// error criterion).
+const LEVEL_STEP_BYTES_PER_CELL: u64 = 6;
+
+/// Bytes the per-cell arrays of the level step take for `grid`.
+fn level_step_bytes(grid: &CoarseGrid) -> u64 {
+    grid.cell_count() as u64 * LEVEL_STEP_BYTES_PER_CELL
+}
+
+/// Refuses a coarse grid whose per-cell arrays, with the coarse-node values the error
+/// criterion evaluates, exceed the budget, or whose level arrays would even with every
+/// cell at level 1 (levels only rise): before minutes of work on a grid that cannot be
+/// contoured.
 fn check_grid_budget(grid: &CoarseGrid, params: &Params) -> Result<()> {
-    if grid.cell_count() as u64 * 5 > params.memory_budget {
+    let corners = if params.max_error > 0.0 {
+        Lattice::corner_bytes(grid)
+    } else {
+        0
+    };
+    let all_level_1 = grid.cell_count() as u64 * (levels::bytes_per_cell(1) + 5);
+    let needed = (level_step_bytes(grid) + corners).max(all_level_1);
+    if needed > params.memory_budget {
         return Err(Error::OverBudget {
             what: format!(
                 "a coarse grid of {}×{}×{} cells",
                 grid.cells[0], grid.cells[1], grid.cells[2]
             ),
-            needed_bytes: grid.cell_count() as u64 * 5,
+            needed_bytes: needed,
             budget_bytes: params.memory_budget,
         });
     }
@@ -261,9 +287,12 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     positions: &[glam::DVec3],
     counts: &[u32],
     params: &Params,
+    progress: &mut Progress,
 ) -> Result<Levels> {
     let mut levels = grid::split(counts, params.splash_threshold);
-    grid::dilate(grid, &mut levels, params.splash_dilation);
+    progress.nested(0.1, 0.2, |p| {
+        grid::dilate(grid, &mut levels, params.splash_dilation, p)
+    })?;
     // Before the error criterion, so that its balancing rounds test the neighbours these
     // cells pull up.
     let hidden = if params.hidden_surfaces {
@@ -271,20 +300,25 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     } else {
         refine::Refined::default()
     };
+    progress.report(0.3)?;
     let mut lattice = Lattice::new(grid);
-    let mut refined = refine::refine(
-        field,
-        grid,
-        counts,
-        &mut levels,
-        params.isovalue,
-        params.max_error,
-        &mut lattice,
-        params.memory_budget,
-    )?;
+    let mut refined = progress.nested(0.3, 0.9, |p| {
+        refine::refine(
+            field,
+            grid,
+            counts,
+            &mut levels,
+            params.isovalue,
+            params.max_error,
+            &mut lattice,
+            // What the per-cell arrays leave.
+            params.memory_budget.saturating_sub(level_step_bytes(grid)),
+            p,
+        )
+    })?;
     refined.hidden = hidden.hidden;
     refined.evaluations += hidden.evaluations;
-    grid::balance(grid, &mut levels);
+    progress.nested(0.9, 1.0, |p| grid::balance(grid, &mut levels, p))?;
     Ok(Levels {
         levels,
         refined,
@@ -316,7 +350,7 @@ pub fn extract_sph(
                 levels,
                 refined,
                 mut lattice,
-            } = levels_and_refined(field, &grid, params)?;
+            } = levels_and_refined(field, &grid, params, progress)?;
             let elapsed = start.elapsed().as_secs_f64();
             let mut out = extract_on(field, &grid, &levels, &mut lattice, params, progress)?;
             out.stats.timings.levels = elapsed;
@@ -350,7 +384,14 @@ fn extract_sph_gpu(
     // The lattice the criterion filled serves only the CPU's level surfaces.
     let Levels {
         levels, refined, ..
-    } = levels_from_counts(field, grid, &positions, &registered.counts, params)?;
+    } = levels_from_counts(
+        field,
+        grid,
+        &positions,
+        &registered.counts,
+        params,
+        progress,
+    )?;
     let elapsed = start.elapsed().as_secs_f64();
     let mut out = extract_gpu_on(gpu, &on_device, field, grid, &levels, params, progress)?;
     out.stats.timings.levels = elapsed;
@@ -406,18 +447,23 @@ fn extract_on<F: ScalarField + ?Sized>(
         progress,
         |level, progress| {
             let mut lattice = lattice.borrow_mut();
-            let covering = lattice.cover_level(field, grid, levels, level, params.memory_budget)?;
-            let mut built = levels::build_level(
-                field,
-                grid,
-                levels,
-                level,
-                &lattice,
-                params.isovalue,
-                params.bisection_iterations,
-                params.normals,
-                progress,
-            )?;
+            let budget = params.memory_budget;
+            let covering = progress.nested(0.0, 0.3, |p| {
+                lattice.cover_level(field, grid, levels, level, budget, p)
+            })?;
+            let mut built = progress.nested(0.3, 1.0, |p| {
+                levels::build_level(
+                    field,
+                    grid,
+                    levels,
+                    level,
+                    &lattice,
+                    params.isovalue,
+                    params.bisection_iterations,
+                    params.normals,
+                    p,
+                )
+            })?;
             built.evaluations += covering;
             Ok(built)
         },

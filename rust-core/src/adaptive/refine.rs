@@ -21,6 +21,7 @@ use super::lattice::Lattice;
 use crate::error::Result;
 use crate::field::ScalarField;
 use crate::mesh::hausdorff::point_triangle;
+use crate::progress::{chunked, collect_ranges, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -143,7 +144,8 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
 /// may hide a droplet between its corners, and its neighbours parts of that droplet's
 /// surface). `max_error` ≤ 0 leaves the levels as they are. The finest nodes of the
 /// candidates and of every cell above level 1 are evaluated into `lattice` (within
-/// `budget` bytes), where the level surfaces read them again.
+/// `budget` bytes), where the level surfaces read them again. Reports between its
+/// passes over the grid.
 #[allow(clippy::too_many_arguments)]
 pub fn refine<F: ScalarField + ?Sized>(
     field: &F,
@@ -154,12 +156,14 @@ pub fn refine<F: ScalarField + ?Sized>(
     max_error: f64,
     lattice: &mut Lattice,
     budget: u64,
+    progress: &mut Progress,
 ) -> Result<Refined> {
     let mut out = Refined::default();
     if max_error <= 0.0 {
         return Ok(out);
     }
-    out.evaluations += lattice.cover_corners(field, grid, budget)?;
+    out.evaluations +=
+        progress.nested(0.0, 0.2, |p| lattice.cover_corners(field, grid, budget, p))?;
     let corner_list = |c: [u32; 3]| -> [f64; 8] {
         std::array::from_fn(|v| {
             lattice.corner([
@@ -170,14 +174,18 @@ pub fn refine<F: ScalarField + ?Sized>(
         })
     };
     // Sign of each cell's corners: bit 0 some corner inside, bit 1 some corner outside.
-    let signs: Vec<u8> = (0..levels.len())
-        .into_par_iter()
-        .map(|i| {
-            corner_list(grid.coords(i))
-                .iter()
-                .fold(0u8, |s, &v| s | if v > iso { 1 } else { 2 })
+    let signs: Vec<u8> = progress.nested(0.2, 0.25, |p| {
+        collect_ranges(levels.len(), p, |cells| {
+            cells
+                .into_par_iter()
+                .map(|i| {
+                    corner_list(grid.coords(i))
+                        .iter()
+                        .fold(0u8, |s, &v| s | if v > iso { 1 } else { 2 })
+                })
+                .collect()
         })
-        .collect();
+    })?;
     // Candidates: cells in the 3×3×3 block of a cell the surface crosses at the corners,
     // or of a cell holding particles with no corner inside (a droplet between the corners
     // reaches into its neighbours too).
@@ -191,10 +199,15 @@ pub fn refine<F: ScalarField + ?Sized>(
                 && marked(grid.index(n.map(|x| x as u32)))
         })
     };
-    let candidates: Vec<usize> = (0..levels.len())
-        .into_par_iter()
-        .filter(|&i| levels[i] < 3 && candidate(i))
-        .collect();
+    let levels_now = &*levels;
+    let candidates: Vec<usize> = progress.nested(0.25, 0.3, |p| {
+        collect_ranges(levels_now.len(), p, |cells| {
+            cells
+                .into_par_iter()
+                .filter(|&i| levels_now[i] < 3 && candidate(i))
+                .collect()
+        })
+    })?;
     // The cells already above level 1 are covered in the same pass: the level surfaces
     // read their nodes, and most share tiles with the candidates (a tile's particles are
     // gathered once per pass, whatever it evaluates).
@@ -203,23 +216,28 @@ pub fn refine<F: ScalarField + ?Sized>(
         .filter(|&i| levels[i] > 1)
         .collect();
     covered.extend(candidates.iter().filter(|&&i| levels[i] == 1));
-    out.evaluations += lattice.cover(field, grid, &covered, 1, budget)?;
+    progress.report(0.3)?;
+    out.evaluations += progress.nested(0.3, 0.8, |p| {
+        lattice.cover(field, grid, &covered, 1, budget, p)
+    })?;
     let lattice = &*lattice;
-    let needs: Vec<(usize, u8)> = candidates
-        .into_par_iter()
-        .map(|i| {
-            (
-                i,
-                needed_level(grid, lattice, grid.coords(i), iso, max_error),
-            )
+    let needs: Vec<(usize, u8)> = progress.nested(0.8, 1.0, |p| {
+        chunked(&candidates, p, |part| {
+            part.par_iter()
+                .map(|&i| {
+                    let need = needed_level(grid, lattice, grid.coords(i), iso, max_error);
+                    (i, need)
+                })
+                .collect()
         })
-        .collect();
+    })?;
     for (i, need) in needs {
         if need > levels[i] {
             levels[i] = need;
             out.raised[need as usize - 2] += 1;
         }
     }
+    progress.report(1.0)?;
     Ok(out)
 }
 
@@ -436,6 +454,7 @@ mod tests {
             1e-9,
             &mut Lattice::new(&g),
             u64::MAX,
+            &mut Progress::none(),
         )
         .unwrap();
         assert_eq!(r.raised, [0, 0]);
@@ -480,7 +499,8 @@ mod tests {
                 0.0,
                 2.0,
                 &mut Lattice::new(&g),
-                u64::MAX
+                u64::MAX,
+                &mut Progress::none(),
             )
             .unwrap()
             .raised,
@@ -497,9 +517,10 @@ mod tests {
                 tolerance,
                 &mut Lattice::new(&g),
                 u64::MAX,
+                &mut Progress::none(),
             )
             .unwrap();
-            crate::adaptive::grid::balance(&g, &mut levels);
+            crate::adaptive::grid::balance(&g, &mut levels, &mut Progress::none()).unwrap();
             let out = extract(&levels);
             assert!(out.mesh.topology().is_watertight_oriented());
             let d =

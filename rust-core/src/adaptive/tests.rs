@@ -408,6 +408,52 @@ fn bad_parameters_and_level_maps_are_refused() {
     };
     let e = extract_sph(&field, &tiny, &mut Progress::none()).unwrap_err();
     assert!(matches!(e, Error::OverBudget { .. }), "{e}");
+    // A budget that holds the level step's arrays but not the level arrays of every cell
+    // at level 1 (levels only rise) is refused before the level step, which took minutes
+    // on a fine grid before the same refusal.
+    let cells = grid.cell_count() as u64;
+    let between = Params {
+        memory_budget: cells * (levels::bytes_per_cell(1) + 5) - 1,
+        max_error: 0.0,
+        ..Params::default()
+    };
+    assert!(between.memory_budget > cells * LEVEL_STEP_BYTES_PER_CELL);
+    let mut reports = 0;
+    let mut count = |_: f64, _: &str| {
+        reports += 1;
+        true
+    };
+    let e = extract_sph(&field, &between, &mut Progress::new(&mut count)).unwrap_err();
+    assert!(
+        matches!(e, Error::OverBudget { .. }) && e.to_string().contains("coarse grid"),
+        "{e}"
+    );
+    assert_eq!(reports, 1, "refused at the start of the level step");
+}
+
+/// The level step answers a cancel: every pass over the coarse grid reports (it ran for
+/// minutes on a fine grid without asking).
+#[test]
+fn level_step_answers_a_cancel() {
+    let field = sph(&torus(0.6, 0.25, 0.05), 0.1);
+    let params = Params::default();
+    let mut phases = Vec::new();
+    let mut record = |_: f64, phase: &str| {
+        phases.push(phase.to_string());
+        true
+    };
+    extract_sph(&field, &params, &mut Progress::new(&mut record)).unwrap();
+    let in_levels = phases.iter().filter(|p| *p == "cell levels").count();
+    assert!(in_levels >= 6, "{in_levels} reports in the level step");
+    // Cancelled at its second report: nothing after it runs.
+    let mut seen = 0;
+    let mut cancel = |_: f64, phase: &str| {
+        seen += 1;
+        assert_eq!(phase, "cell levels", "no later phase starts");
+        seen < 2
+    };
+    let e = extract_sph(&field, &params, &mut Progress::new(&mut cancel)).unwrap_err();
+    assert!(matches!(e, Error::Cancelled), "{e}");
 }
 
 /// A torus of particles on a cubic lattice: a closed body curved two ways, with both
@@ -495,15 +541,29 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
     let grid = grid_for(&field, &params).unwrap();
     let counts = counts(&field, &grid);
     let mut splash = grid::split(&counts, params.splash_threshold);
-    grid::dilate(&grid, &mut splash, params.splash_dilation);
-    grid::balance(&grid, &mut splash);
+    grid::dilate(
+        &grid,
+        &mut splash,
+        params.splash_dilation,
+        &mut Progress::none(),
+    )
+    .unwrap();
+    grid::balance(&grid, &mut splash, &mut Progress::none()).unwrap();
     let off = Params {
         max_error: 0.0,
         hidden_surfaces: false,
         ..params.clone()
     };
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
-    let got = levels_from_counts(&field, &grid, &positions, &counts, &off).unwrap();
+    let got = levels_from_counts(
+        &field,
+        &grid,
+        &positions,
+        &counts,
+        &off,
+        &mut Progress::none(),
+    )
+    .unwrap();
     assert_eq!(got.levels, splash);
     assert_eq!(got.refined, refine::Refined::default());
     let run = |threads| {
@@ -511,7 +571,16 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| levels_from_counts(&field, &grid, &positions, &counts, &params))
+            .install(|| {
+                levels_from_counts(
+                    &field,
+                    &grid,
+                    &positions,
+                    &counts,
+                    &params,
+                    &mut Progress::none(),
+                )
+            })
             .unwrap();
         (got.levels, got.refined)
     };

@@ -49,8 +49,23 @@ impl NodeCache {
         }
     }
 
-    /// Makes sure the eight corners of every cell in `cells` are evaluated.
-    pub fn ensure_corners(&mut self, field: &SphField, grid: &VirtualGrid, cells: &[u64]) {
+    /// Makes sure the eight corners of every cell in `cells` are evaluated, growing the
+    /// cache (and the lists it builds on the way) by at most `room` bytes. Else nothing is
+    /// evaluated and the error holds the bytes it would have taken: a wave of scattered
+    /// cells (the seeds of a grid far finer than the particles) needs a brick per corner,
+    /// and is refused before any is allocated.
+    pub fn ensure_corners(
+        &mut self,
+        field: &SphField,
+        grid: &VirtualGrid,
+        cells: &[u64],
+        room: u64,
+    ) -> Result<(), u64> {
+        // The corner list before it is made unique: 8 keys a cell.
+        let listed = cells.len() as u64 * 8 * 8;
+        if listed > room {
+            return Err(listed);
+        }
         let map = &self.map;
         // Each missing node's whole row of `ROW` nodes along x (a row's nodes differ in
         // the low bits of their brick order): the row shares one neighbour scan and has
@@ -68,6 +83,13 @@ impl NodeCache {
             })
             .collect();
         radix::sort_unique(&mut rows);
+        // The new bricks, and the evaluated keys and samples before they are inserted.
+        let bricks = map.absent_bricks_in_order(rows.iter().map(|r| r << ROW_BITS)) as u64;
+        let needed = bricks * map.bytes_per_new_brick()
+            + rows.len() as u64 * (8 + ROW as u64 * (8 + std::mem::size_of::<NodeSample>() as u64));
+        if needed > room {
+            return Err(needed);
+        }
         let last = grid.cells;
         let (orders, samples): (Vec<u64>, Vec<NodeSample>) = rows
             .par_iter()
@@ -83,6 +105,7 @@ impl NodeCache {
             .unzip();
         self.lookups += 8 * cells.len() as u64;
         self.evaluations += self.map.insert_in_brick_order(&orders, &samples) as u64;
+        Ok(())
     }
 
     /// The eight corner samples of `cell`.

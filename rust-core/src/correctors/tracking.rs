@@ -67,13 +67,34 @@ pub fn track(
     let table = case_table();
     let mut out = Tracked::default();
     let mut visited = BrickSet::for_extent(grid.cells, index_bytes(memory_budget));
+    // Every check comes before the allocation it guards: a wave of scattered cells (the
+    // seeds of a grid far finer than the particles) takes a brick of the visited set per
+    // cell and one of the node cache per corner, gigabytes before the wave is classified.
+    let over = |needed: u64, found: usize, to_visit: usize| {
+        Error::OverBudget {
+        what: format!(
+            "the surface at this grid resolution ({found} cells found so far, {to_visit} still to visit)"
+        ),
+        needed_bytes: needed,
+        budget_bytes: memory_budget,
+    }
+    };
+    // Marking cells visited adds at most a brick a cell.
+    let marking = |cells: usize, visited: &BrickSet| cells as u64 * visited.bytes_per_new_brick();
+    if marking(seeds.len(), &visited) > memory_budget {
+        return Err(over(marking(seeds.len(), &visited), 0, seeds.len()));
+    }
     for &s in &seeds {
         visited.insert(s);
     }
     let mut frontier = seeds;
     let mut is_seed_wave = true;
     while !frontier.is_empty() {
-        cache.ensure_corners(field, grid, &frontier);
+        let held = estimated_bytes(cache, &visited, out.active.len());
+        let room = memory_budget.saturating_sub(held);
+        if let Err(more) = cache.ensure_corners(field, grid, &frontier, room) {
+            return Err(over(held + more, out.active.len(), frontier.len()));
+        }
         let cache_ref = &*cache;
         let visits: Vec<Visit> = frontier
             .par_iter()
@@ -116,9 +137,6 @@ pub fn track(
             })
             .collect();
         radix::sort_unique(&mut next);
-        for &n in &next {
-            visited.insert(n);
-        }
         for v in visits {
             match v {
                 Visit::Active(cell) => out.active.push(cell),
@@ -127,17 +145,13 @@ pub fn track(
                 Visit::Discarded => out.discarded += 1,
             }
         }
-        let needed = estimated_bytes(cache, &visited, out.active.len());
+        let needed =
+            estimated_bytes(cache, &visited, out.active.len()) + marking(next.len(), &visited);
         if needed > memory_budget {
-            return Err(Error::OverBudget {
-                what: format!(
-                    "the surface at this grid resolution ({} cells found so far, {} still to visit)",
-                    out.active.len(),
-                    next.len()
-                ),
-                needed_bytes: needed,
-                budget_bytes: memory_budget,
-            });
+            return Err(over(needed, out.active.len(), next.len()));
+        }
+        for &n in &next {
+            visited.insert(n);
         }
         frontier = next;
         is_seed_wave = false;

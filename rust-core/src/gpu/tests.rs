@@ -218,7 +218,7 @@ fn cpu_level(
 ) -> LevelArrays {
     let mut lattice = Lattice::new(grid);
     lattice
-        .cover_level(field, grid, levels, level, u64::MAX)
+        .cover_level(field, grid, levels, level, u64::MAX, &mut Progress::none())
         .unwrap();
     levels::build_level(
         field,
@@ -561,7 +561,7 @@ fn striped_levels(grid: &CoarseGrid) -> Vec<u8> {
     let mut levels: Vec<u8> = (0..grid.cell_count())
         .map(|i| 1 + (grid.coords(i)[0] % 3) as u8)
         .collect();
-    grid::balance(grid, &mut levels);
+    grid::balance(grid, &mut levels, &mut Progress::none()).unwrap();
     levels
 }
 

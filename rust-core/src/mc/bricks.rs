@@ -337,6 +337,44 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
             + index) as u64
     }
 
+    /// Most bytes one more brick adds to [`BrickMap::bytes`]: all its values (a chunked
+    /// brick can grow to them), its meta, and a hashed index's entry counted twice for
+    /// the table's growth.
+    pub fn bytes_per_new_brick(&self) -> u64 {
+        let chunk_map = if BrickShape::<S, C>::CHUNKED {
+            CHUNKS
+        } else {
+            0
+        };
+        let index = match &self.index {
+            Index::Hashed(_) => 32,
+            Index::Dense { .. } => 0,
+        };
+        (BrickShape::<S, C>::KEYS * std::mem::size_of::<T>()
+            + std::mem::size_of::<Meta>()
+            + std::mem::size_of::<Box<[T]>>()
+            + chunk_map
+            + index) as u64
+    }
+
+    /// How many of the bricks holding the keys `orders` ([`BrickShape::order`] sort keys,
+    /// ascending) are not in the map: what inserting them would add at most (fewer where
+    /// emptied bricks are reused). Counted before inserting, so that a caller can refuse
+    /// a batch its memory budget cannot hold instead of finding out after allocating it.
+    pub fn absent_bricks_in_order(&self, orders: impl IntoIterator<Item = u64>) -> usize {
+        let mut absent = 0;
+        let mut last = None;
+        for o in orders {
+            let brick = o >> (3 * S);
+            if last != Some(brick) {
+                last = Some(brick);
+                let key = BrickShape::<S, C>::brick_of_order(o);
+                absent += usize::from(self.brick_index(key).is_none());
+            }
+        }
+        absent
+    }
+
     /// Frees the values of emptied bricks beyond a quarter as many as are in use: a map
     /// whose keys shrank (a surface after a jump) then holds a quarter more than its
     /// bricks, not those of its widest extent, while one whose keys move at a steady
@@ -797,6 +835,11 @@ impl BrickSet {
     pub fn bytes(&self) -> u64 {
         self.map.bytes()
     }
+
+    /// Most bytes one more brick adds to [`BrickSet::bytes`].
+    pub fn bytes_per_new_brick(&self) -> u64 {
+        self.map.bytes_per_new_brick()
+    }
 }
 
 impl FromIterator<u64> for BrickSet {
@@ -884,7 +927,21 @@ mod tests {
                 orders.sort_unstable();
                 orders.dedup();
                 let values: Vec<u64> = orders.iter().map(|&o| o ^ batch).collect();
+                let (bricks, absent) = (
+                    batched.meta.len(),
+                    batched.absent_bricks_in_order(orders.iter().copied()),
+                );
                 batched.insert_in_brick_order(&orders, &values);
+                assert_eq!(batched.meta.len() - bricks, absent, "bricks counted ahead");
+                // The per-brick bound holds over the whole map (a hashed index grows by
+                // doubling, so one batch may pay for the next ones' entries).
+                assert!(
+                    batched.bytes()
+                        <= batched.meta.len() as u64 * batched.bytes_per_new_brick() + 64,
+                    "{} bytes for {} bricks",
+                    batched.bytes(),
+                    batched.meta.len()
+                );
                 for (&o, &v) in orders.iter().zip(&values) {
                     single.insert(BrickShape::<S, C>::key_of_order(o), v);
                 }
