@@ -74,6 +74,23 @@ def test_bad_parameters():
         isobar.extract(cube(), [], h=0.1)
 
 
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda: isobar.extract(cube(), 0.5, h=0.1, kernel=2**32), "kernel"),
+        (lambda: isobar.extract(cube(), 0.5, h=0.1, memory_budget=2**64), "memory_budget"),
+        (lambda: isobar.extract(cube(), 0.5, h=0.1, memory_budget=float("nan")), "memory_budget"),
+        (lambda: isobar.extract_adaptive(cube(), 0.5, h=0.1, splash_threshold=-1), "splash_threshold"),
+        (lambda: isobar.extract_adaptive(cube(), 0.5, h=0.1, splash_dilation=2**32 + 1), "splash_dilation"),
+    ],
+)
+def test_integers_a_parameter_cannot_hold_are_refused(call, name):
+    # ctypes kept the low bits: kernel 2**32 ran the cubic spline, a budget of 2**64 the
+    # default, a splash threshold of -1 made every cell a splash cell.
+    with pytest.raises(isobar.InvalidArgumentError, match=f"'{name}'"):
+        call()
+
+
 def test_over_budget():
     with pytest.raises(isobar.OverBudgetError) as e:
         isobar.extract(cube(), 0.5, h=0.1, memory_budget=1000)

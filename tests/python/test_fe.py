@@ -132,6 +132,9 @@ def test_bad_meshes_fields_and_cancellation_raise_clear_errors():
         isobar.FeMesh.from_arrays(grid.points, grid.celltypes, grid.cell_offsets[:-1], grid.cell_connectivity)
     with pytest.raises(isobar.IoError):
         isobar.FeMesh.read("/nonexistent/mesh.vtu")
+    # 2**32 + 1 levels used to reach the core as 1.
+    with pytest.raises(isobar.InvalidArgumentError, match="'levels'"):
+        isobar.sample_fe(mesh, "f", R * R, levels=2**32 + 1)
     seen = []
     with pytest.raises(isobar.Cancelled):
         isobar.sample_fe(mesh, "f", R * R, spacing=0.05, progress=lambda f, phase: seen.append(phase) or False)

@@ -14,6 +14,7 @@ was written against. Nothing here is public API; use the functions of the packag
 from __future__ import annotations
 
 import ctypes
+import numbers
 import os
 from ctypes import (
     CFUNCTYPE,
@@ -33,7 +34,7 @@ from ctypes import (
 )
 from pathlib import Path
 
-from .errors import Error, error_for
+from .errors import Error, InvalidArgumentError, error_for
 
 #: The ABI version this module declares (ISOBAR_ABI_VERSION in isobar.h).
 ABI_VERSION = 1
@@ -78,7 +79,31 @@ class SliderChange(Structure):
     ]
 
 
-class SphParams(Structure):
+def _integer_range(kind) -> tuple[int, int]:
+    bits = 8 * ctypes.sizeof(kind)
+    signed = kind(-1).value == -1
+    return (-(2 ** (bits - 1)), 2 ** (bits - 1) - 1) if signed else (0, 2**bits - 1)
+
+
+class _Params(Structure):
+    """A parameter struct that refuses a value its integer field cannot hold, naming the
+    field: ctypes would keep the low bits silently (a kernel of 2**32 became 0, the cubic
+    spline; a memory budget of 2**64 became 0, the default; a splash threshold of -1
+    became 4294967295)."""
+
+    def __setattr__(self, name, value):
+        kind = dict(self._fields_).get(name)
+        if kind is not None and issubclass(kind, ctypes._SimpleCData) and kind._type_ in "bBhHiIlLqQnN":
+            if not isinstance(value, numbers.Integral):
+                raise InvalidArgumentError(f"parameter '{name}': must be an integer, got {value!r}")
+            lo, hi = _integer_range(kind)
+            if not lo <= int(value) <= hi:
+                raise InvalidArgumentError(f"parameter '{name}': {value} is out of range [{lo}, {hi}]")
+            value = int(value)
+        super().__setattr__(name, value)
+
+
+class SphParams(_Params):
     """``IsobarSphParams``; fill with ``isobar_sph_params_default``."""
 
     _fields_ = [
@@ -148,7 +173,7 @@ class Stats(Structure):
     ]
 
 
-class AdaptiveParams(Structure):
+class AdaptiveParams(_Params):
     """``IsobarAdaptiveParams``; fill with ``isobar_adaptive_params_default``."""
 
     _fields_ = [
@@ -187,7 +212,7 @@ class SamplesHandle(Structure):
     """Opaque ``IsobarSamples``."""
 
 
-class FeParams(Structure):
+class FeParams(_Params):
     """``IsobarFeParams``; fill with ``isobar_fe_params_default``."""
 
     _fields_ = [

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import numbers
 import signal
 import threading
 from ctypes import POINTER, byref, c_char_p, c_double
@@ -226,8 +227,8 @@ def _sph_params(particles, iso, field, kernel, h, h_array, h_scale, grid_factor,
         params.attribute_count = len(names)
 
     if memory_budget is not None:
-        if not (int(memory_budget) > 0):
-            raise InvalidArgumentError(f"parameter 'memory_budget': must be a positive byte count, got {memory_budget}")
+        if not (isinstance(memory_budget, numbers.Real) and math.isfinite(memory_budget) and memory_budget > 0):
+            raise InvalidArgumentError(f"parameter 'memory_budget': must be a positive byte count, got {memory_budget!r}")
         params.memory_budget = int(memory_budget)
     params.full_grid = _flag(full_grid)
     if lattice is not None:
