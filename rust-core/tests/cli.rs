@@ -323,6 +323,91 @@ fn bad_input_gets_a_clear_error_and_no_output() {
     assert!(!out.exists(), "a failed run must not leave an output file");
 }
 
+/// A path that cannot take the output is refused before any work (it used to end a
+/// whole extraction), and a statistics file that cannot be written leaves no mesh.
+#[test]
+fn output_paths_are_checked_before_the_work() {
+    let frame = shared("double_dam_break_frame_01_4732_particles.vtk");
+    let run = |output: &str, extra: &[&str], expected: &[&str]| {
+        let mut args = vec!["sph", &frame, "--iso", "0.6", "--h", "0.05", "-o", output];
+        args.extend_from_slice(extra);
+        fails_with(&args, expected);
+    };
+    // The output is checked first: the missing field would fail only after reading.
+    let stl = temp("surface.stl");
+    run(
+        stl.to_str().unwrap(),
+        &["--field", "temperature"],
+        &["surface.stl", "cannot write a mesh as '.stl'"],
+    );
+    run(
+        "/nonexistent-folder/surface.ply",
+        &["--field", "temperature"],
+        &["/nonexistent-folder/surface.ply"],
+    );
+    let out = temp("checked.ply");
+    let _ = std::fs::remove_file(&out);
+    run(
+        out.to_str().unwrap(),
+        &["--stats-json", "/nonexistent-folder/stats.json"],
+        &["/nonexistent-folder/stats.json"],
+    );
+    assert!(
+        !out.exists(),
+        "no mesh written when its statistics cannot be"
+    );
+    let fe = format!("{}/data/fe/mfem_poisson_q3.vtu", env!("CARGO_MANIFEST_DIR"));
+    fails_with(
+        &[
+            "fe",
+            &fe,
+            "--field",
+            "nope",
+            "--iso",
+            "0.03",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &["point samples", ".ply"],
+    );
+}
+
+/// A sequence of one frame still fills the '#' run with the frame's number.
+#[test]
+fn a_one_frame_sequence_fills_the_pattern() {
+    let dir = temp("one-frame");
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("frame_0007.csv");
+    let mut text = String::from("x,y,z\n");
+    for i in 0..27 {
+        let at = |k: usize| 0.05 * (i / k % 3) as f64;
+        text += &format!("{},{},{}\n", at(1), at(3), at(9));
+    }
+    std::fs::write(&input, text).unwrap();
+    let pattern = dir.join("surface_####.ply");
+    let run = isobar()
+        .args([
+            "sph",
+            input.to_str().unwrap(),
+            "--iso",
+            "0.5",
+            "--h",
+            "0.05",
+            "--quiet",
+        ])
+        .arg("-o")
+        .arg(&pattern)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(dir.join("surface_0007.ply").exists());
+    assert!(!pattern.exists(), "the pattern itself is not a file name");
+}
+
 #[test]
 fn comma_separated_options_parse_as_documented() {
     let out = temp("options.ply");

@@ -10,7 +10,7 @@ use crate::gpu::Backend;
 use crate::io;
 use crate::progress::Progress;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// Options of `isobar adaptive` beyond the SPH field's.
@@ -99,9 +99,14 @@ pub fn run(
             ),
         });
     }
+    io::check_frame_outputs(
+        &frames,
+        common.output,
+        common.stats_json,
+        io::check_mesh_output,
+    )?;
     for path in &frames {
-        let number = io::frame_number(path).unwrap_or(0);
-        let output = PathBuf::from(io::fill_frame(&out_text, number));
+        let output = io::frame_output(common.output, path);
         let data = io::read_particles(path)?;
         let t = Instant::now();
         let field = SphField::new(&data, &settings(&data)?)?;
@@ -122,7 +127,7 @@ pub fn run(
             print!("{text}");
         }
         if let Some(json) = common.stats_json {
-            let json = PathBuf::from(io::fill_frame(&json.to_string_lossy(), number));
+            let json = io::frame_output(json, path);
             write_json(&json, &rows)?;
         }
     }

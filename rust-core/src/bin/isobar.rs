@@ -312,15 +312,14 @@ fn run_sph(args: &SphArgs) -> Result<()> {
             ),
         });
     }
+    io::check_frame_outputs(
+        &frames,
+        &args.output,
+        args.stats_json.as_deref(),
+        io::check_mesh_output,
+    )?;
     for path in &frames {
-        let output = if sequence {
-            PathBuf::from(io::fill_frame(
-                &out_text,
-                io::frame_number(path).unwrap_or(0),
-            ))
-        } else {
-            args.output.clone()
-        };
+        let output = io::frame_output(&args.output, path);
         let t = Instant::now();
         let data = io::read_particles(path)?;
         let read_s = t.elapsed().as_secs_f64();
@@ -333,14 +332,7 @@ fn run_sph(args: &SphArgs) -> Result<()> {
             println!("surface written to {}", output.display());
         }
         if let Some(json) = &args.stats_json {
-            let json = if sequence {
-                PathBuf::from(io::fill_frame(
-                    &json.to_string_lossy(),
-                    io::frame_number(path).unwrap_or(0),
-                ))
-            } else {
-                json.clone()
-            };
+            let json = io::frame_output(json, path);
             write_stats_json(&json, &data, &extraction.stats, read_s, build_s)?;
         }
     }

@@ -64,6 +64,11 @@ pub enum Method {
 
 /// Runs `isobar fe`: read, sample (or extract), write, print statistics.
 pub fn run(args: &FeArgs) -> Result<()> {
+    if args.method == Method::Mc {
+        crate::io::check_mesh_output(&args.output)?;
+    } else {
+        crate::io::check_samples_output(&args.output)?;
+    }
     let t = Instant::now();
     let mesh = crate::io::read_fe_mesh(&args.input)?;
     let read_s = t.elapsed().as_secs_f64();

@@ -19,20 +19,7 @@ pub(crate) fn write_atomically<F>(path: &Path, write: F) -> Result<()>
 where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| Error::InvalidInput(format!("{}: not a file path", path.display())))?;
-    // A rename replaces whatever the name points at: a device, a FIFO or a folder there
-    // is something the user has, not an earlier output, and is left alone. (A link to a
-    // regular file is replaced, as before.)
-    if let Ok(meta) = fs::metadata(path) {
-        if !meta.is_file() {
-            return Err(Error::io(
-                path,
-                std::io::Error::other("exists and is not a regular file; not replaced"),
-            ));
-        }
-    }
+    let file_name = replaceable_name(path)?;
     let dir = parent_dir(path);
     let (tmp, file) =
         create_temporary(&dir, &file_name.to_string_lossy()).map_err(|e| Error::io(path, e))?;
@@ -48,6 +35,38 @@ where
         let _ = fs::remove_file(&tmp);
         return Err(Error::io(path, e));
     }
+    Ok(())
+}
+
+/// The file name of `path`, if whatever is there may be replaced: a rename replaces what
+/// the name points at, and a device, a FIFO or a folder there is something the user has,
+/// not an earlier output, so it is left alone. (A link to a regular file is replaced.)
+fn replaceable_name(path: &Path) -> Result<&std::ffi::OsStr> {
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| Error::InvalidInput(format!("{}: not a file path", path.display())))?;
+    if let Ok(meta) = fs::metadata(path) {
+        if !meta.is_file() {
+            return Err(Error::io(
+                path,
+                std::io::Error::other("exists and is not a regular file; not replaced"),
+            ));
+        }
+    }
+    Ok(file_name)
+}
+
+/// Checks, before the work whose result goes there, that `path` can be written the way
+/// [`write_atomically`] writes it: a file name, not something other than a regular file,
+/// in a folder where a temporary can be created (made and removed again here). A long
+/// extraction then does not end in an error that a glance at the path would have given.
+pub(crate) fn check_writable(path: &Path) -> Result<()> {
+    let file_name = replaceable_name(path)?;
+    let (tmp, file) = create_temporary(&parent_dir(path), &file_name.to_string_lossy())
+        .map_err(|e| Error::io(path, e))?;
+    drop(file);
+    // Best effort: the check succeeded, and a leftover hidden file is harmless.
+    let _ = fs::remove_file(tmp);
     Ok(())
 }
 

@@ -45,9 +45,10 @@ use glam::DVec3;
 use std::io::Read;
 use std::path::Path;
 
+use atomic::check_writable;
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::{open_regular, parent_dir, read_regular_file, write_atomically};
-pub use sequence::{expand_sequence, fill_frame, frame_number};
+pub use sequence::{check_frame_outputs, expand_sequence, fill_frame, frame_number, frame_output};
 pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};
 
@@ -113,24 +114,58 @@ pub fn read_particles_from_bytes(
 /// The file is written to a hidden temporary sibling and renamed into place, so an
 /// interrupted or failed write leaves any previous file as it was.
 pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
-    let format = extension_of(path);
-    let name = path.display().to_string();
-    let write: fn(&mut dyn std::io::Write, &Mesh) -> std::io::Result<()> = match format.as_str() {
-        "ply" => ply::write_mesh,
-        "obj" => obj::write_mesh,
-        "vtp" => vtk_xml::write_mesh,
-        _ => {
-            return Err(Error::format(
-                path,
-                format!(
-                    "cannot write a mesh as '.{format}'; supported: {}",
-                    list(MESH_EXTENSIONS)
-                ),
-            ))
-        }
-    };
-    check_mesh(mesh, &name)?;
+    let write = mesh_writer(path)?;
+    check_mesh(mesh, &path.display().to_string())?;
     atomic::write_atomically(path, |w| write(w, mesh))
+}
+
+/// Writes a mesh in one format.
+type MeshWriter = fn(&mut dyn std::io::Write, &Mesh) -> std::io::Result<()>;
+
+/// The writer of `path`'s mesh format, by its extension.
+fn mesh_writer(path: &Path) -> Result<MeshWriter> {
+    match extension_of(path).as_str() {
+        "ply" => Ok(ply::write_mesh),
+        "obj" => Ok(obj::write_mesh),
+        "vtp" => Ok(vtk_xml::write_mesh),
+        format => Err(Error::format(
+            path,
+            format!(
+                "cannot write a mesh as '.{format}'; supported: {}",
+                list(MESH_EXTENSIONS)
+            ),
+        )),
+    }
+}
+
+/// Checks before an extraction that [`write_mesh`] can write to `path` (its extension
+/// names a mesh format, its folder takes a file), so a long run does not end in an error
+/// the path alone would have given.
+pub fn check_mesh_output(path: &Path) -> Result<()> {
+    mesh_writer(path)?;
+    check_writable(path)
+}
+
+/// [`check_mesh_output`] for [`write_samples`].
+pub fn check_samples_output(path: &Path) -> Result<()> {
+    samples_format(path)?;
+    check_writable(path)
+}
+
+/// [`check_mesh_output`] for any other file written whole (statistics).
+pub fn check_output(path: &Path) -> Result<()> {
+    check_writable(path)
+}
+
+fn samples_format(path: &Path) -> Result<()> {
+    let format = extension_of(path);
+    if format != "vtp" {
+        return Err(Error::format(
+            path,
+            format!("cannot write point samples as '.{format}'; supported: .vtp"),
+        ));
+    }
+    Ok(())
 }
 
 /// Reads a mesh written by [`write_mesh`] (and ordinary PLY, VTP and OBJ triangle or polygon
@@ -163,13 +198,7 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
 /// Writes oriented point samples as `.vtp` (vertex cells with Normals, Radius and every
 /// array), atomically like [`write_mesh`].
 pub fn write_samples(path: &Path, samples: &crate::samples::PointSamples) -> Result<()> {
-    let format = extension_of(path);
-    if format != "vtp" {
-        return Err(Error::format(
-            path,
-            format!("cannot write point samples as '.{format}'; supported: .vtp"),
-        ));
-    }
+    samples_format(path)?;
     let n = samples.len();
     if samples.normals.len() != n
         || samples.radii.len() != n

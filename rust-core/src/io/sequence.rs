@@ -119,7 +119,6 @@ pub fn frame_number(path: &Path) -> Option<u64> {
     trailing_digits(stem).parse().ok()
 }
 
-/// Splits `name` into stem and extension, treating `.x.gz` as one extension.
 /// An output path for frame `frame`: the first run of `#` in `pattern` replaced by the
 /// frame number, zero-padded to the run's width (a pattern without `#` is used as is).
 pub fn fill_frame(pattern: &str, frame: u64) -> String {
@@ -135,6 +134,36 @@ pub fn fill_frame(pattern: &str, frame: u64) -> String {
     )
 }
 
+/// The output path of the input file `frame` for the output `pattern`: [`fill_frame`]
+/// with the frame's number (0 when its name ends in no digits), also for a sequence of
+/// one frame; a pattern without `#` is returned as it is.
+pub fn frame_output(pattern: &Path, frame: &Path) -> PathBuf {
+    let text = pattern.to_string_lossy();
+    if !text.contains('#') {
+        return pattern.to_path_buf();
+    }
+    PathBuf::from(fill_frame(&text, frame_number(frame).unwrap_or(0)))
+}
+
+/// Checks, before any frame is read, that every frame's output and statistics file
+/// (`stats`, if asked for) can be written: `check` tests an output path for its kind of
+/// file. A bad path is then found now, not after the first extraction.
+pub fn check_frame_outputs(
+    frames: &[PathBuf],
+    output: &Path,
+    stats: Option<&Path>,
+    check: fn(&Path) -> Result<()>,
+) -> Result<()> {
+    for frame in frames {
+        check(&frame_output(output, frame))?;
+        if let Some(stats) = stats {
+            super::check_output(&frame_output(stats, frame))?;
+        }
+    }
+    Ok(())
+}
+
+/// Splits `name` into stem and extension, treating `.x.gz` as one extension.
 fn split_extension(name: &str) -> (&str, &str) {
     let Some(dot) = name.rfind('.').filter(|&i| i > 0) else {
         return (name, "");
