@@ -1,7 +1,7 @@
 //! The one error type every fallible core call returns. Each variant names what is wrong
 //! (file, field, index) so a host can show it to the user as it is.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Result alias used throughout the crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -48,6 +48,19 @@ impl Error {
         Error::Format {
             path: path.into(),
             message: message.into(),
+        }
+    }
+
+    /// This error as one about the data read from the file `path`, for checks that run
+    /// after reading and know no file ("particle 17 has a non-finite position", a missing
+    /// array): the message then names the file too. Other errors are returned as they are.
+    pub fn in_file(self, path: &Path) -> Self {
+        match self {
+            Error::InvalidInput(m) => Error::InvalidInput(format!("{}: {m}", path.display())),
+            Error::MissingArray { .. } => {
+                Error::InvalidInput(format!("{}: {self}", path.display()))
+            }
+            other => other,
         }
     }
 

@@ -221,7 +221,7 @@ fn bad_input_gets_a_clear_error_and_no_output() {
             "-o",
             o,
         ],
-        &["temperature"],
+        &["frame_01_4732_particles.vtk", "temperature"],
     );
     fails_with(&["sph", &frame, "--iso", "0.6", "-o", o], &["--h"]);
     fails_with(
@@ -303,7 +303,7 @@ fn bad_input_gets_a_clear_error_and_no_output() {
             "-o",
             o,
         ],
-        &["empty"],
+        &["empty.csv", "empty"],
     );
     let nan = temp("nan.csv");
     std::fs::write(&nan, "x,y,z\n0,0,0\n0.01,nan,0\n").unwrap();
@@ -318,7 +318,7 @@ fn bad_input_gets_a_clear_error_and_no_output() {
             "-o",
             o,
         ],
-        &["particle 1"],
+        &["nan.csv", "particle 1"],
     );
     assert!(!out.exists(), "a failed run must not leave an output file");
 }

@@ -109,7 +109,9 @@ pub fn run(
         let output = io::frame_output(common.output, path);
         let data = io::read_particles(path)?;
         let t = Instant::now();
-        let field = SphField::new(&data, &settings(&data)?)?;
+        let field = settings(&data)
+            .and_then(|s| SphField::new(&data, &s))
+            .map_err(|e| e.in_file(path))?;
         let build_s = t.elapsed().as_secs_f64();
         let out = extract_sph(&field, &params, &mut Progress::none())?;
         io::write_mesh(&output, &out.mesh)?;

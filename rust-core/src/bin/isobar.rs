@@ -323,9 +323,10 @@ fn run_sph(args: &SphArgs) -> Result<()> {
         let t = Instant::now();
         let data = io::read_particles(path)?;
         let read_s = t.elapsed().as_secs_f64();
-        let settings = settings_from(args, &data)?;
+        let settings = settings_from(args, &data).map_err(|e| e.in_file(path))?;
         let params = params_from(args, &settings.quantity)?;
-        let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)?;
+        let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)
+            .map_err(|e| e.in_file(path))?;
         io::write_mesh(&output, &extraction.mesh)?;
         if !args.quiet {
             print_stats(path, &data, &extraction.stats, read_s, build_s);
