@@ -406,6 +406,27 @@ fn a_one_frame_sequence_fills_the_pattern() {
     );
     assert!(dir.join("surface_0007.ply").exists());
     assert!(!pattern.exists(), "the pattern itself is not a file name");
+    // An isovalue above the field: an empty mesh is written, and the user told.
+    let run = isobar()
+        .args([
+            "sph",
+            input.to_str().unwrap(),
+            "--iso",
+            "1000",
+            "--h",
+            "0.05",
+            "--quiet",
+        ])
+        .arg("-o")
+        .arg(dir.join("empty.ply"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(
+        err.contains("frame_0007.csv") && err.contains("no surface at isovalue 1000"),
+        "{err}"
+    );
 }
 
 #[test]

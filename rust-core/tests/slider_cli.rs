@@ -191,6 +191,19 @@ fn bad_inputs_fail_with_a_clear_message() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line 2") && err.contains("'abc'"), "{err}");
+    // A step or starting isovalue no key press could use is refused before the store
+    // is opened.
+    for (args, name) in [
+        (["--step", "NaN"], "'step'"),
+        (["--step", "1e300"], "'step'"),
+        (["--step", "0"], "'step'"),
+        (["--iso", "inf"], "'iso'"),
+    ] {
+        let out = slide_with(&store, &args, b"3.5\n");
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(name), "{args:?}: {err}");
+    }
 }
 
 /// u16 little-endian bytes of an 18×15×13 ring-shaped bump on a ramp, moved `shift` nodes

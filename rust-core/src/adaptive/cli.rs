@@ -115,6 +115,7 @@ pub fn run(
         let build_s = t.elapsed().as_secs_f64();
         let out = extract_sph(&field, &params, &mut Progress::none())?;
         io::write_mesh(&output, &out.mesh)?;
+        io::warn_if_empty(path, &out.mesh, common.iso);
         let mut rows = rows(&data, &out.stats, build_s);
         if args.compare {
             rows.extend(compare(&field, &params, &out)?);

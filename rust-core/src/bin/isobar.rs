@@ -328,6 +328,7 @@ fn run_sph(args: &SphArgs) -> Result<()> {
         let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)
             .map_err(|e| e.in_file(path))?;
         io::write_mesh(&output, &extraction.mesh)?;
+        io::warn_if_empty(path, &extraction.mesh, &args.iso);
         if !args.quiet {
             print_stats(path, &data, &extraction.stats, read_s, build_s);
             println!("surface written to {}", output.display());

@@ -163,6 +163,20 @@ pub fn check_frame_outputs(
     Ok(())
 }
 
+/// Says on stderr (also with `--quiet`) that the surface of `frame` at `isovalues` is
+/// empty: an empty file is a valid answer, but usually means an isovalue outside the
+/// field's range or the wrong field, which the user should hear about.
+pub fn warn_if_empty(frame: &Path, mesh: &crate::mesh::Mesh, isovalues: &[f64]) {
+    if mesh.triangles.is_empty() {
+        let isovalues: Vec<String> = isovalues.iter().map(f64::to_string).collect();
+        eprintln!(
+            "isobar: warning: {}: no surface at isovalue {}; the output mesh is empty",
+            frame.display(),
+            isovalues.join(", ")
+        );
+    }
+}
+
 /// Splits `name` into stem and extension, treating `.x.gz` as one extension.
 fn split_extension(name: &str) -> (&str, &str) {
     let Some(dot) = name.rfind('.').filter(|&i| i > 0) else {

@@ -265,6 +265,19 @@ fn is_store(path: &Path) -> Result<bool> {
 
 /// Runs `slide`: interactive on a terminal, else one isovalue per input line.
 pub fn run_slide(args: &SlideArgs) -> Result<()> {
+    // Checked before the store is opened (or built from a volume, which takes a while).
+    if !(args.step > 0.0 && args.step <= 1.0) {
+        return Err(Error::InvalidParameter {
+            name: "step",
+            message: format!("a fraction of the value range in (0, 1], got {}", args.step),
+        });
+    }
+    if let Some(iso) = args.iso.filter(|iso| !iso.is_finite()) {
+        return Err(Error::InvalidParameter {
+            name: "iso",
+            message: format!("must be finite, got {iso}"),
+        });
+    }
     let mut slider = store_for(args)?;
     if let Some(error_bound) = args.lod {
         slider.set_lod(LodParams {
@@ -415,10 +428,12 @@ fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Re
                 }
             };
             match k {
-                b'+' | b'=' | b'k' => iso += step,
-                b'-' | b'_' | b'j' => iso -= step,
-                b']' => step *= 10.0,
-                b'[' => step /= 10.0,
+                // Within a range's width of the values and steps of at most the
+                // range: repeated keys never reach an infinite isovalue.
+                b'+' | b'=' | b'k' => iso = (iso + step).min(lo + 2.0 * range),
+                b'-' | b'_' | b'j' => iso = (iso - step).max(lo - range),
+                b']' => step = (step * 10.0).min(range),
+                b'[' => step = (step / 10.0).max(range * 1e-12),
                 b'q' | b'Q' | 3 | 4 => {
                     eprintln!();
                     return Ok(());
