@@ -195,7 +195,7 @@ typedef struct IsobarFeParams {
   uint32_t levels;
   // The isovalue C.
   double iso;
-  // s: particle spacing on flat parts, world units; <= 0 picks 1/40 of the bounding-box
+  // s: particle spacing on flat parts, world units; 0 picks 1/40 of the bounding-box
   // diagonal.
   double spacing;
   // ρ: extra density on curved parts (0: uniform spacing).

@@ -54,7 +54,7 @@ pub struct IsobarFeParams {
     pub levels: u32,
     /// The isovalue C.
     pub iso: f64,
-    /// s: particle spacing on flat parts, world units; <= 0 picks 1/40 of the bounding-box
+    /// s: particle spacing on flat parts, world units; 0 picks 1/40 of the bounding-box
     /// diagonal.
     pub spacing: f64,
     /// ρ: extra density on curved parts (0: uniform spacing).

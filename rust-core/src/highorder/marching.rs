@@ -26,7 +26,7 @@ use std::time::Instant;
 pub struct McParams {
     /// The isovalue C.
     pub iso: f64,
-    /// Grid cell size, world units; ≤ 0 picks 1/40 of the mesh's bounding-box diagonal.
+    /// Grid cell size, world units; 0 picks 1/40 of the mesh's bounding-box diagonal.
     pub spacing: f64,
     /// Every vertex has |F − C| ≤ tolerance (Newton along its edge).
     pub tolerance: f64,
@@ -98,8 +98,11 @@ pub fn extract(
     if !(params.tolerance > 0.0 && params.tolerance.is_finite()) {
         return Err(bad("tolerance", "must be positive"));
     }
-    if !params.spacing.is_finite() {
-        return Err(bad("spacing", "must be finite"));
+    if !(params.spacing >= 0.0 && params.spacing.is_finite()) {
+        return Err(bad(
+            "spacing",
+            "must be ≥ 0 (0 picks 1/40 of the mesh's diagonal)",
+        ));
     }
     let (lo, hi) = mesh.bounds();
     let spacing = if params.spacing > 0.0 {
@@ -107,7 +110,17 @@ pub fn extract(
     } else {
         (hi - lo).length() / 40.0
     };
-    let grid = VirtualGrid::covering(lo, hi, spacing)?;
+    // The grid's cell size is this method's spacing, not an SPH grid factor.
+    let grid = VirtualGrid::covering(lo, hi, spacing).map_err(|e| match e {
+        Error::InvalidParameter {
+            name: "grid_factor",
+            message,
+        } => Error::InvalidParameter {
+            name: "spacing",
+            message: message.replace("raise the grid factor", "raise the spacing"),
+        },
+        e => e,
+    })?;
     let dims = grid.cells.map(|c| c as usize + 1);
     let count = dims.iter().map(|&n| n as u128).product::<u128>();
     let needed = count * std::mem::size_of::<Node>() as u128;
@@ -455,6 +468,25 @@ mod tests {
             ..McParams::default()
         };
         assert!(extract(&mesh, "f", &nan, &mut Progress::none()).is_err());
+        // A negative spacing used to pick the default silently; a spacing too fine for
+        // the grid named the SPH grid factor.
+        for spacing in [-1.0, 1e-9] {
+            let p = McParams {
+                spacing,
+                ..McParams::default()
+            };
+            let e = extract(&mesh, "f", &p, &mut Progress::none()).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    Error::InvalidParameter {
+                        name: "spacing",
+                        ..
+                    }
+                ) && !e.to_string().contains("grid factor"),
+                "{e}"
+            );
+        }
         let e = extract(&mesh, "nope", &McParams::default(), &mut Progress::none()).unwrap_err();
         let e = e.to_string();
         assert!(

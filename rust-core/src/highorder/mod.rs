@@ -41,7 +41,7 @@ use std::sync::atomic::AtomicU64;
 pub struct Params {
     /// The isovalue C.
     pub iso: f64,
-    /// s: particle spacing on a flat surface, world units; ≤ 0 picks 1/40 of the mesh's
+    /// s: particle spacing on a flat surface, world units; 0 picks 1/40 of the mesh's
     /// bounding-box diagonal.
     pub spacing: f64,
     /// ρ: extra density per unit angle on curved surfaces (0: uniform spacing).
@@ -157,8 +157,11 @@ fn check(p: &Params) -> Result<()> {
     if !(p.tolerance > 0.0 && p.tolerance.is_finite()) {
         return bad("tolerance", "must be positive");
     }
-    if !p.spacing.is_finite() {
-        return bad("spacing", "must be finite");
+    if !(p.spacing >= 0.0 && p.spacing.is_finite()) {
+        return bad(
+            "spacing",
+            "must be ≥ 0 (0 picks 1/40 of the mesh's diagonal)",
+        );
     }
     if !(p.rho >= 0.0 && p.rho.is_finite()) {
         return bad("rho", "must be ≥ 0");

@@ -241,6 +241,22 @@ fn missing_field_and_bad_parameters_are_errors() {
         ..Params::default()
     };
     assert!(sample(&mesh, "f", &bad, &mut Progress::none()).is_err());
+    // A negative spacing is refused (it used to pick the default silently).
+    let negative = Params {
+        spacing: -1.0,
+        ..Params::default()
+    };
+    let err = sample(&mesh, "f", &negative, &mut Progress::none()).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            crate::error::Error::InvalidParameter {
+                name: "spacing",
+                ..
+            }
+        ),
+        "{err}"
+    );
     // An isovalue outside the data: no samples, no error.
     let (s, _) = sample(
         &mesh,
