@@ -70,14 +70,13 @@ pub fn track(
     // Every check comes before the allocation it guards: a wave of scattered cells (the
     // seeds of a grid far finer than the particles) takes a brick of the visited set per
     // cell and one of the node cache per corner, gigabytes before the wave is classified.
-    let over = |needed: u64, found: usize, to_visit: usize| {
-        Error::OverBudget {
+    let over = |needed: u64, found: usize, to_visit: usize| Error::OverBudget {
         what: format!(
-            "the surface at this grid resolution ({found} cells found so far, {to_visit} still to visit)"
+            "the surface at this grid resolution ({found} cells found so far, \
+             {to_visit} still to visit)"
         ),
         needed_bytes: needed,
         budget_bytes: memory_budget,
-    }
     };
     // Marking cells visited adds at most a brick a cell.
     let marking = |cells: usize, visited: &BrickSet| cells as u64 * visited.bytes_per_new_brick();
