@@ -60,7 +60,7 @@ fn replaceable_name(path: &Path) -> Result<&std::ffi::OsStr> {
 /// [`write_atomically`] writes it: a file name, not something other than a regular file,
 /// in a folder where a temporary can be created (made and removed again here). A long
 /// extraction then does not end in an error that a glance at the path would have given.
-pub(crate) fn check_writable(path: &Path) -> Result<()> {
+pub fn check_writable(path: &Path) -> Result<()> {
     let file_name = replaceable_name(path)?;
     let (tmp, file) = create_temporary(&parent_dir(path), &file_name.to_string_lossy())
         .map_err(|e| Error::io(path, e))?;

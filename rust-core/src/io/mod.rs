@@ -45,7 +45,7 @@ use glam::DVec3;
 use std::io::Read;
 use std::path::Path;
 
-use atomic::check_writable;
+pub use atomic::check_writable as check_output;
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::{open_regular, parent_dir, read_regular_file, write_atomically};
 pub use sequence::{
@@ -145,18 +145,13 @@ fn mesh_writer(path: &Path) -> Result<MeshWriter> {
 /// the path alone would have given.
 pub fn check_mesh_output(path: &Path) -> Result<()> {
     mesh_writer(path)?;
-    check_writable(path)
+    check_output(path)
 }
 
 /// [`check_mesh_output`] for [`write_samples`].
 pub fn check_samples_output(path: &Path) -> Result<()> {
     samples_format(path)?;
-    check_writable(path)
-}
-
-/// [`check_mesh_output`] for any other file written whole (statistics).
-pub fn check_output(path: &Path) -> Result<()> {
-    check_writable(path)
+    check_output(path)
 }
 
 fn samples_format(path: &Path) -> Result<()> {
