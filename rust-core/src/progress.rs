@@ -76,6 +76,13 @@ impl<'a> Progress<'a> {
         }
         Ok(())
     }
+
+    /// Reports the work complete. A cancel answered now is too late and is ignored: the
+    /// result exists (a store renamed into place), and a caller told "cancelled" would
+    /// believe it does not.
+    pub fn done(&mut self) {
+        let _ = self.report(1.0);
+    }
 }
 
 /// Runs `work` over `items` in chunks, reporting after each chunk; the chunks' results are

@@ -1,5 +1,8 @@
 """isobar.Slider: build a store from a numpy volume, slide, check against numpy."""
 
+import os
+import signal
+
 import numpy as np
 import pytest
 
@@ -246,3 +249,150 @@ def test_updates_from_several_threads_take_turns(tmp_path):
     assert not errors
     assert len(seen) == 48 and all(n == expect[iso] for iso, n in seen)
     slider.close()
+
+
+def _record(calls, answer=None):
+    """A progress callback that appends (fraction, phase) to `calls` and returns `answer`."""
+
+    def progress(fraction, phase):
+        calls.append((fraction, phase))
+        return answer
+
+    return progress
+
+
+def _check_reports(calls):
+    assert calls, "the progress callback was never called"
+    for fraction, phase in calls:
+        assert isinstance(phase, str) and phase
+        assert 0.0 <= fraction <= 1.0
+    # Within a phase the fraction never goes back (a phase may come back: compare runs).
+    for (f0, p0), (f1, p1) in zip(calls, calls[1:]):
+        if p0 == p1:
+            assert f1 >= f0, (p0, f0, f1)
+
+
+def test_builds_report_progress(tmp_path):
+    vol = _sphere_distance(64)
+    quiet, reported = tmp_path / "quiet.isoslider", tmp_path / "reported.isoslider"
+    isobar.Slider.build_array(vol, quiet)
+    calls = []
+    isobar.Slider.build_array(vol, reported, progress=_record(calls))
+    _check_reports(calls)
+    assert reported.read_bytes() == quiet.read_bytes()
+
+    npy = tmp_path / "sphere.npy"
+    np.save(npy, vol)
+    from_file = tmp_path / "file.isoslider"
+    calls = []
+    isobar.Slider.build(npy, from_file, progress=_record(calls, answer=True))  # True goes on
+    _check_reports(calls)
+    assert from_file.read_bytes() == quiet.read_bytes()
+
+    # Sorting on disk (4 MiB for 64³ nodes) reports its own phases.
+    calls = []
+    isobar.Slider.build_array(vol, tmp_path / "spooled.isoslider", memory_budget=4 << 20, progress=_record(calls))
+    _check_reports(calls)
+    assert any("disk" in phase for _, phase in calls)
+
+
+# Where to cancel: at the first report, or halfway through the edge lists (on-disk sorts'
+# spools are open then).
+_CANCEL_AT = {
+    "first": lambda fraction, phase: False,
+    "middle": lambda fraction, phase: fraction < 0.5,
+}
+
+
+@pytest.mark.parametrize("when", sorted(_CANCEL_AT))
+@pytest.mark.parametrize("budget", [0, 4 << 20], ids=["in-memory", "on-disk"])
+def test_progress_returning_false_cancels_the_build(tmp_path, when, budget):
+    vol = _sphere_distance(64)
+    npy = tmp_path / "sphere.npy"
+    np.save(npy, vol)
+    store = tmp_path / "s.isoslider"
+    for build in (
+        lambda progress: isobar.Slider.build_array(vol, store, memory_budget=budget, progress=progress),
+        lambda progress: isobar.Slider.build(npy, store, memory_budget=budget, progress=progress),
+    ):
+        calls = []
+        stop = _CANCEL_AT[when]
+
+        def progress(fraction, phase):
+            calls.append(fraction)
+            return stop(fraction, phase)
+
+        with pytest.raises(isobar.Cancelled):
+            build(progress)
+        assert calls[-1] < 1.0 and not stop(calls[-1], "")  # stopped where it was told to
+        # No store, and no temporary beside it (os.listdir shows hidden files too).
+        assert os.listdir(tmp_path) == ["sphere.npy"]
+
+    # An earlier store at the path is left as it was.
+    isobar.Slider.build_array(vol[:32], store)
+    before = store.read_bytes()
+    with pytest.raises(isobar.Cancelled):
+        isobar.Slider.build_array(vol, store, memory_budget=budget, progress=_CANCEL_AT[when])
+    assert store.read_bytes() == before
+    assert sorted(os.listdir(tmp_path)) == ["s.isoslider", "sphere.npy"]
+
+
+def test_an_exception_in_progress_stops_the_build_and_propagates(tmp_path):
+    class Boom(Exception):
+        pass
+
+    vol = _sphere_distance(64)
+    npy = tmp_path / "sphere.npy"
+    np.save(npy, vol)
+    store = tmp_path / "s.isoslider"
+    for build in (
+        lambda progress: isobar.Slider.build_array(vol, store, progress=progress),
+        lambda progress: isobar.Slider.build(npy, store, progress=progress),
+    ):
+        calls = []
+        boom = Boom("from the callback")
+
+        def progress(fraction, phase):
+            calls.append(fraction)
+            if len(calls) == 2:
+                raise boom
+
+        with pytest.raises(Boom) as caught:
+            build(progress)
+        assert caught.value is boom  # the callback's own exception, not a Cancelled
+        assert len(calls) == 2  # the build stopped there
+        assert os.listdir(tmp_path) == ["sphere.npy"]
+
+
+def test_ctrl_c_during_a_build_cancels_it(tmp_path):
+    vol = _sphere_distance(64)
+    store = tmp_path / "s.isoslider"
+    calls = []
+
+    def progress(fraction, phase):
+        calls.append(fraction)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # as if Ctrl-C were pressed now
+
+    with pytest.raises(KeyboardInterrupt):
+        isobar.Slider.build_array(vol, store, progress=progress)
+    assert calls[-1] < 1.0
+    assert os.listdir(tmp_path) == []
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_cancel_once_the_store_is_in_place_is_too_late(tmp_path):
+    # The last report comes after the store is renamed into place: a False there must not
+    # raise Cancelled over a store that exists (it did).
+    vol = _sphere_distance(32)
+    quiet, late = tmp_path / "quiet.isoslider", tmp_path / "late.isoslider"
+    isobar.Slider.build_array(vol, quiet)
+    calls = []
+
+    def progress(fraction, phase):
+        calls.append(fraction)
+        return fraction < 1.0
+
+    isobar.Slider.build_array(vol, late, progress=progress)
+    assert calls[-1] == 1.0
+    assert late.read_bytes() == quiet.read_bytes()

@@ -24,6 +24,7 @@ import numpy as np
 
 from ._lib import PROGRESS_FN, SliderChange, SliderHandle, check, encode, lib
 from .errors import InvalidArgumentError
+from .sph import ProgressCallback, _call
 from .surface import _copy
 
 _NO_PROGRESS = PROGRESS_FN()
@@ -34,6 +35,13 @@ def _budget(memory_budget) -> int:
     if isinstance(memory_budget, bool) or not isinstance(memory_budget, int) or not 0 <= memory_budget < 2**64:
         raise InvalidArgumentError(f"memory_budget must be an integer number of bytes >= 0, got {memory_budget!r}")
     return memory_budget
+
+
+def _build(invoke, progress: Optional[ProgressCallback]) -> None:
+    """Runs ``invoke(callback)`` (a core build) with sph's progress/cancel/Ctrl-C wiring.
+    A build has no result handle: nothing to free when a Ctrl-C comes after the core has
+    finished (the store it wrote is complete, so it stays)."""
+    _call(lambda callback, _handle: invoke(callback), progress, None, lambda _handle: None)
 
 
 def _one_at_a_time(method):
@@ -134,23 +142,29 @@ class Slider:
         threshold: float = 0.0,
         max_levels: int = 0,
         memory_budget: int = 0,
+        progress: Optional[ProgressCallback] = None,
     ) -> None:
         """Precomputes a store from a .vti, .nrrd or .npy volume (defaults for 0 parameters).
 
         ``memory_budget`` is the bytes the build may hold besides the volume; beyond about
         29 bytes a node it sorts the values on disk, beside the store (same store).
+
+        ``progress`` is ``callable(fraction, phase)``, called on this thread between chunks
+        of work; return None or True to go on, False to cancel (raises
+        :class:`isobar.Cancelled`). An exception raised in it cancels the build and is
+        re-raised here; Ctrl-C cancels too and raises KeyboardInterrupt. The store is
+        written last and renamed into place whole: a build stopped before then leaves no
+        store and no temporary file, and an earlier store at `store_path` as it was.
         """
-        check(
-            lib.isobar_slider_build_file(
-                encode(volume_path, "volume path"),
-                None if array is None else encode(array, "array"),
-                encode(store_path, "store path"),
-                float(threshold),
-                int(max_levels),
-                _budget(memory_budget),
-                _NO_PROGRESS,
-                None,
-            )
+        volume = encode(volume_path, "volume path")
+        name = None if array is None else encode(array, "array")
+        store = encode(store_path, "store path")
+        budget = _budget(memory_budget)
+        _build(
+            lambda callback: lib.isobar_slider_build_file(
+                volume, name, store, float(threshold), int(max_levels), budget, callback, None
+            ),
+            progress,
         )
 
     @staticmethod
@@ -162,9 +176,10 @@ class Slider:
         threshold: float = 0.0,
         max_levels: int = 0,
         memory_budget: int = 0,
+        progress: Optional[ProgressCallback] = None,
     ) -> None:
         """Precomputes a store from a 3-D array indexed ``[z, y, x]`` (x fastest); the
-        other parameters as :meth:`build`'s."""
+        other parameters (``progress`` included) as :meth:`build`'s."""
         values = np.asarray(values)
         if values.ndim != 3:
             raise InvalidArgumentError(f"values must be a 3-D array [z, y, x], got shape {values.shape}")
@@ -173,19 +188,22 @@ class Slider:
         dims = (c_size_t * 3)(nx, ny, nz)
         o = (c_double * 3)(*[float(v) for v in origin])
         s = (c_double * 3)(*[float(v) for v in spacing])
-        check(
-            lib.isobar_slider_build_f32(
+        store = encode(store_path, "store path")
+        budget = _budget(memory_budget)
+        _build(
+            lambda callback: lib.isobar_slider_build_f32(
                 data.ctypes.data_as(POINTER(np.ctypeslib.ctypes.c_float)),
                 dims,
                 o,
                 s,
-                encode(store_path, "store path"),
+                store,
                 float(threshold),
                 int(max_levels),
-                _budget(memory_budget),
-                _NO_PROGRESS,
+                budget,
+                callback,
                 None,
-            )
+            ),
+            progress,
         )
 
     def _live(self):

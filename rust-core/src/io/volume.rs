@@ -206,6 +206,8 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
     let mut endian = Endian::Little;
     let mut spacing = DVec3::ONE;
     let mut origin = DVec3::ZERO;
+    let mut line_skip = 0usize;
+    let mut byte_skip = ByteSkip::Bytes(0);
     for line in header.lines().skip(1) {
         let line = line.trim();
         if line.starts_with('#') || line.is_empty() {
@@ -219,7 +221,13 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
             continue;
         }
         let value = value.trim();
-        match key.trim().to_ascii_lowercase().as_str() {
+        // Teem accepts "byteskip" for "byte skip", "datafile" for "data file" ...
+        let field: String = key
+            .split_whitespace()
+            .collect::<String>()
+            .to_ascii_lowercase();
+        let bad = |what: &str| err(format!("field '{}': {what}", key.trim()));
+        match field.as_str() {
             "type" => {
                 ty = Some(nrrd_type(value).ok_or_else(|| {
                     err(format!(
@@ -240,51 +248,45 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
             }
             "encoding" => encoding = value.to_ascii_lowercase(),
             "endian" => {
-                endian = if value.eq_ignore_ascii_case("big") {
-                    Endian::Big
-                } else {
-                    Endian::Little
-                }
-            }
-            "spacings" => {
-                let v: Vec<f64> = value
-                    .split_whitespace()
-                    .filter_map(|t| t.parse().ok())
-                    .collect();
-                if v.len() == 3 {
-                    spacing = DVec3::new(v[0], v[1], v[2]);
-                }
-            }
-            "space directions" => {
-                // Axis-aligned directions only: the spacing is each vector's length.
-                let vectors: Vec<Vec<f64>> = value
-                    .split(')')
-                    .filter_map(|v| v.trim().strip_prefix('('))
-                    .map(|v| v.split(',').filter_map(|t| t.trim().parse().ok()).collect())
-                    .collect();
-                if vectors.len() == 3 && vectors.iter().all(|v| v.len() == 3) {
-                    for a in 0..3 {
-                        let off_axis = (0..3).filter(|&b| b != a).any(|b| vectors[a][b] != 0.0);
-                        if off_axis {
-                            return Err(err(
-                                "space directions are not axis-aligned; only axis-aligned volumes are supported".into(),
-                            ));
-                        }
-                        spacing[a] = vectors[a][a].abs();
+                endian = match value.to_ascii_lowercase().as_str() {
+                    "little" => Endian::Little,
+                    "big" => Endian::Big,
+                    _ => {
+                        return Err(bad(&format!(
+                            "'{}' is neither little nor big",
+                            show(value.as_bytes())
+                        )))
                     }
                 }
             }
-            "space origin" => {
-                let v: Vec<f64> = value
-                    .trim_matches(|c| c == '(' || c == ')')
-                    .split(',')
-                    .filter_map(|t| t.trim().parse().ok())
-                    .collect();
-                if v.len() == 3 {
-                    origin = DVec3::new(v[0], v[1], v[2]);
+            "spacings" => {
+                let v = numbers(value).map_err(|m| bad(&m))?;
+                spacing = axis_triple(&v).map_err(|m| bad(&m))?;
+            }
+            "spacedirections" => spacing = direction_lengths(value).map_err(|m| bad(&m))?,
+            "spaceorigin" => {
+                let v =
+                    numbers(value.trim_matches(|c| c == '(' || c == ')')).map_err(|m| bad(&m))?;
+                origin = axis_triple(&v).map_err(|m| bad(&m))?;
+            }
+            "lineskip" => {
+                line_skip = value.parse().map_err(|_| {
+                    bad(&format!("'{}' is not a line count", show(value.as_bytes())))
+                })?
+            }
+            "byteskip" => {
+                byte_skip = match value.parse::<i64>() {
+                    Ok(-1) => ByteSkip::ToEnd,
+                    Ok(n) if n >= 0 => ByteSkip::Bytes(n as usize),
+                    _ => {
+                        return Err(bad(&format!(
+                            "'{}' is neither a byte count nor -1",
+                            show(value.as_bytes())
+                        )))
+                    }
                 }
             }
-            "data file" | "datafile" => {
+            "datafile" => {
                 return Err(err(
                     "detached data files are not supported; save the NRRD with attached data"
                         .into(),
@@ -312,28 +314,33 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
         .and_then(|n| n.checked_mul(nz))
         .and_then(|n| n.checked_mul(ty.size()))
         .ok_or_else(|| err("sizes are impossibly large".into()))?;
-    let payload = &bytes[data_start..];
-    let data: std::borrow::Cow<[u8]> = match encoding.as_str() {
-        "raw" => payload.into(),
+    // "line skip" lines, then "byte skip" bytes, come before the data: the skipped lines
+    // in the file as stored, the skipped bytes in the decoded data (NRRD's order).
+    let mut payload = &bytes[data_start..];
+    for skipped in 0..line_skip {
+        let Some(end) = payload.iter().position(|&b| b == b'\n') else {
+            return Err(err(format!(
+                "truncated: 'line skip: {line_skip}' passes the end of the file after {skipped} lines"
+            )));
+        };
+        payload = &payload[end + 1..];
+    }
+    let (data, skip): (std::borrow::Cow<[u8]>, usize) = match encoding.as_str() {
+        "raw" => match byte_skip {
+            // -1: the data is the file's last bytes.
+            ByteSkip::ToEnd => (payload[payload.len().saturating_sub(count)..].into(), 0),
+            ByteSkip::Bytes(n) => (payload.into(), n),
+        },
         "gzip" | "gz" => {
-            let mut out = Vec::with_capacity(count.min(payload.len().saturating_mul(16)));
-            let mut gz = flate2::read::MultiGzDecoder::new(payload);
-            (&mut gz)
-                .take(count as u64)
-                .read_to_end(&mut out)
-                .map_err(|e| err(format!("gzip data: {e}")))?;
-            // The decoder checks a member's CRC-32 only at its end: read on to the end
-            // (a flipped bit must not pass as values), but not through a stream that
-            // holds far more than the sizes declare.
-            let limit = count as u64 + 1;
-            let beyond = std::io::copy(&mut (&mut gz).take(limit), &mut std::io::sink())
-                .map_err(|e| err(format!("gzip data: {e}")))?;
-            if beyond == limit {
-                return Err(err(format!(
-                    "the gzip data holds more than the {count} bytes its sizes declare"
-                )));
-            }
-            out.into()
+            let ByteSkip::Bytes(skip) = byte_skip else {
+                return Err(err(
+                    "'byte skip: -1' (data at the end of the file) needs raw encoding".into(),
+                ));
+            };
+            let total = count
+                .checked_add(skip)
+                .ok_or_else(|| err("'byte skip' is impossibly large".into()))?;
+            (inflate_exactly(payload, total).map_err(err)?.into(), skip)
         }
         other => {
             return Err(err(format!(
@@ -342,21 +349,111 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
             )))
         }
     };
+    let data = data.get(skip..).unwrap_or_default();
     if data.len() < count {
         return Err(err(format!(
-            "truncated: {nx}×{ny}×{nz} values need {count} bytes, the data holds {}",
-            data.len()
+            "truncated: {nx}×{ny}×{nz} values need {count} bytes, the data holds {}{}",
+            data.len(),
+            if skip > 0 {
+                format!(" after 'byte skip: {skip}'")
+            } else {
+                String::new()
+            }
         )));
     }
-    // Raw data may be preceded by padding; NRRD puts the data at the end of the file.
-    let data = &data[data.len() - count..];
     build(
         name,
         [nx, ny, nz],
         origin,
         spacing,
-        decode(ty, data, endian),
+        decode(ty, &data[..count], endian),
     )
+}
+
+/// Where a NRRD's data starts after its skipped lines.
+#[derive(Clone, Copy)]
+enum ByteSkip {
+    Bytes(usize),
+    /// `byte skip: -1`: the data ends the file.
+    ToEnd,
+}
+
+/// The first `total` bytes a gzip stream decodes to (fewer if it holds fewer). The whole
+/// stream is read, since the decoder checks a member's CRC-32 only at its end (a flipped
+/// bit must not pass as values), but not past `total` + 1 bytes: a stream that holds far
+/// more than declared is refused.
+fn inflate_exactly(payload: &[u8], total: usize) -> std::result::Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(total.min(payload.len().saturating_mul(16)));
+    let mut gz = flate2::read::MultiGzDecoder::new(payload);
+    (&mut gz)
+        .take(total as u64)
+        .read_to_end(&mut out)
+        .map_err(|e| format!("gzip data: {e}"))?;
+    let limit = total as u64 + 1;
+    let beyond = std::io::copy(&mut (&mut gz).take(limit), &mut std::io::sink())
+        .map_err(|e| format!("gzip data: {e}"))?;
+    if beyond == limit {
+        return Err(format!(
+            "the gzip data holds more than the {total} bytes its sizes declare"
+        ));
+    }
+    Ok(out)
+}
+
+/// Every number in `text` (separated by spaces or commas); any other word is an error,
+/// so a field that does not parse is never silently replaced by its default.
+fn numbers(text: &str) -> std::result::Result<Vec<f64>, String> {
+    text.split(|c: char| c.is_whitespace() || c == ',')
+        .filter(|t| !t.is_empty())
+        .map(|t| {
+            t.parse::<f64>()
+                .map_err(|_| format!("'{}' is not a number", show(t.as_bytes())))
+        })
+        .collect()
+}
+
+/// Three finite numbers, one per axis.
+fn axis_triple(v: &[f64]) -> std::result::Result<DVec3, String> {
+    match v {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(*x, *y, *z)),
+        [_, _, _] => Err(format!("{v:?} is not finite")),
+        _ => Err(format!("{} values, expected 3 (one per axis)", v.len())),
+    }
+}
+
+/// The node spacing from `space directions: (a,0,0) (0,b,0) (0,0,c)`: each vector's
+/// length. Only axis-aligned volumes are supported; a non-spatial axis (`none`) cannot be
+/// one of a scalar volume's three.
+fn direction_lengths(value: &str) -> std::result::Result<DVec3, String> {
+    let mut vectors = Vec::new();
+    for (axis, word) in value
+        .split(')')
+        .map(str::trim)
+        .filter(|w| !w.is_empty())
+        .enumerate()
+    {
+        let Some(inside) = word.strip_prefix('(') else {
+            return Err(format!(
+                "axis {axis} has no direction vector ('{}'): a volume needs three spatial axes",
+                show(word.as_bytes())
+            ));
+        };
+        vectors.push(axis_triple(&numbers(inside)?)?);
+    }
+    if vectors.len() != 3 {
+        return Err(format!("{} vectors, expected 3", vectors.len()));
+    }
+    let mut spacing = DVec3::ZERO;
+    for (a, v) in vectors.iter().enumerate() {
+        if (0..3).any(|b| b != a && v[b] != 0.0) {
+            return Err(
+                "the directions are not axis-aligned; only axis-aligned volumes are supported"
+                    .into(),
+            );
+        }
+        spacing[a] = v[a].abs();
+    }
+    Ok(spacing)
 }
 
 fn nrrd_type(t: &str) -> Option<Scalar> {
@@ -531,6 +628,91 @@ mod tests {
         assert!(e.to_string().contains("no point array 'nope'"), "{e}");
         let e = read_vti(vti.as_bytes(), "a.vti", Some("other")).unwrap_err();
         assert!(e.to_string().contains("3 components"), "{e}");
+    }
+
+    /// The data starts where "line skip" and "byte skip" put it, not at the file's end
+    /// (trailing bytes used to shift every value), and a header field that does not parse
+    /// is an error naming it, not its default.
+    #[test]
+    fn nrrd_skips_are_honoured_and_bad_fields_named() {
+        let dims = [3, 4, 5];
+        let v = ramp(dims);
+        let le: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let expect = Values::U16(v);
+        let head = "NRRD0004\ntype: uint16\ndimension: 3\nsizes: 3 4 5\n";
+        let file = |fields: &str, before: &[u8], data: &[u8], after: &[u8]| {
+            let mut f = format!("{head}{fields}\n").into_bytes();
+            f.extend_from_slice(before);
+            f.extend_from_slice(data);
+            f.extend_from_slice(after);
+            f
+        };
+        let read = |f: &[u8]| read_nrrd(f, "s.nrrd");
+        // Trailing bytes after the data (a newline some writers append) change nothing.
+        assert_eq!(read(&file("", b"", &le, b"\n")).unwrap().values, expect);
+        assert_eq!(
+            read(&file("byte skip: 7\n", b"padding", &le, b"xyz"))
+                .unwrap()
+                .values,
+            expect
+        );
+        assert_eq!(
+            read(&file("line skip: 2\n", b"one\ntwo\n", &le, b""))
+                .unwrap()
+                .values,
+            expect
+        );
+        assert_eq!(
+            read(&file("lineskip: 1\nbyteskip: 2\n", b"l\nbb", &le, b""))
+                .unwrap()
+                .values,
+            expect
+        );
+        assert_eq!(
+            read(&file("byte skip: -1\n", b"whatever", &le, b""))
+                .unwrap()
+                .values,
+            expect
+        );
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut enc, b"skipme").unwrap();
+        std::io::Write::write_all(&mut enc, &le).unwrap();
+        let gz = enc.finish().unwrap();
+        let skipped = file(
+            "encoding: gzip\nline skip: 1\nbyte skip: 6\n",
+            b"x\n",
+            &gz,
+            b"",
+        );
+        assert_eq!(read(&skipped).unwrap().values, expect);
+
+        for (fields, words) in [
+            ("byte skip: 300\n", &["truncated", "byte skip: 300"][..]),
+            ("line skip: 3\n", &["line skip: 3", "passes the end"]),
+            ("byte skip: -2\n", &["'byte skip'", "-2"]),
+            ("encoding: gzip\nbyte skip: -1\n", &["needs raw encoding"]),
+            ("spacings: 1 0.5\n", &["'spacings'", "2 values"]),
+            ("spacings: 1 x 1\n", &["'spacings'", "'x' is not a number"]),
+            ("spacings: 1 nan 1\n", &["'spacings'", "not finite"]),
+            ("space origin: (0,0)\n", &["'space origin'", "2 values"]),
+            (
+                "space directions: (1,0,0) (0,1,0) (0,0,nan)\n",
+                &["'space directions'", "not finite"],
+            ),
+            (
+                "space directions: none (1,0,0) (0,1,0)\n",
+                &["'space directions'", "axis 0"],
+            ),
+            ("space directions: (1,0,0) (0,1,0)\n", &["2 vectors"]),
+            ("space directions: (1,0,0) (0,0,0) (0,0,1)\n", &["spacing"]),
+            ("endian: middle\n", &["'endian'", "middle"]),
+        ] {
+            let e = read(&file(fields, b"", &le, b"")).unwrap_err().to_string();
+            assert!(e.contains("s.nrrd"), "{fields}: {e}");
+            for w in words {
+                assert!(e.contains(w), "{fields}: '{w}' not in: {e}");
+            }
+        }
     }
 
     /// A header claiming 10^15 nodes over three values is refused by what the file

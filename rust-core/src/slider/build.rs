@@ -422,7 +422,7 @@ fn build_store_sorted(
         .map_err(|e| Error::io(path, e))?
         .len();
     stats.seconds = start.elapsed().as_secs_f64();
-    progress.report(1.0)?;
+    progress.done();
     Ok(stats)
 }
 
