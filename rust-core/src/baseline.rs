@@ -77,6 +77,18 @@ pub fn extract(
     let mut mesh = Mesh::default();
     let n = params.isovalues.len() as f64;
     for (k, &iso) in params.isovalues.iter().enumerate() {
+        // The grid and the earlier isovalues' surfaces stay in memory.
+        let held = needed as u64 + mesh.heap_bytes();
+        if held > memory_budget {
+            return Err(Error::OverBudget {
+                what: format!(
+                    "a full grid of {}×{}×{} nodes with the surfaces of {k} isovalues",
+                    nodes[0], nodes[1], nodes[2]
+                ),
+                needed_bytes: held,
+                budget_bytes: memory_budget,
+            });
+        }
         let node_threshold = params.trim.map(|t| t.node);
         let mut active: Vec<ActiveCell> = (0..grid.cells[2])
             .into_par_iter()

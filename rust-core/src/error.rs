@@ -64,6 +64,22 @@ impl Error {
         }
     }
 
+    /// This error from work that ran on `budget` less the `held` bytes `holder` keeps, as
+    /// an error against the whole `budget`: an over-budget refusal then counts `held` in
+    /// what was needed and names what holds it. Other errors are returned as they are.
+    pub fn besides(self, held: u64, holder: &str, budget: u64) -> Self {
+        match self {
+            Error::OverBudget {
+                what, needed_bytes, ..
+            } if held > 0 => Error::OverBudget {
+                what: format!("{what}, besides the {held} bytes of {holder},"),
+                needed_bytes: needed_bytes.saturating_add(held),
+                budget_bytes: budget,
+            },
+            other => other,
+        }
+    }
+
     /// Shorthand for an I/O error about `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {

@@ -503,6 +503,77 @@ fn bad_input_gets_a_clear_error() {
     );
 }
 
+/// The surfaces of earlier isovalues stay in memory while later ones are tracked: they
+/// count against the budget (a thousand isovalues used to take any amount of memory).
+#[test]
+fn earlier_isovalues_surfaces_count_against_the_budget() {
+    let data = block(DVec3::ZERO, DVec3::new(0.6, 0.4, 0.3), 0.05, 5);
+    let s = settings(Kernel::CubicSpline, 0.1, Quantity::SumOfWeights);
+    let field = SphField::new(&data, &s).unwrap();
+    let extract = |isovalues: Vec<f64>, memory_budget: u64| {
+        let p = Params {
+            isovalues,
+            grid_factor: 0.375,
+            memory_budget,
+            ..Params::default()
+        };
+        correctors::extract(&field, &data, &p, &mut Progress::none())
+    };
+    // The least budget one surface needs, by bisection.
+    let (mut lo, mut hi) = (0u64, 1u64 << 30);
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        match extract(vec![0.6], mid) {
+            Ok(_) => hi = mid,
+            Err(Error::OverBudget { .. }) => lo = mid,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let one = hi;
+    // The same surface twice tracks through nodes the cache already holds: all the second
+    // needs on top of the first's budget is room for the first's mesh.
+    let twice = extract(vec![0.6, 0.6], 1 << 30).unwrap();
+    let first = twice.mesh.heap_bytes() / 2;
+    assert!(first > 0);
+    let err = extract(vec![0.6, 0.6], one).unwrap_err();
+    match &err {
+        Error::OverBudget {
+            needed_bytes,
+            budget_bytes,
+            ..
+        } => {
+            assert_eq!(*budget_bytes, one, "{err}");
+            assert!(*needed_bytes > one, "{err}");
+            assert!(err.to_string().contains("earlier isovalues"), "{err}");
+        }
+        _ => panic!("{err}"),
+    }
+    let fits = extract(vec![0.6, 0.6], one + first).unwrap();
+    assert_eq!(fits.mesh.triangles, twice.mesh.triangles);
+
+    // The full-grid baseline holds its grid and the surfaces so far.
+    let grid_only = |isovalues: Vec<f64>, memory_budget: u64| {
+        let p = Params {
+            isovalues,
+            grid_factor: 0.375,
+            memory_budget,
+            ..Params::default()
+        };
+        baseline::extract(&field, &data, &p, &mut Progress::none())
+    };
+    let (mut lo, mut hi) = (0u64, 1u64 << 30);
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        match grid_only(vec![0.6], mid) {
+            Ok(_) => hi = mid,
+            Err(_) => lo = mid,
+        }
+    }
+    let err = grid_only(vec![0.6, 0.6], hi).unwrap_err();
+    assert!(err.to_string().contains("surfaces of 1 isovalues"), "{err}");
+    assert!(grid_only(vec![0.6, 0.6], hi + first).is_ok());
+}
+
 #[test]
 fn cancel_stops_the_extraction() {
     let data = block(DVec3::ZERO, DVec3::splat(0.3), 0.05, 2);

@@ -331,7 +331,20 @@ pub fn extract(
 
         progress.phase("surface tracking", at(0.1), at(0.5))?;
         let t = Instant::now();
-        let mut tracked = tracking::track(field, &grid, seeds, iso, params, &mut cache, progress)?;
+        // Earlier isovalues' surfaces stay in memory: what tracking may hold is the rest.
+        let earlier = mesh.heap_bytes();
+        let room = Params {
+            memory_budget: params.memory_budget.saturating_sub(earlier),
+            ..params.clone()
+        };
+        let mut tracked = tracking::track(field, &grid, seeds, iso, &room, &mut cache, progress)
+            .map_err(|e| {
+                e.besides(
+                    earlier,
+                    "the surfaces of the earlier isovalues",
+                    params.memory_budget,
+                )
+            })?;
         clip_cells(&grid, &mut tracked.active, params);
         stats.non_intersected_seeds += tracked.non_intersected_seeds;
         stats.discarded_cells += tracked.discarded;

@@ -44,6 +44,19 @@ impl Mesh {
         self.positions.len()
     }
 
+    /// Bytes its arrays hold, as counted against a memory budget.
+    pub fn heap_bytes(&self) -> u64 {
+        let arrays = std::mem::size_of_val(self.positions.as_slice())
+            + std::mem::size_of_val(self.normals.as_slice())
+            + std::mem::size_of_val(self.triangles.as_slice())
+            + self
+                .attributes
+                .iter()
+                .map(|a| std::mem::size_of_val(a.data.as_slice()))
+                .sum::<usize>();
+        arrays as u64
+    }
+
     /// The per-vertex attribute called `name`, if present.
     pub fn attribute(&self, name: &str) -> Option<&Attribute> {
         self.attributes.iter().find(|a| a.name == name)
