@@ -427,6 +427,20 @@ fn a_one_frame_sequence_fills_the_pattern() {
         err.contains("frame_0007.csv") && err.contains("no surface at isovalue 1000"),
         "{err}"
     );
+    // Frames 7, 8 and 10: the missing 9 is named, and the others still run.
+    for n in [8, 10] {
+        std::fs::copy(&input, dir.join(format!("frame_{n:04}.csv"))).unwrap();
+    }
+    let run = isobar()
+        .args(["sph", dir.join("frame_####.csv").to_str().unwrap()])
+        .args(["--iso", "0.5", "--h", "0.05", "--quiet", "-o"])
+        .arg(&pattern)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("frame 9 missing"), "{err}");
+    assert!(dir.join("surface_0010.ply").exists());
 }
 
 #[test]

@@ -88,6 +88,7 @@ pub fn run(
     };
     params.validate()?;
     let frames = io::expand_sequence(common.input)?;
+    io::warn_if_gaps(common.input, &frames);
     let out_text = common.output.to_string_lossy().to_string();
     if frames.len() > 1 && !out_text.contains('#') {
         return Err(Error::InvalidParameter {

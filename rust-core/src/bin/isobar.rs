@@ -300,6 +300,7 @@ fn say_backend(args: &SphArgs) -> Result<()> {
 fn run_sph(args: &SphArgs) -> Result<()> {
     say_backend(args)?;
     let frames = io::expand_sequence(&args.input)?;
+    io::warn_if_gaps(&args.input, &frames);
     let sequence = frames.len() > 1;
     let out_text = args.output.to_string_lossy().to_string();
     if sequence && !out_text.contains('#') {

@@ -68,7 +68,10 @@ pub(crate) fn read(bytes: &[u8], name: &str) -> Result<ParticleData> {
     let mut definitions = Vec::new();
     for k in 0..point_attributes {
         let len = r.u16("an attribute name")? as usize;
-        let attr_name = String::from_utf8_lossy(r.take(len, "an attribute name")?).into_owned();
+        let name_bytes = r.take(len, "an attribute name")?;
+        let attr_name = String::from_utf8_lossy(name_bytes).into_owned();
+        // Named in messages as shown text: a corrupt length reads binary as the name.
+        let shown = super::numeric::show(name_bytes);
         let size = r.u16("an attribute size")? as usize;
         let ty = r.i32("an attribute type")?;
         let scalar = match ty {
@@ -77,12 +80,12 @@ pub(crate) fn read(bytes: &[u8], name: &str) -> Result<ParticleData> {
             INDEX => None,
             STRING => {
                 return Err(r.err(format!(
-                    "point attribute '{attr_name}' has Houdini type string, which has no per-point layout in classic bgeo"
+                    "point attribute '{shown}' has Houdini type string, which has no per-point layout in classic bgeo"
                 )))
             }
             other => {
                 return Err(r.err(format!(
-                    "point attribute {k} '{attr_name}' has unknown Houdini type {other}"
+                    "point attribute {k} '{shown}' has unknown Houdini type {other}"
                 )))
             }
         };

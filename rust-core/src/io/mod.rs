@@ -49,7 +49,8 @@ pub use atomic::check_writable as check_output;
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::{open_regular, parent_dir, read_regular_file, write_atomically};
 pub use sequence::{
-    check_frame_outputs, expand_sequence, fill_frame, frame_number, frame_output, warn_if_empty,
+    check_frame_outputs, expand_sequence, fill_frame, frame_number, frame_output, missing_frames,
+    warn_if_empty, warn_if_gaps,
 };
 pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};

@@ -163,16 +163,33 @@ impl<'a> Tokens<'a> {
 pub(crate) fn show(bytes: &[u8]) -> String {
     const MAX: usize = 60;
     let text = String::from_utf8_lossy(&bytes[..bytes.len().min(MAX)]);
-    if bytes.len() > MAX {
-        format!("{text}...")
-    } else {
-        text.into_owned()
+    // Control bytes (a corrupt file's binary read as a name) are escaped: printed raw they
+    // would reach the user's terminal as escape sequences.
+    let mut shown = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            shown.extend(c.escape_default());
+        } else {
+            shown.push(c);
+        }
     }
+    if bytes.len() > MAX {
+        shown.push_str("...");
+    }
+    shown
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shown_text_is_short_and_escapes_control_bytes() {
+        assert_eq!(show(b"pressure"), "pressure");
+        assert_eq!(show(b"a\x1b[2Jb\x00"), "a\\u{1b}[2Jb\\u{0}");
+        let long = show(&[b'x'; 100]);
+        assert!(long.len() == 63 && long.ends_with("..."), "{long}");
+    }
 
     #[test]
     fn decodes_both_byte_orders() {

@@ -177,6 +177,48 @@ pub fn warn_if_empty(frame: &Path, mesh: &crate::mesh::Mesh, isovalues: &[f64]) 
     }
 }
 
+/// The frame numbers a sequence skips: with every step between its frames a multiple of
+/// the smallest (1, or 10 for a solver that saves every tenth step), the numbers of that
+/// stride that have no file. An irregular sequence has no gaps to name.
+pub fn missing_frames(frames: &[PathBuf]) -> Vec<u64> {
+    let numbers: Vec<u64> = frames.iter().filter_map(|f| frame_number(f)).collect();
+    let Some(step) = numbers
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&d| d > 0)
+        .min()
+    else {
+        return Vec::new();
+    };
+    if numbers.windows(2).any(|w| (w[1] - w[0]) % step != 0) {
+        return Vec::new();
+    }
+    numbers
+        .windows(2)
+        .flat_map(|w| (1..(w[1] - w[0]) / step).map(move |k| w[0] + k * step))
+        .collect()
+}
+
+/// Says on stderr which frames of the sequence `pattern` are missing, so a hole left by a
+/// failed solver step is not passed over in silence; the present frames still run.
+pub fn warn_if_gaps(pattern: &str, frames: &[PathBuf]) {
+    let missing = missing_frames(frames);
+    if missing.is_empty() {
+        return;
+    }
+    const SHOWN: usize = 10;
+    let mut list: Vec<String> = missing.iter().take(SHOWN).map(u64::to_string).collect();
+    if missing.len() > SHOWN {
+        list.push(format!("... ({} in all)", missing.len()));
+    }
+    eprintln!(
+        "isobar: warning: '{pattern}': frame{} {} missing; going on with the {} present",
+        if missing.len() == 1 { "" } else { "s" },
+        list.join(", "),
+        frames.len()
+    );
+}
+
 /// Splits `name` into stem and extension, treating `.x.gz` as one extension.
 fn split_extension(name: &str) -> (&str, &str) {
     let Some(dot) = name.rfind('.').filter(|&i| i > 0) else {
@@ -331,6 +373,22 @@ mod tests {
         assert_eq!(fill_frame("surf/f_####.ply", 7), "surf/f_0007.ply");
         assert_eq!(fill_frame("f_##.vtp", 1234), "f_1234.vtp");
         assert_eq!(fill_frame("plain.ply", 3), "plain.ply");
+    }
+
+    #[test]
+    fn gaps_are_found_at_the_sequence_stride() {
+        let frames = |numbers: &[u64]| -> Vec<PathBuf> {
+            numbers
+                .iter()
+                .map(|n| PathBuf::from(format!("d/f_{n:04}.vtk")))
+                .collect()
+        };
+        assert_eq!(missing_frames(&frames(&[1, 2, 3, 4])), Vec::<u64>::new());
+        assert_eq!(missing_frames(&frames(&[1, 2, 4, 7])), vec![3, 5, 6]);
+        assert_eq!(missing_frames(&frames(&[0, 10, 20, 50])), vec![30, 40]);
+        // Irregular steps (0, 10, 25) have no stride to measure gaps by.
+        assert_eq!(missing_frames(&frames(&[0, 10, 25])), Vec::<u64>::new());
+        assert_eq!(missing_frames(&frames(&[5])), Vec::<u64>::new());
     }
 
     #[test]

@@ -715,6 +715,27 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_vti_spacing_or_origin_that_is_not_finite_is_named() {
+        let vti = |origin: &str, spacing: &str| {
+            format!(
+                r#"<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian">
+<ImageData WholeExtent="1 2 0 1 0 1" Origin="{origin}" Spacing="{spacing}">
+<Piece Extent="1 2 0 1 0 1"><PointData Scalars="d">
+<DataArray type="Float32" Name="d" format="ascii">0 1 2 3 4 5 6 7</DataArray>
+</PointData></Piece></ImageData></VTKFile>"#
+            )
+        };
+        assert!(read_vti(vti("0 0 0", "1 1 1").as_bytes(), "v.vti", None).is_ok());
+        for (origin, spacing, named) in [
+            ("0 0 0", "nan 1 1", "Spacing=\"nan 1 1\" is not finite"),
+            ("0 inf 0", "1 1 1", "Origin=\"0 inf 0\" is not finite"),
+        ] {
+            let e = read_vti(vti(origin, spacing).as_bytes(), "v.vti", None).unwrap_err();
+            assert!(e.to_string().contains(named), "{e}");
+        }
+    }
+
     /// A header claiming 10^15 nodes over three values is refused by what the file
     /// holds, before anything is sized by the claim (it used to abort the process on an
     /// 8 PB allocation).

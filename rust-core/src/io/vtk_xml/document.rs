@@ -316,11 +316,11 @@ impl<'a> Document<'a> {
                 };
                 let whole_extent = self.numbers::<6, i64>(&get("WholeExtent")?, "WholeExtent")?;
                 let origin = match attr("Origin")? {
-                    Some(t) => self.numbers::<3, f64>(&t, "Origin")?,
+                    Some(t) => self.finite(&t, "Origin")?,
                     None => [0.0; 3],
                 };
                 let spacing = match attr("Spacing")? {
-                    Some(t) => self.numbers::<3, f64>(&t, "Spacing")?,
+                    Some(t) => self.finite(&t, "Spacing")?,
                     None => [1.0; 3],
                 };
                 self.image = Some(ImageGeometry {
@@ -397,6 +397,20 @@ impl<'a> Document<'a> {
     }
 
     /// Exactly `N` whitespace-separated numbers from an attribute's text.
+    /// Three finite numbers: an `Origin` or `Spacing` (a NaN spacing would otherwise
+    /// surface as a NaN origin, the extent's start times the spacing).
+    fn finite(&self, text: &str, what: &str) -> Result<[f64; 3]> {
+        let v = self.numbers::<3, f64>(text, what)?;
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(v)
+        } else {
+            Err(self.err(format!(
+                "{what}=\"{}\" is not finite",
+                show(text.as_bytes())
+            )))
+        }
+    }
+
     fn numbers<const N: usize, T: std::str::FromStr + Copy + Default>(
         &self,
         text: &str,
