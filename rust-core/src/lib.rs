@@ -19,6 +19,7 @@ mod prefetch;
 pub mod progress;
 pub mod samples;
 pub mod slider;
+pub mod terminal;
 #[cfg(test)]
 mod test_rng;
 

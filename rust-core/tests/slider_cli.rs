@@ -291,3 +291,87 @@ fn slide_on_a_volume_builds_its_store_once_and_rebuilds_a_stale_one() {
     assert!(!out.status.success());
     assert!(err.contains("is a slider store already"), "{err}");
 }
+
+/// Ctrl-C or SIGTERM during `slide-build` stops it the way a cancel does: no temporary
+/// store and no spool is left beside the output, an earlier store is kept, and the exit
+/// status is 130. (The process used to die where it stood, leaving its hidden temporary.)
+#[test]
+fn an_interrupted_build_leaves_no_temporary_files() {
+    let dir = temp("interrupted");
+    std::fs::create_dir_all(&dir).unwrap();
+    let n = 160usize;
+    let mut bytes = Vec::with_capacity(n * n * n * 4);
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let d = [x, y, z].map(|c| c as f32 - n as f32 / 2.0);
+                let v = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() + (x as f32 * 0.3).sin();
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    let raw = dir.join("v.raw");
+    std::fs::write(&raw, &bytes).unwrap();
+    let store = dir.join("v.isoslider");
+    let hidden = || {
+        std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+            .map(|e| (e.file_name(), e.metadata().map_or(0, |m| m.len())))
+            .collect::<Vec<_>>()
+    };
+    // Sorted on disk (a budget far below 29 bytes a node): the slow path, spools open.
+    let build = |signal: libc::c_int, wait_for_temporary: bool| {
+        let mut child = isobar()
+            .args(["slide-build", raw.to_str().unwrap(), "-o"])
+            .arg(&store)
+            .args(["--raw-type", "f32", "--raw-dims", "160,160,160"])
+            .args(["--memory-budget", "40000000", "--quiet"])
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = std::time::Instant::now();
+        if wait_for_temporary {
+            // Until the store's temporary holds data: the signal comes while it is written.
+            while !hidden().iter().any(|(_, len)| *len > 0)
+                && start.elapsed().as_secs() < 60
+                && child.try_wait().unwrap().is_none()
+            {
+                std::thread::sleep(std::time::Duration::from_micros(200));
+            }
+        } else {
+            std::thread::sleep(std::time::Duration::from_millis(300));
+        }
+        unsafe { libc::kill(child.id() as libc::pid_t, signal) };
+        child.wait_with_output().unwrap()
+    };
+
+    let run = build(libc::SIGINT, false);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    assert!(!store.exists());
+    assert_eq!(hidden(), vec![]);
+
+    // A store already there stays as it was.
+    std::fs::write(&store, b"an earlier store").unwrap();
+    let run = build(libc::SIGTERM, false);
+    assert_eq!(run.status.code(), Some(130));
+    assert_eq!(std::fs::read(&store).unwrap(), b"an earlier store");
+    assert_eq!(hidden(), vec![]);
+    std::fs::remove_file(&store).unwrap();
+
+    // During the store's write the file is finished and renamed first (nothing half
+    // written is left), and the command either ends there or was stopped before it.
+    let run = build(libc::SIGTERM, true);
+    assert_eq!(hidden(), vec![], "{}", String::from_utf8_lossy(&run.stderr));
+    match run.status.code() {
+        Some(0) => {
+            Store::open(&store).unwrap();
+        }
+        Some(130) => assert!(!store.exists()),
+        other => panic!("{other:?}: {}", String::from_utf8_lossy(&run.stderr)),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

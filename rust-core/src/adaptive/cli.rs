@@ -8,7 +8,7 @@ use crate::field::particles::ParticleData;
 use crate::field::sph::{SphField, SphSettings};
 use crate::gpu::Backend;
 use crate::io;
-use crate::progress::Progress;
+use crate::terminal::with_progress;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -109,12 +109,17 @@ pub fn run(
     for path in &frames {
         let output = io::frame_output(common.output, path);
         let data = io::read_particles(path)?;
-        let t = Instant::now();
-        let field = settings(&data)
-            .and_then(|s| SphField::new(&data, &s))
-            .map_err(|e| e.in_file(path))?;
-        let build_s = t.elapsed().as_secs_f64();
-        let out = extract_sph(&field, &params, &mut Progress::none())?;
+        let (field, build_s, out) = with_progress(common.quiet, |progress| {
+            progress.window(0.0, 0.1);
+            let t = Instant::now();
+            let field = settings(&data)
+                .and_then(|s| SphField::build(&data, &s, progress))
+                .map_err(|e| e.in_file(path))?;
+            let build_s = t.elapsed().as_secs_f64();
+            progress.window(0.1, 1.0);
+            let out = extract_sph(&field, &params, progress)?;
+            Ok((field, build_s, out))
+        })?;
         io::write_mesh(&output, &out.mesh)?;
         io::warn_if_empty(path, &out.mesh, common.iso);
         let mut rows = rows(&data, &out.stats, build_s);
@@ -207,13 +212,10 @@ fn compare(
 ) -> Result<Vec<(String, String)>> {
     let grid = grid_for(field, params)?;
     let t = Instant::now();
-    let uniform = extract(
-        field,
-        &grid,
-        &vec![3u8; grid.cell_count()],
-        params,
-        &mut Progress::none(),
-    )?;
+    // The comparisons run without a bar of their own, but an interrupt still stops them.
+    let uniform = with_progress(true, |p| {
+        extract(field, &grid, &vec![3u8; grid.cell_count()], params, p)
+    })?;
     let uniform_s = t.elapsed().as_secs_f64();
     let baseline_params = correctors::Params {
         isovalues: vec![params.isovalue],
@@ -226,8 +228,9 @@ fn compare(
     };
     let t = Instant::now();
     let empty = ParticleData::default();
-    let baseline =
-        crate::baseline::extract(field, &empty, &baseline_params, &mut Progress::none())?;
+    let baseline = with_progress(true, |p| {
+        crate::baseline::extract(field, &empty, &baseline_params, p)
+    })?;
     let baseline_s = t.elapsed().as_secs_f64();
     let fine = grid.fine;
     let d = crate::mesh::hausdorff::hausdorff(&adaptive.mesh, &uniform.mesh, 8.0 * fine);
@@ -285,7 +288,7 @@ fn compare_backends(field: &SphField, params: &Params) -> Result<Vec<(String, St
             ..params.clone()
         };
         let t = Instant::now();
-        let out = extract_sph(field, &p, &mut Progress::none())?;
+        let out = with_progress(true, |progress| extract_sph(field, &p, progress))?;
         let seconds = t.elapsed().as_secs_f64();
         rows.extend([
             (

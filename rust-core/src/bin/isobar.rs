@@ -2,15 +2,13 @@
 
 use clap::{Args, Parser, Subcommand};
 use glam::DVec3;
-use indicatif::{ProgressBar, ProgressStyle};
 use isobar::correctors::{self, Extraction, Lattice, Params, Stats, Trim};
 use isobar::field::kernel::Kernel;
 use isobar::field::particles::ParticleData;
 use isobar::field::sph::{Mass, Quantity, SmoothingLength, SphField, SphSettings, Volumes};
 use isobar::field::DEFAULT_MEMORY_BUDGET;
 use isobar::gpu::Backend;
-use isobar::progress::Progress;
-use isobar::{baseline, io, Error, Result};
+use isobar::{baseline, io, terminal, Error, Result};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -161,6 +159,7 @@ struct SphArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    terminal::catch_interrupts();
     let result = match cli.command {
         Command::Sph(args) => run_sph(&args),
         Command::Adaptive { sph, adaptive } => run_adaptive(&sph, &adaptive),
@@ -172,6 +171,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(Error::Cancelled) if terminal::interrupted() => {
+            eprintln!("isobar: interrupted; no file was left half-written");
+            ExitCode::from(terminal::INTERRUPTED_STATUS)
+        }
         Err(e) => {
             eprintln!("isobar: error: {e}");
             ExitCode::FAILURE
@@ -456,39 +459,19 @@ fn extract(
     full_grid: bool,
     quiet: bool,
 ) -> Result<(Extraction, f64)> {
-    let bar = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(1000)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {percent:>3}% {msg}").expect("valid template"),
-    );
-    let mut report = |f: f64, phase: &str| {
-        bar.set_position((f * 1000.0) as u64);
-        bar.set_message(phase.to_string());
-        true
-    };
-    let mut progress = Progress::new(&mut report);
-    progress.window(0.0, 0.1);
-    let t = Instant::now();
-    let field = SphField::build(data, settings, &mut progress);
-    let build_s = t.elapsed().as_secs_f64();
-    let field = match field {
-        Ok(f) => f,
-        Err(e) => {
-            bar.finish_and_clear();
-            return Err(e);
-        }
-    };
-    progress.window(0.1, 1.0);
-    let result = if full_grid {
-        baseline::extract(&field, data, params, &mut progress)
-    } else {
-        correctors::extract(&field, data, params, &mut progress)
-    };
-    bar.finish_and_clear();
-    Ok((result?, build_s))
+    terminal::with_progress(quiet, |progress| {
+        progress.window(0.0, 0.1);
+        let t = Instant::now();
+        let field = SphField::build(data, settings, progress)?;
+        let build_s = t.elapsed().as_secs_f64();
+        progress.window(0.1, 1.0);
+        let result = if full_grid {
+            baseline::extract(&field, data, params, progress)
+        } else {
+            correctors::extract(&field, data, params, progress)
+        };
+        Ok((result?, build_s))
+    })
 }
 
 fn stats_rows(

@@ -4,9 +4,8 @@
 
 use super::marching::{extract, McParams};
 use super::{sample, Params, Stats};
-use crate::error::{Error, Result};
-use crate::progress::Progress;
-use indicatif::{ProgressBar, ProgressStyle};
+use crate::error::Result;
+use crate::terminal::with_progress;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -85,41 +84,13 @@ pub fn run(args: &FeArgs) -> Result<()> {
         ..Params::default()
     };
     let t = Instant::now();
-    let result = with_progress(args.quiet, |progress| {
+    let (samples, stats) = with_progress(args.quiet, |progress| {
         sample(&mesh, &args.field, &params, progress)
     })?;
-    let (samples, stats) = result?;
     let sample_s = t.elapsed().as_secs_f64();
     crate::io::write_samples(&args.output, &samples)?;
     print_stats(&stats, mesh.cell_count(), read_s, sample_s);
     Ok(())
-}
-
-/// Runs `work` with a terminal progress bar (hidden when `quiet`), cleared afterwards.
-fn with_progress<T>(quiet: bool, work: impl FnOnce(&mut Progress) -> T) -> Result<T> {
-    let bar = progress_bar(quiet)?;
-    let mut report = |f: f64, phase: &str| {
-        bar.set_position((f * 1000.0) as u64);
-        bar.set_message(phase.to_string());
-        true
-    };
-    let mut progress = Progress::new(&mut report);
-    let out = work(&mut progress);
-    bar.finish_and_clear();
-    Ok(out)
-}
-
-fn progress_bar(quiet: bool) -> Result<ProgressBar> {
-    let bar = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(1000)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {percent:>3}% {msg}")
-            .map_err(|e| Error::InvalidInput(format!("progress bar: {e}")))?,
-    );
-    Ok(bar)
 }
 
 fn run_mc(args: &FeArgs, mesh: &crate::field::fe::FeMesh, read_s: f64) -> Result<()> {
@@ -130,10 +101,9 @@ fn run_mc(args: &FeArgs, mesh: &crate::field::fe::FeMesh, read_s: f64) -> Result
         ..McParams::default()
     };
     let t = Instant::now();
-    let result = with_progress(args.quiet, |progress| {
+    let (surface, s) = with_progress(args.quiet, |progress| {
         extract(mesh, &args.field, &params, progress)
     })?;
-    let (surface, s) = result?;
     let extract_s = t.elapsed().as_secs_f64();
     crate::io::write_mesh(&args.output, &surface)?;
     println!(

@@ -7,7 +7,6 @@ use super::{build_store, BuildParams, BuildStats, LodParams, Slider};
 use crate::error::{Error, Result};
 use crate::field::grid::Volume;
 use crate::io::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};
-use crate::progress::Progress;
 use glam::DVec3;
 use std::io::{BufRead, IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
@@ -176,24 +175,16 @@ pub fn run_build(args: &BuildArgs) -> Result<()> {
     Ok(())
 }
 
-/// [`build_store`] with a percentage and the phase on stderr unless `quiet`.
+/// [`build_store`] with a progress bar on stderr unless `quiet`.
 fn build_with_progress(
     volume: &Volume,
     output: &Path,
     params: &BuildParams,
     quiet: bool,
 ) -> Result<BuildStats> {
-    let mut report = |f: f64, phase: &str| {
-        if !quiet {
-            eprint!("\r{:>3.0}% {phase:<24}", f * 100.0);
-        }
-        true
-    };
-    let stats = build_store(volume, output, params, &mut Progress::new(&mut report));
-    if !quiet {
-        eprintln!();
-    }
-    stats
+    crate::terminal::with_progress(quiet, |progress| {
+        build_store(volume, output, params, progress)
+    })
 }
 
 /// The store `slide` opens for `args.input`: the input itself when it is a store; for a
@@ -400,7 +391,19 @@ fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Re
         }
         eprint!("   ");
         loop {
-            if stdin.read(&mut key).map_err(|e| Error::io("<stdin>", e))? == 0 {
+            let read = match stdin.read(&mut key) {
+                // Ctrl-C (the terminal keeps sending signals) quits like q, and the
+                // terminal's settings are restored on the way out.
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {
+                    if crate::terminal::interrupted() {
+                        0
+                    } else {
+                        continue;
+                    }
+                }
+                other => other.map_err(|e| Error::io("<stdin>", e))?,
+            };
+            if read == 0 {
                 eprintln!();
                 return Ok(());
             }
