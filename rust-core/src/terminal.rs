@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Exit status of a command stopped by an interrupt (the shell's 128 + SIGINT).
-pub const INTERRUPTED_STATUS: u8 = 130;
+const INTERRUPTED_STATUS: u8 = 130;
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
@@ -36,6 +36,11 @@ pub fn catch_interrupts() {
             libc::sigaction(signal, &action, std::ptr::null_mut());
         }
     }
+}
+
+/// The exit status of a command that an interrupt stopped (130, as shells give).
+pub fn interrupted_exit_code() -> std::process::ExitCode {
+    std::process::ExitCode::from(INTERRUPTED_STATUS)
 }
 
 /// True once SIGINT or SIGTERM has arrived (after [`catch_interrupts`]).

@@ -9,6 +9,8 @@ use super::crack_gen::{point_edge, ROW};
 use super::crack_table::CRACK_PATTERNS;
 use super::grid::{subdivisions, CoarseGrid, FINE_PER_COARSE};
 use super::levels::LevelArrays;
+use crate::error::Result;
+use crate::progress::{chunked, collect_ranges, Progress};
 use rayon::prelude::*;
 
 /// A face between two cells whose levels differ: (lower cell along `axis`, axis).
@@ -19,17 +21,23 @@ pub struct TransitionFace {
 }
 
 /// Every transition face, in (cell, axis) order.
-pub fn transition_faces(grid: &CoarseGrid, levels: &[u8]) -> Vec<TransitionFace> {
-    (0..levels.len())
-        .into_par_iter()
-        .flat_map_iter(|cell| {
-            let n = grid.face_neighbours(cell);
-            (0..3).filter_map(move |axis| {
-                let other = n[2 * axis + 1]?;
-                (levels[other] != levels[cell]).then_some(TransitionFace { cell, axis })
+pub fn transition_faces(
+    grid: &CoarseGrid,
+    levels: &[u8],
+    progress: &mut Progress,
+) -> Result<Vec<TransitionFace>> {
+    collect_ranges(levels.len(), progress, |cells| {
+        cells
+            .into_par_iter()
+            .flat_map_iter(|cell| {
+                let n = grid.face_neighbours(cell);
+                (0..3).filter_map(move |axis| {
+                    let other = n[2 * axis + 1]?;
+                    (levels[other] != levels[cell]).then_some(TransitionFace { cell, axis })
+                })
             })
-        })
-        .collect()
+            .collect()
+    })
 }
 
 /// Fill triangles of every transition face, as (level, index into that level's E)
@@ -40,11 +48,13 @@ pub fn fill(
     arrays: &[LevelArrays],
     faces: &[TransitionFace],
     iso: f64,
-) -> Vec<[(u8, u32); 3]> {
-    faces
-        .par_iter()
-        .flat_map_iter(|&face| face_triangles(grid, levels, arrays, face, iso))
-        .collect()
+    progress: &mut Progress,
+) -> Result<Vec<[(u8, u32); 3]>> {
+    chunked(faces, progress, |part| {
+        part.par_iter()
+            .flat_map_iter(|&face| face_triangles(grid, levels, arrays, face, iso))
+            .collect()
+    })
 }
 
 fn face_triangles(

@@ -7,7 +7,7 @@
 //! quarter of a coarse cell, so every grid vertex of every level is a finest-lattice node.
 
 use crate::error::{Error, Result};
-use crate::progress::{collect_ranges, Progress};
+use crate::progress::{collect_ranges, for_ranges, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -354,7 +354,7 @@ fn required_level(grid: &CoarseGrid, levels: &[u8], i: usize) -> u8 {
 
 /// Checks a caller's level map: one entry per coarse cell, levels 1..=3, face neighbours
 /// at most one level apart and no alternating edge (see [`balance`]).
-pub fn check_levels(grid: &CoarseGrid, levels: &[u8]) -> Result<()> {
+pub fn check_levels(grid: &CoarseGrid, levels: &[u8], progress: &mut Progress) -> Result<()> {
     if levels.len() != grid.cell_count() {
         return Err(Error::InvalidInput(format!(
             "the level map has {} entries for {} coarse cells",
@@ -368,10 +368,19 @@ pub fn check_levels(grid: &CoarseGrid, levels: &[u8]) -> Result<()> {
             levels[i]
         )));
     }
-    if let Some(i) = (0..levels.len())
-        .into_par_iter()
-        .find_first(|&i| required_level(grid, levels, i) != levels[i])
-    {
+    // In ranges with a report after each: tens of millions of cells take a second.
+    let mut first_bad = None;
+    for_ranges(
+        levels.len(),
+        progress,
+        |range| {
+            range
+                .into_par_iter()
+                .find_first(|&i| required_level(grid, levels, i) != levels[i])
+        },
+        |bad| first_bad = first_bad.or(bad),
+    )?;
+    if let Some(i) = first_bad {
         return Err(Error::InvalidInput(format!(
             "coarse cell {i} (level {}) needs level {} next to its neighbours",
             levels[i],
@@ -479,7 +488,7 @@ mod tests {
             1,
             "edge neighbours may stay coarse"
         );
-        check_levels(&g, &levels).unwrap();
+        check_levels(&g, &levels, &mut Progress::none()).unwrap();
         // Two diagonal splash cells around one edge: the edge alternates 3,2,3,2 and the
         // level-2 cells between them rise to 3.
         let mut counts = vec![0u32; g.cell_count()];
@@ -489,10 +498,10 @@ mod tests {
         balance(&g, &mut levels, &mut Progress::none()).unwrap();
         assert_eq!(levels[g.index([3, 2, 2])], 3);
         assert_eq!(levels[g.index([2, 3, 2])], 3);
-        check_levels(&g, &levels).unwrap();
+        check_levels(&g, &levels, &mut Progress::none()).unwrap();
         let mut bad = levels.clone();
         bad[g.index([0, 0, 0])] = 3;
-        assert!(check_levels(&g, &bad).is_err());
+        assert!(check_levels(&g, &bad, &mut Progress::none()).is_err());
     }
 
     /// Balancing only the blocks of changed cells reaches the same fixed point as
@@ -527,7 +536,7 @@ mod tests {
             let mut levels = start.clone();
             balance(&g, &mut levels, &mut Progress::none()).unwrap();
             assert_eq!(levels, swept, "density {density}");
-            check_levels(&g, &levels).unwrap();
+            check_levels(&g, &levels, &mut Progress::none()).unwrap();
             assert!(levels.iter().zip(&start).all(|(a, b)| a >= b));
             assert!(levels != start, "density {density}: nothing to balance");
         }

@@ -162,39 +162,26 @@ impl Lattice {
     ) -> Result<u64> {
         assert!(TILE.is_multiple_of(stride) && (FINE_PER_COARSE as usize).is_multiple_of(stride));
         let tiles = self.tiles;
-        // (tile, cell) for every tile holding some node of a cell; then each tile's mask.
-        let mut touches: Vec<(usize, usize)> = cells
-            .par_iter()
-            .flat_map_iter(|&cell| {
-                let c = grid.coords(cell).map(|x| (x * FINE_PER_COARSE) as usize);
-                let lo = c.map(|x| x / TILE);
-                let hi = c.map(|x| (x + M - 1) / TILE);
-                (lo[2]..=hi[2]).flat_map(move |z| {
-                    (lo[1]..=hi[1]).flat_map(move |y| {
-                        (lo[0]..=hi[0]).map(move |x| (x + tiles[0] * (y + tiles[1] * z), cell))
-                    })
-                })
-            })
-            .collect();
-        touches.par_sort_unstable();
-        touches.dedup();
-        let groups: Vec<&[(usize, usize)]> = touches.chunk_by(|a, b| a.0 == b.0).collect();
-        let wanted: Vec<(usize, Rows)> = groups
-            .par_iter()
-            .filter_map(|g| {
-                let t = g[0].0;
-                let mut rows = [0u8; TILE * TILE];
-                for &(_, cell) in g.iter() {
-                    self.mark_cell(grid, t, cell, stride, &mut rows);
-                }
-                if let Some(slot) = self.stored(t) {
-                    for (r, m) in rows.iter_mut().zip(&self.marked[slot]) {
-                        *r &= !m;
-                    }
-                }
-                rows.iter().any(|&r| r != 0).then_some((t, rows))
-            })
-            .collect();
+        // The cells by the layer of tiles (along z) their nodes reach into, one or two
+        // each: the tiles a cover needs are then found layer by layer, with a report
+        // after each, instead of in one sort of every (tile, cell) pair (tens of seconds
+        // on a fine grid, which no cancel could interrupt).
+        let mut by_layer: Vec<Vec<usize>> = vec![Vec::new(); tiles[2]];
+        for &cell in cells {
+            let z = grid.coords(cell)[2] as usize * FINE_PER_COARSE as usize;
+            for layer in &mut by_layer[z / TILE..=(z + M - 1) / TILE] {
+                layer.push(cell);
+            }
+        }
+        let mut wanted: Vec<(usize, Rows)> = Vec::new();
+        progress.nested(0.0, 0.2, |p| {
+            for (z, layer) in by_layer.iter().enumerate() {
+                wanted.extend(self.wanted_in_layer(grid, z, layer, stride));
+                p.report((z + 1) as f64 / by_layer.len() as f64)?;
+            }
+            Ok(())
+        })?;
+        drop(by_layer);
         let new_tiles = wanted.iter().filter(|w| self.stored(w.0).is_none()).count();
         let needed = self.bytes() + (new_tiles * (TILE3 * 8 + TILE * TILE)) as u64;
         if needed > budget {
@@ -210,26 +197,94 @@ impl Lattice {
                 self.marked.push([0; TILE * TILE]);
             }
         }
-        self.values.resize(self.marked.len() * TILE3, f64::NAN);
         // The work by slot, so that each tile's storage is handed to one task.
         let mut work: Vec<Option<(usize, Rows)>> = vec![None; self.marked.len()];
         for (t, rows) in wanted {
             work[self.slot[t] as usize] = Some((t, rows));
         }
-        // Blocks of slots, each spread over the threads, a report after each.
+        // Blocks of slots, each spread over the threads, a report after each. The new
+        // tiles' values (gigabytes on a fine grid) are allocated block by block too, so
+        // that a cancel is answered during the allocation as well.
         const BLOCK: usize = 4096;
         let mut evaluations = 0;
-        let blocks = self
-            .values
-            .chunks_mut(TILE3 * BLOCK)
-            .zip(self.marked.chunks_mut(BLOCK))
-            .zip(work.chunks(BLOCK));
         let count = work.len().div_ceil(BLOCK);
-        for (b, ((values, marked), work)) in blocks.enumerate() {
-            evaluations += Self::evaluate(field, grid, tiles, values, marked, work);
-            progress.report((b + 1) as f64 / count as f64)?;
+        // Reserved whole (pages untouched until filled): growing block by block would
+        // copy the store at each doubling and hold it twice meanwhile.
+        self.values
+            .reserve_exact(work.len() * TILE3 - self.values.len());
+        let done = progress.nested(0.2, 1.0, |p| {
+            for (b, work) in work.chunks(BLOCK).enumerate() {
+                let slots = b * BLOCK..b * BLOCK + work.len();
+                if self.values.len() < slots.end * TILE3 {
+                    self.values.resize(slots.end * TILE3, f64::NAN);
+                }
+                let values = &mut self.values[slots.start * TILE3..slots.end * TILE3];
+                let marked = &mut self.marked[slots];
+                evaluations += Self::evaluate(field, grid, tiles, values, marked, work);
+                p.report((b + 1) as f64 / count as f64)?;
+            }
+            Ok(())
+        });
+        if done.is_err() {
+            // Stopped: the tiles given slots but no values yet are let go again.
+            self.keep_slots(self.values.len() / TILE3);
         }
-        Ok(evaluations)
+        done.map(|()| evaluations)
+    }
+
+    /// Forgets every tile in a slot from `kept` on (the store as it was before a cover
+    /// that gave those slots).
+    fn keep_slots(&mut self, kept: usize) {
+        for slot in &mut self.slot {
+            if *slot != ABSENT && *slot as usize >= kept {
+                *slot = ABSENT;
+            }
+        }
+        self.marked.truncate(kept);
+        self.values.truncate(kept * TILE3);
+    }
+
+    /// The tiles of z-layer `z` that `cells` (each reaching into it) need evaluated, in
+    /// tile order, each with the mask of its nodes not stored yet.
+    fn wanted_in_layer(
+        &self,
+        grid: &CoarseGrid,
+        z: usize,
+        cells: &[usize],
+        stride: usize,
+    ) -> Vec<(usize, Rows)> {
+        let tiles = self.tiles;
+        // (tile, cell) for every tile of the layer holding some node of a cell.
+        let mut touches: Vec<(usize, usize)> = cells
+            .par_iter()
+            .flat_map_iter(|&cell| {
+                let c = grid.coords(cell).map(|x| (x * FINE_PER_COARSE) as usize);
+                let lo = c.map(|x| x / TILE);
+                let hi = c.map(|x| (x + M - 1) / TILE);
+                (lo[1]..=hi[1]).flat_map(move |y| {
+                    (lo[0]..=hi[0]).map(move |x| (x + tiles[0] * (y + tiles[1] * z), cell))
+                })
+            })
+            .collect();
+        touches.par_sort_unstable();
+        touches.dedup();
+        let groups: Vec<&[(usize, usize)]> = touches.chunk_by(|a, b| a.0 == b.0).collect();
+        groups
+            .par_iter()
+            .filter_map(|g| {
+                let t = g[0].0;
+                let mut rows = [0u8; TILE * TILE];
+                for &(_, cell) in g.iter() {
+                    self.mark_cell(grid, t, cell, stride, &mut rows);
+                }
+                if let Some(slot) = self.stored(t) {
+                    for (r, m) in rows.iter_mut().zip(&self.marked[slot]) {
+                        *r &= !m;
+                    }
+                }
+                rows.iter().any(|&r| r != 0).then_some((t, rows))
+            })
+            .collect()
     }
 
     /// Evaluates the marked nodes of the tiles in `work` into their slots' `values`,
@@ -466,6 +521,72 @@ mod tests {
             Some(at([12, 4, 8]).to_bits())
         );
         assert_eq!(lattice.get([6, 2, 6]), None);
+    }
+
+    /// [`Wavy`], counting its evaluations.
+    #[derive(Default)]
+    struct Counted(std::sync::atomic::AtomicU64);
+
+    impl ScalarField for Counted {
+        fn value(&self, x: DVec3) -> f64 {
+            self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Wavy.value(x)
+        }
+        fn value_and_gradient(&self, x: DVec3) -> (f64, DVec3) {
+            (self.value(x), DVec3::ZERO)
+        }
+    }
+
+    /// A cover cancelled between its blocks leaves a store whose tiles all have values:
+    /// a later cover completes it, each node evaluated once in all, reading the field
+    /// exactly.
+    #[test]
+    fn a_cancelled_cover_leaves_a_store_to_cover_again() {
+        let grid = CoarseGrid {
+            origin: DVec3::new(-0.3, 0.1, 0.2),
+            fine: 0.01,
+            cells: [40, 40, 40],
+        };
+        let cells: Vec<usize> = (0..grid.cell_count()).collect();
+        let field = Counted::default();
+        let mut lattice = Lattice::new(&grid);
+        // Stop at the first report past the tiles' preparation (the first block).
+        let mut stop = |fraction: f64, _: &str| fraction <= 0.2;
+        let err = lattice
+            .cover(
+                &field,
+                &grid,
+                &cells,
+                1,
+                u64::MAX,
+                &mut Progress::new(&mut stop),
+            )
+            .unwrap_err();
+        assert!(matches!(err, Error::Cancelled));
+        let kept = lattice.marked.len();
+        assert!(kept > 0 && kept < 21 * 21 * 21, "{kept} tiles kept");
+        assert_eq!(lattice.values.len(), kept * TILE3);
+        let first = field.0.load(std::sync::atomic::Ordering::Relaxed);
+        let made = lattice
+            .cover(&field, &grid, &cells, 1, u64::MAX, &mut Progress::none())
+            .unwrap();
+        assert!(first > 0);
+        assert_eq!(first + made, 161 * 161 * 161);
+        assert_eq!(
+            field.0.load(std::sync::atomic::Ordering::Relaxed),
+            161 * 161 * 161
+        );
+        for &i in cells.iter().step_by(97) {
+            let c = grid.coords(i);
+            let mut values = [0.0; M * M * M];
+            lattice.cell(c, &mut values);
+            for (v, &f) in values.iter().enumerate() {
+                let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
+                let node = std::array::from_fn(|a| c[a] * 4 + l[a]);
+                let at = Wavy.value(grid.point(node.map(|x| x as i64), 0));
+                assert_eq!(f.to_bits(), at.to_bits(), "cell {i} node {node:?}");
+            }
+        }
     }
 
     #[test]

@@ -14,7 +14,7 @@ use super::lattice::Lattice;
 use crate::error::{Error, Result};
 use crate::field::ScalarField;
 use crate::mc::{case_index, case_table, corner_offset, edge_corner_axis, edge_key, VirtualGrid};
-use crate::progress::{chunked, Progress};
+use crate::progress::{chunked, collect_ranges, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -111,39 +111,45 @@ pub fn build_level<F: ScalarField + ?Sized>(
     // Step 4: vertex values, cell by cell, read from the lattice (a node shared by
     // several cells was evaluated once there).
     let nnn = n * n * n;
-    let values: Vec<f64> = chunked(&cells, progress, |part| {
-        part.par_iter()
-            .flat_map_iter(|&cell| {
-                let first = grid.coords(cell as usize).map(|x| x * FINE_PER_COARSE);
-                let mut block = [0.0; (FINE_PER_COARSE as usize + 1).pow(3)];
-                lattice.block(first, n, step, &mut block[..nnn]);
-                block.into_iter().take(nnn)
-            })
-            .collect()
+    // Every pass over the cells or sub-cells reports as it goes: on a fine grid each
+    // takes seconds, and a cancel must not wait for all of them.
+    let values: Vec<f64> = progress.nested(0.0, 0.2, |p| {
+        chunked(&cells, p, |part| {
+            part.par_iter()
+                .flat_map_iter(|&cell| {
+                    let first = grid.coords(cell as usize).map(|x| x * FINE_PER_COARSE);
+                    let mut block = [0.0; (FINE_PER_COARSE as usize + 1).pow(3)];
+                    lattice.block(first, n, step, &mut block[..nnn]);
+                    block.into_iter().take(nnn)
+                })
+                .collect()
+        })
     })?;
     let mut evaluations = 0;
     // Step 5: cases and triangle counts of the sub-cells.
     let kk = (k * k * k) as usize;
     let table = case_table();
-    let cases: Vec<u8> = (0..cells.len() * kk)
-        .into_par_iter()
-        .map(|s| {
-            let (slot, local) = (s / kk, s % kk);
-            let l = [
-                local % k as usize,
-                local / k as usize % k as usize,
-                local / (k * k) as usize,
-            ];
-            let base = slot * n * n * n;
-            let corners: [f64; 8] = std::array::from_fn(|c| {
-                let o = corner_offset(c);
-                values[base
-                    + (l[0] + o[0] as usize)
-                    + n * ((l[1] + o[1] as usize) + n * (l[2] + o[2] as usize))]
-            });
-            case_index(&corners, iso)
+    let case_of = |s: usize| {
+        let (slot, local) = (s / kk, s % kk);
+        let l = [
+            local % k as usize,
+            local / k as usize % k as usize,
+            local / (k * k) as usize,
+        ];
+        let base = slot * n * n * n;
+        let corners: [f64; 8] = std::array::from_fn(|c| {
+            let o = corner_offset(c);
+            values[base
+                + (l[0] + o[0] as usize)
+                + n * ((l[1] + o[1] as usize) + n * (l[2] + o[2] as usize))]
+        });
+        case_index(&corners, iso)
+    };
+    let cases: Vec<u8> = progress.nested(0.2, 0.3, |p| {
+        collect_ranges(cells.len() * kk, p, |range| {
+            range.into_par_iter().map(case_of).collect()
         })
-        .collect();
+    })?;
     let mut triangle_offsets = Vec::with_capacity(cases.len() + 1);
     let mut total = 0u32;
     for &case in &cases {
@@ -162,71 +168,79 @@ pub fn build_level<F: ScalarField + ?Sized>(
         let o = corner_offset(corner);
         std::array::from_fn(|a| c[a] * FINE_PER_COARSE + (l[a] as u32 + o[a]) * step)
     };
-    let mut cut: Vec<(u64, f64, f64)> = (0..cases.len())
-        .into_par_iter()
-        .filter(|&s| cases[s] != 0 && cases[s] != 255)
-        .flat_map_iter(|s| {
-            let (slot, local) = (s / kk, s % kk);
-            let bits = table.edges_cut[cases[s] as usize];
-            let values = &values;
-            let finest_node = &finest_node;
-            (0..12).filter(move |e| bits >> e & 1 == 1).map(move |e| {
-                let (corner, axis) = edge_corner_axis(e);
-                let node = finest_node(slot, local, corner);
-                let value = |corner: usize| {
-                    let o = corner_offset(corner);
-                    let l = [
-                        local % k as usize,
-                        local / k as usize % k as usize,
-                        local / (k * k) as usize,
-                    ];
-                    values[slot * n * n * n
-                        + (l[0] + o[0] as usize)
-                        + n * ((l[1] + o[1] as usize) + n * (l[2] + o[2] as usize))]
-                };
-                let key = edge_key(VirtualGrid::key(node[0], node[1], node[2]), axis);
-                (key, value(corner), value(corner | 1 << axis))
-            })
+    let cut_edges_of = |s: usize| {
+        let (slot, local) = (s / kk, s % kk);
+        let bits = table.edges_cut[cases[s] as usize];
+        let values = &values;
+        let finest_node = &finest_node;
+        (0..12).filter(move |e| bits >> e & 1 == 1).map(move |e| {
+            let (corner, axis) = edge_corner_axis(e);
+            let node = finest_node(slot, local, corner);
+            let value = |corner: usize| {
+                let o = corner_offset(corner);
+                let l = [
+                    local % k as usize,
+                    local / k as usize % k as usize,
+                    local / (k * k) as usize,
+                ];
+                values[slot * n * n * n
+                    + (l[0] + o[0] as usize)
+                    + n * ((l[1] + o[1] as usize) + n * (l[2] + o[2] as usize))]
+            };
+            let key = edge_key(VirtualGrid::key(node[0], node[1], node[2]), axis);
+            (key, value(corner), value(corner | 1 << axis))
         })
-        .collect();
+    };
+    let mut cut: Vec<(u64, f64, f64)> = progress.nested(0.3, 0.4, |p| {
+        collect_ranges(cases.len(), p, |range| {
+            range
+                .into_par_iter()
+                .filter(|&s| cases[s] != 0 && cases[s] != 255)
+                .flat_map_iter(cut_edges_of)
+                .collect()
+        })
+    })?;
     cut.par_sort_unstable_by_key(|e| e.0);
     cut.dedup_by_key(|e| e.0);
     let edges: Vec<u64> = cut.iter().map(|e| e.0).collect();
     let shift = iterations;
     let steps = iterations + (3 - level as u32);
     let bisected = AtomicU64::new(0);
-    let points: Vec<EdgePoint> = chunked(&cut, progress, |part| {
-        part.par_iter()
-            .map(|&(key, f0, f1)| {
-                let (point, made) = bisect(
-                    field, grid, lattice, key, f0, f1, iso, step, shift, steps, normals,
-                );
-                bisected.fetch_add(made, Ordering::Relaxed);
-                point
-            })
-            .collect()
+    let points: Vec<EdgePoint> = progress.nested(0.4, 0.9, |p| {
+        chunked(&cut, p, |part| {
+            part.par_iter()
+                .map(|&(key, f0, f1)| {
+                    let (point, made) = bisect(
+                        field, grid, lattice, key, f0, f1, iso, step, shift, steps, normals,
+                    );
+                    bisected.fetch_add(made, Ordering::Relaxed);
+                    point
+                })
+                .collect()
+        })
     })?;
     evaluations += bisected.into_inner();
     // Step 7: triangles of the active sub-cells into E.
-    let triangles: Vec<[u32; 3]> = (0..cases.len())
-        .into_par_iter()
-        .flat_map_iter(|s| {
-            let (slot, local) = (s / kk, s % kk);
-            let edges = &edges;
-            let finest_node = &finest_node;
-            table.triangles[cases[s] as usize].iter().map(move |tri| {
-                tri.map(|e| {
-                    let (corner, axis) = edge_corner_axis(e as usize);
-                    let node = finest_node(slot, local, corner);
-                    let key = edge_key(VirtualGrid::key(node[0], node[1], node[2]), axis);
-                    edges
-                        .binary_search(&key)
-                        .expect("every cut edge of an active sub-cell is in E")
-                        as u32
-                })
+    let triangles_of = |s: usize| {
+        let (slot, local) = (s / kk, s % kk);
+        let edges = &edges;
+        let finest_node = &finest_node;
+        table.triangles[cases[s] as usize].iter().map(move |tri| {
+            tri.map(|e| {
+                let (corner, axis) = edge_corner_axis(e as usize);
+                let node = finest_node(slot, local, corner);
+                let key = edge_key(VirtualGrid::key(node[0], node[1], node[2]), axis);
+                edges
+                    .binary_search(&key)
+                    .expect("every cut edge of an active sub-cell is in E") as u32
             })
         })
-        .collect();
+    };
+    let triangles: Vec<[u32; 3]> = progress.nested(0.9, 1.0, |p| {
+        collect_ranges(cases.len(), p, |range| {
+            range.into_par_iter().flat_map_iter(triangles_of).collect()
+        })
+    })?;
     Ok(LevelArrays {
         level,
         cells,

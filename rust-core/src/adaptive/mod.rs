@@ -467,7 +467,9 @@ fn extract_on<F: ScalarField + ?Sized>(
             built.evaluations += covering;
             Ok(built)
         },
-        |arrays, faces| Ok(cracks::fill(grid, levels, arrays, faces, params.isovalue)),
+        |arrays, faces, progress| {
+            cracks::fill(grid, levels, arrays, faces, params.isovalue, progress)
+        },
     )?;
     out.stats.array_bytes += lattice.borrow().bytes();
     Ok(out)
@@ -531,7 +533,8 @@ fn extract_gpu_on(
             on_level.borrow_mut().push(built.buffers);
             Ok(built.arrays)
         },
-        |_, faces| {
+        // One dispatch: nothing to report between.
+        |_, faces, _| {
             let b = on_level.borrow();
             let fine = [b[1].as_ref(), b[2].as_ref()];
             crate::gpu::cracks::fill(gpu, grid, levels, fine, faces, iso)
@@ -553,10 +556,11 @@ fn extract_with(
     params: &Params,
     progress: &mut Progress,
     mut build: impl FnMut(u8, &mut Progress) -> Result<LevelArrays>,
-    fill: impl FnOnce(&[LevelArrays], &[cracks::TransitionFace]) -> Result<Fills>,
+    fill: impl FnOnce(&[LevelArrays], &[cracks::TransitionFace], &mut Progress) -> Result<Fills>,
 ) -> Result<Extraction> {
     params.validate()?;
-    grid::check_levels(grid, levels)?;
+    progress.phase("checking levels", 0.0, 0.05)?;
+    grid::check_levels(grid, levels, progress)?;
     levels::check_budget(levels, params.memory_budget)?;
     let start = Instant::now();
     let mut stats = Stats {
@@ -581,8 +585,8 @@ fn extract_with(
 
     progress.phase("crack filling", 0.8, 0.9)?;
     let t = Instant::now();
-    let faces = cracks::transition_faces(grid, levels);
-    let fills = fill(&arrays, &faces)?;
+    let faces = progress.nested(0.0, 0.3, |p| cracks::transition_faces(grid, levels, p))?;
+    let fills = progress.nested(0.3, 1.0, |p| fill(&arrays, &faces, p))?;
     stats.transition_faces = faces.len() as u64;
     stats.crack_triangles = fills.len() as u64;
     stats.timings.cracks = t.elapsed().as_secs_f64();

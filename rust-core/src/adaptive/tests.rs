@@ -592,7 +592,7 @@ fn error_criterion_off_is_the_splash_rule_and_on_is_deterministic() {
     );
     assert!(one.iter().zip(&splash).all(|(a, b)| a >= b));
     assert_ne!(one, splash);
-    grid::check_levels(&grid, &one).unwrap();
+    grid::check_levels(&grid, &one, &mut Progress::none()).unwrap();
     let bad = Params {
         max_error: -1.0,
         ..params

@@ -173,7 +173,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(Error::Cancelled) if terminal::interrupted() => {
             eprintln!("isobar: interrupted; no file was left half-written");
-            ExitCode::from(terminal::INTERRUPTED_STATUS)
+            terminal::interrupted_exit_code()
         }
         Err(e) => {
             eprintln!("isobar: error: {e}");

@@ -33,7 +33,7 @@ struct Fine {
 const MISSING: u32 = u32::MAX;
 
 /// Fill triangles of `faces` as (level, index into that level's E) triples, equal to
-/// `adaptive::cracks::fill(grid, levels, arrays, faces, iso)`. `fine` holds the device
+/// `adaptive::cracks::fill(grid, levels, arrays, faces, iso, progress)`. `fine` holds the device
 /// buffers of levels 2 and 3 (None for a level without cells) as `gpu::level` left them;
 /// `iso` is the f32 isovalue the level kernels compared with.
 pub fn fill(

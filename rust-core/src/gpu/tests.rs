@@ -602,8 +602,16 @@ fn gpu_crack_fills_equal_cpu_crack_fills() {
                 })
                 .collect();
             let arrays: Vec<LevelArrays> = built.iter().map(|l| l.arrays.clone()).collect();
-            let faces = cracks::transition_faces(&grid, &levels);
-            let cpu = cracks::fill(&grid, &levels, &arrays, &faces, iso as f64);
+            let faces = cracks::transition_faces(&grid, &levels, &mut Progress::none()).unwrap();
+            let cpu = cracks::fill(
+                &grid,
+                &levels,
+                &arrays,
+                &faces,
+                iso as f64,
+                &mut Progress::none(),
+            )
+            .unwrap();
             let fine = [built[1].buffers.as_ref(), built[2].buffers.as_ref()];
             let gpu = super::cracks::fill(g, &grid, &levels, fine, &faces, iso).unwrap();
             let kinds: HashSet<(u8, u8)> = faces
@@ -1200,7 +1208,7 @@ fn crack_fill_traffic() {
         let fine = [built[1].buffers.as_ref(), built[2].buffers.as_ref()];
         for call in 0..2 {
             let t = g.transfers();
-            let faces = cracks::transition_faces(&grid, &levels);
+            let faces = cracks::transition_faces(&grid, &levels, &mut Progress::none()).unwrap();
             let fills = super::cracks::fill(g, &grid, &levels, fine, &faces, iso).unwrap();
             println!(
                 "{name}: {} cells, {} faces, {} fills; crack fill call {call}: {:?}",
