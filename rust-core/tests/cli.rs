@@ -491,3 +491,26 @@ fn comma_separated_options_parse_as_documented() {
         &["lattice", "4"],
     );
 }
+
+/// h in other units than the positions (millimetres against metres) makes every
+/// particle a neighbour of every other: said on stderr, while a fitting h says nothing.
+#[test]
+fn a_kernel_wider_than_the_data_is_reported() {
+    let frame = shared("double_dam_break_frame_26_4732_particles.vtk");
+    for (h, warned) in [("0.05", false), ("50", true)] {
+        let out = temp(&format!("wide_{h}.ply"));
+        let run = isobar()
+            .args(["sph", &frame, "--field", "SumOfWeights", "--iso", "0.5"])
+            .args(["--h", h, "--quiet", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success(), "{err}");
+        assert_eq!(
+            err.contains("wider than the particles' extent"),
+            warned,
+            "h {h}: {err}"
+        );
+    }
+}
