@@ -375,3 +375,45 @@ fn an_interrupted_build_leaves_no_temporary_files() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// With isovalues on a pipe that stays open, Ctrl-C ends `slide` while it waits for the
+/// next line (std's line reader retried after the signal and waited on), with status 130.
+#[test]
+fn an_interrupt_ends_slide_while_it_waits_for_isovalues() {
+    use std::io::BufRead;
+    let raw = temp("waiting-ring.raw");
+    std::fs::write(&raw, ring_volume(0.0)).unwrap();
+    let mut child = isobar()
+        .arg("slide")
+        .arg(&raw)
+        .args(["--raw-type", "u16", "--raw-dims", "18,15,13"])
+        .arg("--store")
+        .arg(temp("waiting-ring.isoslider"))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    writeln!(stdin, "1500").unwrap();
+    let mut first = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert!(first.starts_with("iso 1500 "), "{first}");
+    // The first line is answered: `slide` now waits on the open pipe.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            start.elapsed().as_secs() < 20,
+            "slide did not end on SIGINT"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    };
+    drop(stdin);
+    assert_eq!(status.code(), Some(130));
+}

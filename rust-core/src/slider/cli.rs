@@ -290,10 +290,14 @@ pub fn run_slide(args: &SlideArgs) -> Result<()> {
 /// triangles added and removed, the slider's own memory ([`Slider::held_bytes`]) (and,
 /// with `lod`, the LOD mesh's triangles, vertices and build time).
 fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
-    let stdin = std::io::stdin();
+    let mut stdin = std::io::stdin().lock();
     let mut out = std::io::stdout().lock();
-    for (k, line) in stdin.lock().lines().enumerate() {
-        let line = line.map_err(|e| Error::io("<stdin>", e))?;
+    let mut line = Vec::new();
+    for k in 0.. {
+        if !next_line(&mut stdin, &mut line)? {
+            break;
+        }
+        let line = String::from_utf8_lossy(&line);
         let text = line.trim();
         if text.is_empty() || text.starts_with('#') {
             continue;
@@ -328,6 +332,35 @@ fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
         writeln!(out).map_err(|e| Error::io("<stdout>", e))?;
     }
     Ok(())
+}
+
+/// Reads the next line of `input` into `line`; false at the end of the input. An
+/// interrupt ends the command (Cancelled) between lines and while it waits for one:
+/// `BufRead::read_line` would retry after the signal and wait on.
+fn next_line(input: &mut impl BufRead, line: &mut Vec<u8>) -> Result<bool> {
+    line.clear();
+    loop {
+        if crate::terminal::interrupted() {
+            return Err(Error::Cancelled);
+        }
+        let available = match input.fill_buf() {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(Error::io("<stdin>", e)),
+        };
+        if available.is_empty() {
+            return Ok(!line.is_empty());
+        }
+        let (taken, ended) = match available.iter().position(|&b| b == b'\n') {
+            Some(i) => (i + 1, true),
+            None => (available.len(), false),
+        };
+        line.extend_from_slice(&available[..taken]);
+        input.consume(taken);
+        if ended {
+            return Ok(true);
+        }
+    }
 }
 
 /// Puts the terminal in non-canonical, no-echo mode while alive (through `stty`, so no
