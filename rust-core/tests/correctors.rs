@@ -503,6 +503,21 @@ fn bad_input_gets_a_clear_error() {
     );
 }
 
+/// The least budget in 0..2^30 bytes with which `run` is not refused as over budget, by
+/// bisection (any other error fails the test).
+fn least_budget<T>(run: impl Fn(u64) -> Result<T, Error>) -> u64 {
+    let (mut lo, mut hi) = (0u64, 1u64 << 30);
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        match run(mid) {
+            Ok(_) => hi = mid,
+            Err(Error::OverBudget { .. }) => lo = mid,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    hi
+}
+
 /// The surfaces of earlier isovalues stay in memory while later ones are tracked: they
 /// count against the budget (a thousand isovalues used to take any amount of memory).
 #[test]
@@ -510,26 +525,17 @@ fn earlier_isovalues_surfaces_count_against_the_budget() {
     let data = block(DVec3::ZERO, DVec3::new(0.6, 0.4, 0.3), 0.05, 5);
     let s = settings(Kernel::CubicSpline, 0.1, Quantity::SumOfWeights);
     let field = SphField::new(&data, &s).unwrap();
+    let params = |isovalues: Vec<f64>, memory_budget: u64| Params {
+        isovalues,
+        grid_factor: 0.375,
+        memory_budget,
+        ..Params::default()
+    };
     let extract = |isovalues: Vec<f64>, memory_budget: u64| {
-        let p = Params {
-            isovalues,
-            grid_factor: 0.375,
-            memory_budget,
-            ..Params::default()
-        };
+        let p = params(isovalues, memory_budget);
         correctors::extract(&field, &data, &p, &mut Progress::none())
     };
-    // The least budget one surface needs, by bisection.
-    let (mut lo, mut hi) = (0u64, 1u64 << 30);
-    while hi - lo > 1 {
-        let mid = (lo + hi) / 2;
-        match extract(vec![0.6], mid) {
-            Ok(_) => hi = mid,
-            Err(Error::OverBudget { .. }) => lo = mid,
-            Err(e) => panic!("{e}"),
-        }
-    }
-    let one = hi;
+    let one = least_budget(|b| extract(vec![0.6], b));
     // The same surface twice tracks through nodes the cache already holds: all the second
     // needs on top of the first's budget is room for the first's mesh.
     let twice = extract(vec![0.6, 0.6], 1 << 30).unwrap();
@@ -553,22 +559,10 @@ fn earlier_isovalues_surfaces_count_against_the_budget() {
 
     // The full-grid baseline holds its grid and the surfaces so far.
     let grid_only = |isovalues: Vec<f64>, memory_budget: u64| {
-        let p = Params {
-            isovalues,
-            grid_factor: 0.375,
-            memory_budget,
-            ..Params::default()
-        };
+        let p = params(isovalues, memory_budget);
         baseline::extract(&field, &data, &p, &mut Progress::none())
     };
-    let (mut lo, mut hi) = (0u64, 1u64 << 30);
-    while hi - lo > 1 {
-        let mid = (lo + hi) / 2;
-        match grid_only(vec![0.6], mid) {
-            Ok(_) => hi = mid,
-            Err(_) => lo = mid,
-        }
-    }
+    let hi = least_budget(|b| grid_only(vec![0.6], b));
     let err = grid_only(vec![0.6, 0.6], hi).unwrap_err();
     assert!(err.to_string().contains("surfaces of 1 isovalues"), "{err}");
     assert!(grid_only(vec![0.6, 0.6], hi + first).is_ok());

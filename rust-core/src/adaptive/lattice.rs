@@ -436,6 +436,21 @@ mod tests {
         }
     }
 
+    /// Checks that every node of covered cell `i` reads [`Wavy`] at that node to the bit;
+    /// returns the cell's values.
+    fn assert_cell_reads_wavy(lattice: &Lattice, grid: &CoarseGrid, i: usize) -> [f64; M * M * M] {
+        let c = grid.coords(i);
+        let mut values = [0.0; M * M * M];
+        lattice.cell(c, &mut values);
+        for (v, &f) in values.iter().enumerate() {
+            let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
+            let node = std::array::from_fn(|a| c[a] * 4 + l[a]);
+            let at = Wavy.value(grid.point(node.map(|x| x as i64), 0));
+            assert_eq!(f.to_bits(), at.to_bits(), "cell {i} node {node:?}");
+        }
+        values
+    }
+
     /// Every node of the covered cells reads the field's value at that node to the bit,
     /// including the grid's last nodes (in clipped tiles), each evaluated once: a second
     /// cover evaluates only the nodes the first did not, a repeated one nothing. Nodes of
@@ -494,15 +509,12 @@ mod tests {
             0
         );
         for &i in &cells {
-            let c = grid.coords(i);
-            let mut values = [0.0; M * M * M];
-            lattice.cell(c, &mut values);
-            for (v, &f) in values.iter().enumerate() {
-                let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
-                let node = std::array::from_fn(|a| c[a] * 4 + l[a]);
-                assert_eq!(f.to_bits(), at(node).to_bits(), "cell {i} node {node:?}");
-            }
-            assert_eq!(lattice.stored_cell(c), Some(values), "cell {i}");
+            let values = assert_cell_reads_wavy(&lattice, &grid, i);
+            assert_eq!(
+                lattice.stored_cell(grid.coords(i)),
+                Some(values),
+                "cell {i}"
+            );
         }
         // (1, 0, 1) shares nodes with covered cells but is not covered itself.
         assert_eq!(lattice.stored_cell([1, 0, 1]), None);
@@ -577,15 +589,7 @@ mod tests {
             161 * 161 * 161
         );
         for &i in cells.iter().step_by(97) {
-            let c = grid.coords(i);
-            let mut values = [0.0; M * M * M];
-            lattice.cell(c, &mut values);
-            for (v, &f) in values.iter().enumerate() {
-                let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
-                let node = std::array::from_fn(|a| c[a] * 4 + l[a]);
-                let at = Wavy.value(grid.point(node.map(|x| x as i64), 0));
-                assert_eq!(f.to_bits(), at.to_bits(), "cell {i} node {node:?}");
-            }
+            assert_cell_reads_wavy(&lattice, &grid, i);
         }
     }
 
