@@ -51,6 +51,7 @@ fn one_particle_gives_the_kernel_sphere() {
                 Attribute::scalar("a", vec![5.0]),
                 Attribute::scalar("vol", vec![2.0]),
             ],
+            ..Default::default()
         };
         let s = SphSettings {
             volumes: Volumes::Array("vol".into()),
@@ -601,6 +602,7 @@ fn lone_particle_is_found_at_every_isovalue() {
         let data = ParticleData {
             positions: vec![DVec3::new(0.1, 0.2, 0.3)],
             attributes: vec![Attribute::scalar("a", vec![1.0])],
+            ..Default::default()
         };
         let s = SphSettings {
             volumes: Volumes::Computed { mass: None },

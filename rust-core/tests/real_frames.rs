@@ -175,6 +175,7 @@ fn pieces_on_a_shared_lattice_reproduce_the_whole_surface() {
         let piece = ParticleData {
             positions,
             attributes: vec![],
+            ..Default::default()
         };
         pieces.push(extract(&piece, Some(clip)));
     }

@@ -154,6 +154,7 @@ fn fluid(radius: f64, dx: f64, droplets: &[DVec3]) -> ParticleData {
     ParticleData {
         positions,
         attributes: vec![],
+        ..Default::default()
     }
 }
 
@@ -476,6 +477,7 @@ fn torus(major: f64, minor: f64, dx: f64) -> ParticleData {
     ParticleData {
         positions,
         attributes: vec![],
+        ..Default::default()
     }
 }
 
@@ -644,6 +646,7 @@ fn droplets_near_a_slab_stay_fine_and_its_interior_stays_coarse() {
     let data = ParticleData {
         positions,
         attributes: vec![],
+        ..Default::default()
     };
     let field = sph(&data, h);
     let params = Params {
@@ -712,6 +715,7 @@ fn hidden_surface_rule_keeps_a_droplet_between_the_corners() {
     let data = |positions: Vec<DVec3>| ParticleData {
         positions,
         attributes: vec![],
+        ..Default::default()
     };
     // The grid's origin is the particles' lower bound less a padding: the slab's alone,
     // as the droplet lies above it. Its cell: one coarse cell above the kernel support.

@@ -279,6 +279,7 @@ mod tests {
         let data = ParticleData {
             positions: positions.clone(),
             attributes: vec![],
+            ..Default::default()
         };
         let field = SphField::new(
             &data,

@@ -38,6 +38,7 @@ fn create<T: Copy + Into<f64>>(
     let data = ParticleData {
         positions,
         attributes: vec![],
+        ..Default::default()
     };
     put(out, Box::into_raw(IsobarParticles::new(data)), "out")
 }

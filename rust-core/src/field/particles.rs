@@ -54,6 +54,16 @@ pub struct ParticleData {
     pub positions: Vec<DVec3>,
     /// Every per-particle array the source carried (velocity, pressure, density, mass ...).
     pub attributes: Vec<Attribute>,
+    /// Arrays the source held that are not per-particle data, kept by name so that asking
+    /// for one says why it cannot be used instead of claiming it is not there.
+    pub skipped: Vec<Skipped>,
+}
+
+/// An array a reader left out, and why ("shape (3,) for 46656 particles").
+#[derive(Clone, Debug, PartialEq)]
+pub struct Skipped {
+    pub name: String,
+    pub why: String,
 }
 
 impl ParticleData {
@@ -72,12 +82,21 @@ impl ParticleData {
         self.attributes.iter().find(|a| a.name == name)
     }
 
-    /// The attribute called `name`, or an error that lists what is there.
+    /// The attribute called `name`, or an error that lists what is there (or, for an
+    /// array the reader left out, says why).
     pub fn require(&self, name: &str) -> Result<&Attribute> {
-        self.attribute(name).ok_or_else(|| Error::MissingArray {
-            name: name.to_string(),
-            available: self.attribute_names(),
-        })
+        self.attribute(name)
+            .ok_or_else(|| match self.skipped.iter().find(|s| s.name == name) {
+                Some(s) => Error::InvalidInput(format!(
+                    "array '{name}' is not per-particle data: {} (usable arrays: {})",
+                    s.why,
+                    self.attribute_names()
+                )),
+                None => Error::MissingArray {
+                    name: name.to_string(),
+                    available: self.attribute_names(),
+                },
+            })
     }
 
     /// Comma-separated attribute names, for messages.

@@ -709,6 +709,7 @@ mod tests {
         let data = ParticleData {
             positions,
             attributes: vec![],
+            ..Default::default()
         };
         (data, points)
     }

@@ -150,6 +150,7 @@ pub(crate) fn read(bytes: &[u8], name: &str) -> Result<ParticleData> {
     Ok(ParticleData {
         positions,
         attributes,
+        ..Default::default()
     })
 }
 

@@ -144,6 +144,7 @@ pub(crate) fn read_xyz(bytes: &[u8], name: &str) -> Result<ParticleData> {
             .enumerate()
             .map(|(k, c)| Attribute::scalar(format!("col{}", k + 3), c))
             .collect(),
+        ..Default::default()
     })
 }
 
@@ -278,6 +279,7 @@ fn assemble(names: &[String], columns: Vec<Vec<f64>>, file: &str) -> Result<Part
     Ok(ParticleData {
         positions,
         attributes: attributes.into_iter().map(|(_, a)| a).collect(),
+        ..Default::default()
     })
 }
 

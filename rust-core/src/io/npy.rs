@@ -7,7 +7,7 @@
 
 use super::numeric::{byte_len, show, Endian, Scalar};
 use crate::error::{Error, Result};
-use crate::field::particles::{Attribute, ParticleData};
+use crate::field::particles::{Attribute, ParticleData, Skipped};
 use std::io::Read;
 
 /// Names under which an `.npz` may store its (N, 3) positions, in order of preference.
@@ -18,7 +18,7 @@ pub(crate) fn read_npy(bytes: &[u8], name: &str) -> Result<ParticleData> {
     let array = Array::parse(bytes, name, None)?;
     Ok(ParticleData {
         positions: array.positions(name)?,
-        attributes: Vec::new(),
+        ..Default::default()
     })
 }
 
@@ -170,23 +170,40 @@ pub(crate) fn read_npz(bytes: &[u8], name: &str) -> Result<ParticleData> {
 
     let n = positions.len() as u64;
     let mut attributes = Vec::new();
-    for (key, array) in &arrays {
-        // Arrays of another length, rank or an unsupported dtype are not per-particle data.
-        let Ok(array) = array else { continue };
+    let mut skipped = Vec::new();
+    for (key, array) in arrays {
+        // Arrays of another length, rank or an unsupported dtype are not per-particle data
+        // (an archive may hold a time step or a box too); they are kept aside by name.
+        let array = match array {
+            Ok(array) => array,
+            Err(e) => {
+                let why = match e {
+                    Error::Format { message, .. } => message,
+                    other => other.to_string(),
+                };
+                skipped.push(Skipped { name: key, why });
+                continue;
+            }
+        };
         let components = match array.shape[..] {
             [m] if m == n => 1,
             [m, k] if m == n && k > 0 => k as usize,
-            _ => continue,
+            _ => {
+                let why = format!("shape {} for {n} particles", shape_text(&array.shape));
+                skipped.push(Skipped { name: key, why });
+                continue;
+            }
         };
         attributes.push(Attribute {
-            name: key.clone(),
+            name: key,
             components,
-            data: array.data.clone(),
+            data: array.data,
         });
     }
     Ok(ParticleData {
         positions,
         attributes,
+        skipped,
     })
 }
 
@@ -480,6 +497,23 @@ pub(crate) mod tests {
             assert_eq!(p.require("mass").unwrap().data, vec![7.0, 8.0]);
             assert_eq!(p.require("flags").unwrap().components, 2);
         }
+    }
+
+    /// Arrays that are not per-particle data are left out, and asking for one says why.
+    #[test]
+    fn arrays_left_out_say_why_when_asked_for() {
+        let p = read_particles_from_bytes(&sample_npz(true), "npz", "s.npz").unwrap();
+        let why = |name: &str| p.require(name).unwrap_err().to_string();
+        assert!(why("time").contains("'time' is not per-particle data: shape () for 2 particles"));
+        assert!(why("grid").contains("shape (2, 2, 2) for 2 particles"));
+        let names = why("names");
+        assert!(names.contains("unsupported dtype '<U3'"), "{names}");
+        assert!(
+            names.contains("usable arrays: velocity, mass, flags"),
+            "{names}"
+        );
+        let absent = why("pressure");
+        assert!(absent.contains("no array named 'pressure'"), "{absent}");
     }
 
     #[test]

@@ -24,6 +24,7 @@ pub(crate) fn read_particles(bytes: &[u8], name: &str) -> Result<ParticleData> {
     Ok(ParticleData {
         positions: positions.into_iter().map(glam::DVec3::from_array).collect(),
         attributes,
+        ..Default::default()
     })
 }
 

@@ -6,7 +6,7 @@
 
 use super::numeric::{byte_len, parse_number, show, Endian, Scalar, Tokens};
 use crate::error::{Error, Result};
-use crate::field::particles::{Attribute, ParticleData};
+use crate::field::particles::{Attribute, ParticleData, Skipped};
 
 /// Reads the points and point arrays of a legacy VTK file.
 pub(crate) fn read(bytes: &[u8], name: &str) -> Result<ParticleData> {
@@ -209,6 +209,7 @@ impl<'a> Reader<'a> {
         // was cut short, even though everything before the cut parses.
         let mut cells_without_types = false;
         let mut attributes: Vec<Attribute> = Vec::new();
+        let mut skipped = Vec::new();
         let mut section = Section::None;
         while let Some(line) = self.line() {
             let words: Vec<&str> = line.split_whitespace().collect();
@@ -259,9 +260,12 @@ impl<'a> Reader<'a> {
                             )))
                         }
                     };
-                    let array = self.attribute(&words, &keyword, items, section)?;
-                    if let (Section::Point(_), Some(a)) = (section, array) {
-                        attributes.push(a);
+                    match self.attribute(&words, &keyword, items, section)? {
+                        Some(a) => attributes.push(a),
+                        None => skipped.push(Skipped {
+                            name: words[1].to_string(),
+                            why: "it is CELL_DATA, one value per cell".into(),
+                        }),
                     }
                 }
             }
@@ -281,6 +285,7 @@ impl<'a> Reader<'a> {
         Ok(ParticleData {
             positions: super::positions_from_flat(&flat),
             attributes,
+            skipped,
         })
     }
 
@@ -495,6 +500,11 @@ mod tests {
         assert_eq!(p.attribute("c").unwrap().data, vec![1.0, 2.0, 3.0, 4.0]);
         assert_eq!(p.attribute("v").unwrap().components, 3);
         assert_eq!(p.attribute("mass").unwrap().data, vec![0.5, 0.25]);
+        let e = p.require("cd").unwrap_err().to_string();
+        assert!(
+            e.contains("'cd' is not per-particle data: it is CELL_DATA"),
+            "{e}"
+        );
     }
 
     #[test]

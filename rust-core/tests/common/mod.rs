@@ -50,6 +50,7 @@ pub fn with_fields(positions: Vec<DVec3>, top: f64) -> ParticleData {
             Attribute::scalar("pressure", pressure),
             Attribute::vector("velocity", velocity),
         ],
+        ..Default::default()
     }
 }
 

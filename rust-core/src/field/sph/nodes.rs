@@ -274,6 +274,7 @@ mod tests {
         ParticleData {
             positions,
             attributes: vec![Attribute::scalar("h", h), Attribute::scalar("p", p)],
+            ..Default::default()
         }
     }
 

@@ -88,7 +88,7 @@ pub(crate) fn read_fe_mesh(bytes: &[u8], name: &str) -> Result<FeMesh> {
         point_data = if k == 0 {
             arrays
         } else {
-            super::join_attributes(point_data, arrays)
+            super::join_attributes(point_data, arrays, drop)
         };
     }
     if legacy_hex {

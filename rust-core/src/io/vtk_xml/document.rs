@@ -23,7 +23,7 @@ pub(super) struct DataArray {
     pub(super) name: String,
     /// `None` for types that are not numbers (String, Bit).
     pub(super) ty: Option<Scalar>,
-    type_name: String,
+    pub(super) type_name: String,
     pub(super) components: usize,
     format: Format,
     /// Inline content (ascii numbers or base64).

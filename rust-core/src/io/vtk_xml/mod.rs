@@ -15,7 +15,7 @@ mod tests;
 mod write;
 
 use crate::error::{Error, Result};
-use crate::field::particles::{Attribute, ParticleData};
+use crate::field::particles::{Attribute, ParticleData, Skipped};
 use crate::mesh::Mesh;
 use document::Document;
 
@@ -26,7 +26,8 @@ pub(crate) use points::write_points;
 pub(crate) use write::write_mesh;
 
 /// Reads the points and point arrays of every piece of a VTK XML dataset (pieces are
-/// concatenated; an array missing from some piece is dropped).
+/// concatenated; an array missing from some piece is left out, and so is an array of
+/// strings or bits, each noted in `skipped`).
 pub(crate) fn read_particles(bytes: &[u8], name: &str) -> Result<ParticleData> {
     let doc = Document::parse(bytes, name)?;
     let mut out = ParticleData::default();
@@ -36,6 +37,12 @@ pub(crate) fn read_particles(bytes: &[u8], name: &str) -> Result<ParticleData> {
         for a in piece.arrays.iter().filter(|a| a.section == "PointData") {
             // Strings and bit arrays carry nothing a field can use.
             if a.ty.is_none() {
+                if !out.skipped.iter().any(|s| s.name == a.name) {
+                    out.skipped.push(Skipped {
+                        name: a.name.clone(),
+                        why: format!("its type {} is not numeric", a.type_name),
+                    });
+                }
                 continue;
             }
             attributes.push(Attribute {
@@ -48,7 +55,14 @@ pub(crate) fn read_particles(bytes: &[u8], name: &str) -> Result<ParticleData> {
         if k == 0 {
             out.attributes = attributes;
         } else {
-            out.attributes = join_attributes(std::mem::take(&mut out.attributes), attributes);
+            let all = std::mem::take(&mut out.attributes);
+            out.attributes = join_attributes(all, attributes, |a| {
+                let why = format!(
+                    "piece {k} has no {}-component array of that name",
+                    a.components
+                );
+                out.skipped.push(Skipped { name: a.name, why });
+            });
         }
     }
     Ok(out)
@@ -106,18 +120,28 @@ pub(crate) fn read_mesh(bytes: &[u8], name: &str) -> Result<Mesh> {
         mesh.attributes = if k == 0 {
             attributes
         } else {
-            join_attributes(std::mem::take(&mut mesh.attributes), attributes)
+            join_attributes(std::mem::take(&mut mesh.attributes), attributes, drop)
         };
     }
     Ok(mesh)
 }
-/// Keeps the arrays of `all` that `next` also has with the same width, extended by its data.
-fn join_attributes(all: Vec<Attribute>, next: Vec<Attribute>) -> Vec<Attribute> {
+
+/// Keeps the arrays of `all` that `next` also has with the same width, extended by its data;
+/// the others are handed to `dropped`.
+fn join_attributes(
+    all: Vec<Attribute>,
+    next: Vec<Attribute>,
+    mut dropped: impl FnMut(Attribute),
+) -> Vec<Attribute> {
     all.into_iter()
         .filter_map(|mut a| {
-            let b = next
+            let Some(b) = next
                 .iter()
-                .find(|b| b.name == a.name && b.components == a.components)?;
+                .find(|b| b.name == a.name && b.components == a.components)
+            else {
+                dropped(a);
+                return None;
+            };
             a.data.extend_from_slice(&b.data);
             Some(a)
         })

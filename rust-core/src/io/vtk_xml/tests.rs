@@ -288,6 +288,37 @@ fn unsupported_features_are_named() {
     assert!(e.starts_with("b.vtu: "), "{e}");
 }
 
+/// A string array, and an array only the first piece has, are left out of the particles;
+/// asking for either says why.
+#[test]
+fn arrays_left_out_say_why_when_asked_for() {
+    let piece = |arrays: &str| {
+        format!(
+            "<Piece NumberOfPoints=\"1\" NumberOfCells=\"0\"><Points>\
+             <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">0 0 0</DataArray>\
+             </Points><PointData>{arrays}</PointData></Piece>"
+        )
+    };
+    let rho = "<DataArray type=\"Float32\" Name=\"rho\" format=\"ascii\">1000</DataArray>";
+    let tag = "<DataArray type=\"String\" Name=\"tag\" format=\"ascii\">97 0</DataArray>";
+    let file = format!(
+        "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\"><UnstructuredGrid>{}{}\
+         </UnstructuredGrid></VTKFile>",
+        piece(&format!("{rho}{tag}")),
+        piece(tag)
+    );
+    let p = read_particles(file.as_bytes(), "two.vtu").unwrap();
+    assert_eq!(p.len(), 2);
+    assert!(p.attributes.is_empty());
+    let e = p.require("rho").unwrap_err().to_string();
+    assert!(
+        e.contains("'rho' is not per-particle data: piece 1 has no 1-component array"),
+        "{e}"
+    );
+    let e = p.require("tag").unwrap_err().to_string();
+    assert!(e.contains("its type String is not numeric"), "{e}");
+}
+
 #[test]
 fn vtp_round_trip_is_exact() {
     let dir = scratch_dir("vtp");
