@@ -625,6 +625,12 @@ enum IsobarStatus isobar_surface_attribute(const struct IsobarSurface *s,
                                            size_t *components,
                                            const double **data);
 
+// What the extraction warns about although it succeeded, one warning a line: a kernel
+// wider than the whole particle set (h and positions in different units?), an isovalue
+// the field never crosses. "" when there is nothing to say, and for NULL. Hosts show
+// each line as a warning. Valid until `isobar_surface_free`.
+const char *isobar_surface_warnings(const struct IsobarSurface *s);
+
 // Copies the statistics into `out` (whose `struct_size` the caller sets).
 enum IsobarStatus isobar_surface_stats(const struct IsobarSurface *s, struct IsobarStats *out);
 

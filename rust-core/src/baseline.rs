@@ -132,7 +132,7 @@ pub fn extract(
             span,
             &mut stats,
         )?;
-        surface::append_surface(&mut mesh, part, iso, params);
+        surface::append_surface(&mut mesh, part, iso, params, &mut stats.warnings);
     }
     stats.vertices = mesh.vertex_count() as u64;
     stats.triangles = mesh.triangles.len() as u64;

@@ -628,3 +628,64 @@ fn lone_particle_is_found_at_every_isovalue() {
         }
     }
 }
+
+/// What is not an error but still wrong-looking reaches the caller in the stats, for every
+/// host to show: an isovalue the field never crosses, and a kernel wider than the whole
+/// particle set (h in other units than the positions). Neither appears on sound input.
+#[test]
+fn warnings_name_an_isovalue_never_crossed_and_a_kernel_wider_than_the_data() {
+    let data = block(DVec3::ZERO, DVec3::ONE, 0.2, 7);
+    assert!(data.len() >= 100, "{} particles", data.len());
+    let pressure = settings(
+        Kernel::CubicSpline,
+        0.3,
+        Quantity::Scalar("pressure".into()),
+    );
+    let crossed = Params {
+        isovalues: vec![2000.0],
+        trim: None,
+        ..Params::default()
+    };
+    let sound = run(&data, &pressure, &crossed);
+    assert!(!sound.mesh.triangles.is_empty());
+    assert_eq!(sound.stats.warnings, Vec::<String>::new());
+
+    let beyond = Params {
+        isovalues: vec![2000.0, 1e12],
+        ..crossed.clone()
+    };
+    let one_empty = run(&data, &pressure, &beyond);
+    assert_eq!(one_empty.mesh.triangles.len(), sound.mesh.triangles.len());
+    assert_eq!(
+        one_empty.stats.warnings,
+        ["no surface at isovalue 1000000000000: the field never crosses it"]
+    );
+
+    let wide = settings(Kernel::CubicSpline, 2.0, Quantity::SumOfWeights);
+    let field = SphField::new(&data, &wide).unwrap();
+    let [warning] = field.warnings() else {
+        panic!("{:?}", field.warnings())
+    };
+    assert!(
+        warning.contains("kernel support (4.0000, from h = 2) is wider than the particles' extent"),
+        "{warning}"
+    );
+    let blob = run(&data, &wide, &crossed);
+    assert_eq!(blob.stats.warnings[0], *warning);
+    let adaptive = isobar::adaptive::extract_sph(
+        &field,
+        &isobar::adaptive::Params {
+            isovalue: 1e12,
+            ..isobar::adaptive::Params::default()
+        },
+        &mut Progress::none(),
+    )
+    .unwrap();
+    assert_eq!(
+        adaptive.stats.warnings,
+        [
+            warning.clone(),
+            "no surface at isovalue 1000000000000: the field never crosses it".into()
+        ]
+    );
+}

@@ -118,7 +118,29 @@ int main(int argc, char **argv) {
     CHECK(isobar_surface_attribute(surface, 0, &name, &components, &weights) == ISOBAR_STATUS_OK, "attribute");
     CHECK(name && strcmp(name, "SumOfWeights") == 0 && components == 1 && weights, "SumOfWeights");
     CHECK(isobar_surface_attribute(surface, 99, &name, &components, &weights) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "index 99");
+    CHECK(strcmp(isobar_surface_warnings(surface), "") == 0, "warnings on a sound surface: %s",
+          isobar_surface_warnings(surface));
+    CHECK(strcmp(isobar_surface_warnings(NULL), "") == 0, "warnings of NULL");
     isobar_surface_free(surface);
+
+    /* Above the particle's peak the field is never crossed: an empty surface, and a
+     * warning saying so, one line per isovalue. */
+    {
+        const double above[2] = {2.0 * value * volume * cubic(0.0, h), 3.0 * value * volume * cubic(0.0, h)};
+        params.isovalues = above;
+        params.isovalue_count = 2;
+        IsobarSurface *empty = NULL;
+        CHECK(isobar_sph_extract(particles, &params, NULL, NULL, &empty) == ISOBAR_STATUS_OK, "extract above the peak");
+        CHECK(isobar_surface_triangle_count(empty) == 0, "no triangles above the peak");
+        const char *warnings = isobar_surface_warnings(empty);
+        const char *newline = strchr(warnings, '\n');
+        CHECK(strncmp(warnings, "no surface at isovalue ", 23) == 0 && newline &&
+                  strncmp(newline + 1, "no surface at isovalue ", 23) == 0 && !strchr(newline + 1, '\n'),
+              "two warnings, one a line: '%s'", warnings);
+        isobar_surface_free(empty);
+        params.isovalues = &iso;
+        params.isovalue_count = 1;
+    }
 
     /* The adaptive 3-level surface of the same particle: every vertex within the
      * bisection accuracy (finest cell / 2^n, n = the level-3 halvings) of the sphere

@@ -121,7 +121,7 @@ pub fn run(
             Ok((field, build_s, out))
         })?;
         io::write_mesh(&output, &out.mesh)?;
-        io::warn_if_empty(path, &out.mesh, common.iso);
+        io::print_warnings(path, &out.stats.warnings);
         let mut rows = rows(&data, &out.stats, build_s);
         if args.compare {
             rows.extend(compare(&field, &params, &out)?);

@@ -192,6 +192,9 @@ pub struct Stats {
     pub timings: Timings,
     /// The back end that ran (`Cpu` or `Gpu`, never `Auto`).
     pub backend: Backend,
+    /// What the caller should tell the user although nothing failed (see
+    /// [`crate::correctors::Stats::warnings`]).
+    pub warnings: Vec<String>,
 }
 
 /// A surface and how it was made.
@@ -359,6 +362,9 @@ pub fn extract_sph(
         }
     };
     out.stats.timings.total += out.stats.timings.levels;
+    out.stats
+        .warnings
+        .splice(0..0, field.warnings().iter().cloned());
     Ok(out)
 }
 
@@ -598,6 +604,11 @@ fn extract_with(
     stats.timings.assembly = t.elapsed().as_secs_f64();
     stats.vertices = mesh.vertex_count() as u64;
     stats.triangles = mesh.triangles.len() as u64;
+    if mesh.triangles.is_empty() {
+        stats
+            .warnings
+            .push(crate::mesh::no_surface(params.isovalue));
+    }
     stats.timings.total = start.elapsed().as_secs_f64();
     progress.phase("done", 1.0, 1.0)?;
     Ok(Extraction { mesh, stats })

@@ -236,39 +236,7 @@ fn settings_from(args: &SphArgs, data: &ParticleData) -> Result<SphSettings> {
         shepard: args.shepard,
         memory_budget: (args.memory_budget * (1u64 << 30) as f64) as u64,
     };
-    warn_if_support_spans_the_data(data, &settings);
     Ok(settings)
-}
-
-/// Says on stderr when the kernel's support is wider than the whole particle set: every
-/// particle is then a neighbour of every other (N² pairs: minutes on large frames, and a
-/// surface smoothed into a blob). Usually h was given in other units than the positions.
-fn warn_if_support_spans_the_data(data: &ParticleData, settings: &SphSettings) {
-    // A few particles under one wide kernel can be meant; hundreds are a frame.
-    if data.len() < 100 {
-        return;
-    }
-    let h = match &settings.smoothing_length {
-        SmoothingLength::Constant(h) => *h,
-        SmoothingLength::Array(name) => match data.attribute(name) {
-            Some(a) => a.data.iter().copied().fold(f64::NAN, f64::max),
-            None => return,
-        },
-    };
-    let support = settings.kernel.support_factor() * h * settings.h_scale;
-    let (lo, hi) = data.positions.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    let extent = (hi - lo).length();
-    if support > extent {
-        eprintln!(
-            "isobar: warning: the kernel support ({support:.4}, from h = {h}) is wider than \
-             the particles' extent ({extent:.4}): every particle neighbours every other, \
-             which is slow and smooths the surface away; are h and the positions in the \
-             same units?"
-        );
-    }
 }
 
 /// Checks that a comma-separated option has exactly `n` values.
@@ -365,7 +333,7 @@ fn run_sph(args: &SphArgs) -> Result<()> {
         let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)
             .map_err(|e| e.in_file(path))?;
         io::write_mesh(&output, &extraction.mesh)?;
-        io::warn_if_empty(path, &extraction.mesh, &args.iso);
+        io::print_warnings(path, &extraction.stats.warnings);
         if !args.quiet {
             print_stats(path, &data, &extraction.stats, read_s, build_s);
             println!("surface written to {}", output.display());

@@ -203,6 +203,7 @@ pub extern "C" fn isobar_adaptive_extract(
                     total: s.timings.total,
                     ..correctors::Timings::default()
                 },
+                warnings: s.warnings.clone(),
                 ..correctors::Stats::default()
             },
             mesh: extraction.mesh,

@@ -11,12 +11,20 @@ use std::ffi::{c_char, CString};
 pub struct IsobarSurface {
     extraction: Extraction,
     names: Vec<CString>,
+    /// The extraction's warnings, one a line.
+    warnings: CString,
 }
 
 impl IsobarSurface {
     pub(crate) fn new(extraction: Extraction) -> Box<Self> {
         let names = names_of(&extraction.mesh.attributes);
-        Box::new(IsobarSurface { extraction, names })
+        let text = extraction.stats.warnings.join("\n").replace('\0', " ");
+        let warnings = CString::new(text).unwrap_or_default();
+        Box::new(IsobarSurface {
+            extraction,
+            names,
+            warnings,
+        })
     }
 }
 
@@ -123,6 +131,15 @@ pub extern "C" fn isobar_surface_attribute(
             data,
         )
     })
+}
+
+/// What the extraction warns about although it succeeded, one warning a line: a kernel
+/// wider than the whole particle set (h and positions in different units?), an isovalue
+/// the field never crosses. "" when there is nothing to say, and for NULL. Hosts show
+/// each line as a warning. Valid until `isobar_surface_free`.
+#[no_mangle]
+pub extern "C" fn isobar_surface_warnings(s: *const IsobarSurface) -> *const c_char {
+    surface(s).map_or(c"".as_ptr(), |s| s.warnings.as_ptr())
 }
 
 /// Copies the statistics into `out` (whose `struct_size` the caller sets).

@@ -202,6 +202,9 @@ pub struct Stats {
     /// The back end the seed search ran on: `Cpu` or `Gpu` (never `Auto`).
     pub backend: Backend,
     pub timings: Timings,
+    /// What the caller should tell the user although nothing failed: the field's own
+    /// warnings, and each isovalue the field never crosses.
+    pub warnings: Vec<String>,
 }
 
 /// A surface and how it was made.
@@ -309,6 +312,7 @@ pub fn extract(
     let attributes = surface::AttributeSource::new(field, data, &params.attributes)?;
     let mut stats = Stats {
         virtual_cells: grid.cell_count(),
+        warnings: field.warnings().to_vec(),
         ..Stats::default()
     };
     let mut cache = NodeCache::for_grid(&grid, tracking::index_bytes(params.memory_budget));
@@ -393,7 +397,7 @@ pub fn extract(
             span,
             &mut stats,
         )?;
-        surface::append_surface(&mut mesh, part, iso, params);
+        surface::append_surface(&mut mesh, part, iso, params, &mut stats.warnings);
     }
     stats.field_evaluations += stats.node_evaluations;
     stats.vertices = mesh.vertex_count() as u64;

@@ -52,8 +52,17 @@ impl AttributeSource {
 }
 
 /// Appends one isovalue's surface to the extraction's mesh, tagging its vertices with an
-/// `Isovalue` array when there are several.
-pub fn append_surface(mesh: &mut Mesh, mut part: Mesh, iso: f64, params: &Params) {
+/// `Isovalue` array when there are several; an empty one is a warning.
+pub fn append_surface(
+    mesh: &mut Mesh,
+    mut part: Mesh,
+    iso: f64,
+    params: &Params,
+    warnings: &mut Vec<String>,
+) {
+    if part.triangles.is_empty() {
+        warnings.push(crate::mesh::no_surface(iso));
+    }
     if params.isovalues.len() > 1 {
         let n = part.vertex_count();
         part.attributes

@@ -208,6 +208,8 @@ pub struct SphField {
     /// Every particle's value is exactly 1 (the sum-of-weights field): Σ w·1 is Σ w to
     /// the bit, so the loops sum only the weights and copy them.
     unit_values: bool,
+    /// What the data suggests went wrong without being an error, for every host to show.
+    warnings: Vec<String>,
 }
 
 impl SphField {
@@ -311,6 +313,7 @@ impl SphField {
                     max_support,
                     bounds: (DVec3::ZERO, DVec3::ZERO),
                     unit_values: false,
+                    warnings: Vec::new(),
                 };
                 let slots: Vec<usize> = (0..n).collect();
                 chunked(&slots, progress, |part| {
@@ -331,6 +334,10 @@ impl SphField {
         for (p, v) in particles.iter_mut().zip(&volumes) {
             p.weight_scale *= v;
         }
+        let bounds = super::neighbours::bounds(&data.positions);
+        let warnings = support_spans_the_data(n, max_support, bounds, settings)
+            .into_iter()
+            .collect();
         Ok(SphField {
             kernel,
             shepard: settings.shepard,
@@ -338,10 +345,17 @@ impl SphField {
             h_unscaled,
             h_scale: settings.h_scale,
             max_support,
-            bounds: super::neighbours::bounds(&data.positions),
+            bounds,
             unit_values: particles.iter().all(|p| p.value == 1.0),
             particles,
+            warnings,
         })
+    }
+
+    /// Warnings about the data that are not errors (a kernel wider than the particle set),
+    /// which extractions pass on in their stats.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// Bounds of the particle positions.
@@ -634,6 +648,27 @@ impl SphField {
     pub fn search_reach(&self) -> u32 {
         REACH as u32
     }
+}
+
+/// A warning when the kernel's support is wider than the whole particle set: every
+/// particle is then a neighbour of every other (N² pairs: minutes on large frames, and a
+/// surface smoothed into a blob). Usually h was given in other units than the positions.
+fn support_spans_the_data(
+    n: usize,
+    support: f64,
+    (lo, hi): (DVec3, DVec3),
+    settings: &SphSettings,
+) -> Option<String> {
+    // A few particles under one wide kernel can be meant; hundreds are a frame.
+    let extent = (hi - lo).length();
+    (n >= 100 && support > extent).then(|| {
+        let h = support / (settings.kernel.support_factor() * settings.h_scale);
+        format!(
+            "the kernel support ({support:.4}, from h = {h}) is wider than the particles' \
+             extent ({extent:.4}): every particle neighbours every other, which is slow and \
+             smooths the surface away; are h and the positions in the same units?"
+        )
+    })
 }
 
 impl ScalarField for SphField {

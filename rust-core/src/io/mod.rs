@@ -50,7 +50,7 @@ pub use atomic::check_writable as check_output;
 pub(crate) use atomic::{open_regular, parent_dir, read_regular_file, write_atomically};
 pub use sequence::{
     check_frame_outputs, expand_sequence, fill_frame, frame_number, frame_output, missing_frames,
-    warn_if_empty, warn_if_gaps,
+    print_warnings, warn_if_gaps,
 };
 pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};

@@ -163,17 +163,12 @@ pub fn check_frame_outputs(
     Ok(())
 }
 
-/// Says on stderr (also with `--quiet`) that the surface of `frame` at `isovalues` is
-/// empty: an empty file is a valid answer, but usually means an isovalue outside the
-/// field's range or the wrong field, which the user should hear about.
-pub fn warn_if_empty(frame: &Path, mesh: &crate::mesh::Mesh, isovalues: &[f64]) {
-    if mesh.triangles.is_empty() {
-        let isovalues: Vec<String> = isovalues.iter().map(f64::to_string).collect();
-        eprintln!(
-            "isobar: warning: {}: no surface at isovalue {}; the output mesh is empty",
-            frame.display(),
-            isovalues.join(", ")
-        );
+/// Says on stderr (also with `--quiet`) what the extraction of `frame` warned about: an
+/// isovalue with no surface, a kernel wider than the particles (the extraction's
+/// `warnings`, which every host shows its own way).
+pub fn print_warnings(frame: &Path, warnings: &[String]) {
+    for w in warnings {
+        eprintln!("isobar: warning: {}: {w}", frame.display());
     }
 }
 

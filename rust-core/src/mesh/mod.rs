@@ -184,3 +184,9 @@ impl Mesh {
         self.attributes = joined;
     }
 }
+
+/// The warning for an isovalue that gave no triangle: an empty mesh is a valid answer, but
+/// usually means an isovalue outside the field's range or the wrong field.
+pub(crate) fn no_surface(iso: f64) -> String {
+    format!("no surface at isovalue {iso}: the field never crosses it")
+}
