@@ -6,6 +6,7 @@ the sphere of radius q h.
 """
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -63,3 +64,26 @@ def test_float32_positions_give_the_same_sphere_as_float64():
     s64 = isobar.extract(p64, iso_for(0.7), **kw)
     assert np.array_equal(s32.points, s64.points)
     assert np.array_equal(s32.triangles, s64.triangles)
+
+
+def test_an_isovalue_above_the_peak_warns_and_gives_an_empty_surface():
+    peak = iso_for(0.0)
+    with pytest.warns(isobar.IsobarWarning, match=r"no surface at isovalue .*never crosses it") as caught:
+        s = isobar.extract(one_particle(), 2 * peak, field="a", h=H, volume_array="vol", trim=None)
+    assert s.n_triangles == 0
+    assert s.warnings == [str(w.message) for w in caught]
+    assert len(s.warnings) == 1
+    # The warning points at the caller's line, not at the package.
+    assert caught[0].filename == __file__
+
+
+def test_a_kernel_wider_than_the_particles_warns_and_a_sound_one_does_not():
+    rng = np.random.default_rng(3)
+    cloud = rng.uniform(0.0, 1.0, (200, 3))
+    with pytest.warns(isobar.IsobarWarning, match=r"kernel support .* is wider than the particles' extent"):
+        s = isobar.extract(isobar.Particles.from_arrays(cloud), 0.5, h=5.0, trim=None)
+    assert any("wider than" in w for w in s.warnings)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", isobar.IsobarWarning)
+        sound = isobar.extract(isobar.Particles.from_arrays(cloud), 0.5, h=0.15, trim=None)
+    assert sound.warnings == [] and sound.n_triangles > 0

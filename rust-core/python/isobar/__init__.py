@@ -31,6 +31,7 @@ from .errors import (
     InvalidArgumentError,
     InvalidInputError,
     IoError,
+    IsobarWarning,
     OverBudgetError,
     Status,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "InvalidArgumentError",
     "InvalidInputError",
     "IoError",
+    "IsobarWarning",
     "OverBudgetError",
     "Particles",
     "Samples",

@@ -376,6 +376,7 @@ _PROTOTYPES = {
         [POINTER(SurfaceHandle), c_size_t, POINTER(c_char_p), POINTER(c_size_t), POINTER(POINTER(c_double))],
     ),
     "isobar_surface_stats": (_Status, [POINTER(SurfaceHandle), POINTER(Stats)]),
+    "isobar_surface_warnings": (c_char_p, [POINTER(SurfaceHandle)]),
     "isobar_surface_write": (_Status, [POINTER(SurfaceHandle), c_char_p]),
     "isobar_surface_free": (None, [POINTER(SurfaceHandle)]),
     # slider

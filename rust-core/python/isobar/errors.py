@@ -88,6 +88,12 @@ class InternalError(Error):
     default_status = Status.INTERNAL
 
 
+class IsobarWarning(UserWarning):
+    """An extraction succeeded but its input looks wrong: an isovalue the field never
+    crosses (an empty surface), a kernel wider than the whole particle set (h in other
+    units than the positions). Also kept in :attr:`isobar.Surface.warnings`."""
+
+
 _BY_STATUS = {
     Status.INVALID_ARGUMENT: InvalidArgumentError,
     Status.INVALID_INPUT: InvalidInputError,

@@ -7,13 +7,14 @@ import math
 import numbers
 import signal
 import threading
+import warnings
 from ctypes import POINTER, byref, c_char_p, c_double
 from typing import Callable, Iterable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from ._lib import BACKENDS, KERNELS, PROGRESS_FN, SphParams, SurfaceHandle, check, encode, lib
-from .errors import InvalidArgumentError, Status
+from .errors import InvalidArgumentError, IsobarWarning, Status
 from .particles import Particles
 from .surface import Surface
 
@@ -249,7 +250,11 @@ def _run(invoke, progress: Optional[ProgressCallback], normals: bool) -> Surface
     """Calls ``invoke(callback, handle)`` (a core extraction writing a surface handle) with
     the progress/cancel/Ctrl-C wiring, and wraps the result."""
     handle = _call(invoke, progress, POINTER(SurfaceHandle)(), lib.isobar_surface_free)
-    return Surface._from_handle(handle, normals_requested=bool(normals))
+    surface = Surface._from_handle(handle, normals_requested=bool(normals))
+    for text in surface.warnings:
+        # stacklevel 3: the line that called extract() or extract_adaptive().
+        warnings.warn(text, IsobarWarning, stacklevel=3)
+    return surface
 
 
 def _call(invoke, progress: Optional[ProgressCallback], handle, free):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import weakref
 from ctypes import POINTER, byref, c_char_p, c_double, c_size_t, sizeof
-from typing import Dict, Optional
+from typing import Dict, List, Optional
 
 import numpy as np
 
@@ -48,12 +48,25 @@ class Surface:
             ``Isovalue`` and the interpolated particle arrays that were asked for.
         stats: dict of the extraction statistics (cells, evaluations, corrections,
             seconds per phase, ``backend``: "cpu" or "gpu", where the seed search ran).
+        warnings: list of what the extraction warned about although it succeeded (an
+            isovalue never crossed, a kernel wider than the particle set); each was also
+            issued as an :class:`isobar.IsobarWarning`.
 
     The arrays belong to numpy. The core's copy of the mesh is kept only for
     :meth:`write`; :meth:`release` (or garbage collection) frees it.
     """
 
-    __slots__ = ("points", "normals", "triangles", "attributes", "stats", "_handle", "_finalizer", "__weakref__")
+    __slots__ = (
+        "points",
+        "normals",
+        "triangles",
+        "attributes",
+        "stats",
+        "warnings",
+        "_handle",
+        "_finalizer",
+        "__weakref__",
+    )
 
     def __init__(
         self,
@@ -62,6 +75,7 @@ class Surface:
         normals: Optional[np.ndarray] = None,
         attributes: Optional[Dict[str, np.ndarray]] = None,
         stats: Optional[Dict[str, float]] = None,
+        warnings: Optional[List[str]] = None,
     ):
         """A surface from arrays (no core handle: :meth:`write` is unavailable)."""
         self.points = points
@@ -69,6 +83,7 @@ class Surface:
         self.normals = normals
         self.attributes = dict(attributes or {})
         self.stats = dict(stats or {})
+        self.warnings = list(warnings or [])
         self._handle = None
         self._finalizer = None
 
@@ -93,10 +108,11 @@ class Surface:
             check(lib.isobar_surface_stats(handle, byref(stats)))
             stats_dict = {f: getattr(stats, f) for f, _ in Stats._fields_ if f != "struct_size"}
             stats_dict["backend"] = backend_name(stats.backend)
+            text = lib.isobar_surface_warnings(handle).decode("utf-8", "replace")
         except BaseException:
             lib.isobar_surface_free(handle)
             raise
-        surface = cls(points, triangles, normals, attributes, stats_dict)
+        surface = cls(points, triangles, normals, attributes, stats_dict, text.splitlines())
         surface._handle = handle
         surface._finalizer = weakref.finalize(surface, lib.isobar_surface_free, handle)
         return surface
