@@ -535,6 +535,30 @@ fn damaged_or_foreign_stores_are_refused_clearly() {
 /// the body flipped (one about every chunk, at varying offsets inside it) makes some
 /// isovalue sweep fail with a "corrupt" error naming the file, or `verify` fail, never
 /// a panic or a silently different surface.
+/// A store cut short by another process while a slider has it mapped: the next update
+/// is an error naming the file, not a SIGBUS when the walk reads a page past the end.
+#[test]
+fn a_store_truncated_while_open_is_refused_at_the_next_update() {
+    let volume = blobs([30, 29, 28], 0.1);
+    let path = store_of(&volume, "cut-while-open.isoslider", 0.25);
+    let mut s = Slider::open(&path).unwrap();
+    s.set_isovalue(0.3).unwrap();
+    let len = std::fs::metadata(&path).unwrap().len();
+    let file = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+    file.set_len(len / 3).unwrap();
+    for iso in [0.9, -0.5, 0.31] {
+        let e = s.set_isovalue(iso).unwrap_err().to_string();
+        assert!(
+            e.contains("cut-while-open.isoslider")
+                && e.contains("truncated to")
+                && e.contains("while open"),
+            "{e}"
+        );
+    }
+    // The slider keeps the surface it had.
+    assert_eq!(s.isovalue(), 0.3);
+}
+
 #[test]
 fn corrupt_chunks_are_refused_when_first_read() {
     let volume = blobs([30, 29, 28], 0.1);

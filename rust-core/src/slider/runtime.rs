@@ -757,6 +757,7 @@ impl Slider {
             });
         }
         let start = Instant::now();
+        self.store.check_length()?;
         let target = self.store.rank_of(iso)?;
         let mut change = Change {
             isovalue: iso,

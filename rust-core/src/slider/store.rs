@@ -443,6 +443,28 @@ impl Store {
         };
     }
 
+    /// Refuses a store whose file was cut shorter since it was mapped (by another
+    /// process: isobar replaces stores by rename, which leaves the mapped file whole).
+    /// Reading a mapped page past the new end would kill the process with SIGBUS; one
+    /// `fstat` before each walk turns that into an error, unless the cut lands during it.
+    pub(crate) fn check_length(&self) -> Result<()> {
+        let len = self
+            .file
+            .metadata()
+            .map_err(|e| Error::io(&self.path, e))?
+            .len();
+        if len < self.map.len() as u64 {
+            return Err(Error::format(
+                &self.path,
+                format!(
+                    "truncated to {len} of its {} bytes while open; reopen the store, or rebuild it",
+                    self.map.len()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// The file this store was opened from.
     pub fn path(&self) -> &Path {
         &self.path
