@@ -7,7 +7,7 @@ all at once (``execute``, for scripts and background mode). No UI here.
 from __future__ import annotations
 
 import os
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import bpy
 
@@ -41,6 +41,8 @@ class BakeJob:
         os.makedirs(self.folder, exist_ok=True)
         self.original_frame = scene.frame_current
         self.baked: List[int] = []
+        #: (frame, text) for what the extractions warned about, for the operator's report.
+        self.warnings: List[Tuple[int, str]] = []
         self.is_object_source = obj.isobar.source_type == "OBJECT"
 
     @property
@@ -78,6 +80,7 @@ class BakeJob:
             mesh, _origin = importer.extract_live(obj, self.scene, depsgraph, frame, self.settings_params, progress)
         if mesh is None:
             mesh = importer.empty_mesh()
+        self.warnings.extend((frame, text) for text in mesh.warnings)
         cache.write(cache.frame_path(self.folder, frame), mesh, self.fingerprint)
         self.baked.append(frame)
         self.index += 1

@@ -8,6 +8,7 @@ Layout of ``<folder>/frame_000012.npz`` (uncompressed, written atomically)::
     a.<name>    (n,) or (n, k) float32    one per mesh attribute, Blender names
     fingerprint 0-d str                   the parameters and source it was made with
     info        0-d str                   JSON: vertices, triangles, seconds
+    warnings    0-d str                   JSON list: the extraction's warnings (absent: none)
 
 A cached frame is used only while its fingerprint equals the current one, so changing a
 parameter after baking never shows a stale surface.
@@ -45,6 +46,8 @@ def write(path: str, mesh: FrameMesh, fingerprint: str) -> None:
         "fingerprint": np.array(fingerprint),
         "info": np.array(json.dumps(mesh.info)),
     }
+    if mesh.warnings:  # shown again when the baked frame plays
+        arrays["warnings"] = np.array(json.dumps(mesh.warnings))
     if mesh.normals is not None:
         arrays["normals"] = np.ascontiguousarray(mesh.normals, dtype=np.float32)
     for name, values in mesh.attributes.items():
@@ -87,6 +90,7 @@ def read(path: str) -> Tuple[FrameMesh, str]:
             normals=data["normals"].reshape(n, 3) if "normals" in data.files else None,
             attributes={k[2:]: data[k] for k in data.files if k.startswith("a.")},
             info=json.loads(str(data["info"][()])) if "info" in data.files else {},
+            warnings=json.loads(str(data["warnings"][()])) if "warnings" in data.files else [],
         )
         fingerprint = str(data["fingerprint"][()])
     return mesh, fingerprint

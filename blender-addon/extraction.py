@@ -117,6 +117,9 @@ class FrameMesh:
     normals: Optional[np.ndarray] = None  # (n, 3) float32
     attributes: Dict[str, np.ndarray] = field(default_factory=dict)  # (n,) or (n, k) float32
     info: Dict[str, object] = field(default_factory=dict)
+    #: What the extraction warned about although it succeeded (isobar's Surface.warnings:
+    #: an isovalue the field never crosses, a kernel wider than the particles).
+    warnings: List[str] = field(default_factory=list)
 
     @property
     def n_points(self) -> int:
@@ -223,15 +226,24 @@ def extract(particles, params: Params, progress: Optional[ProgressFn] = None) ->
     """Extracts the surface of `particles` (an ``isobar.Particles``) with `params`.
 
     Adds a 'speed' array (|velocity|) to the particles when asked and possible, so that
-    the speed is SPH-interpolated like every other quantity.
+    the speed is SPH-interpolated like every other quantity. What the extraction warns
+    about is in the FrameMesh's ``warnings`` and nowhere else: the operators report them,
+    the panel and the console show them, so Python's copy would print each twice.
 
     Raises:
         isobar.Error: the core refused the data or the parameters (its message names the
             array, file or parameter), isobar.Cancelled when `progress` returned False.
     """
+    with isobar_module().quiet_warnings():
+        if params.method == "ADAPTIVE":
+            return _extract_adaptive(particles, params, progress)
+        return _extract_correctors(particles, params, progress)
+
+
+def _extract_correctors(particles, params: Params, progress: Optional[ProgressFn]) -> FrameMesh:
+    """Marching Correctors: vertices on the level set, the particle arrays interpolated
+    onto them, the velocity as motion blur."""
     isobar = isobar_module()
-    if params.method == "ADAPTIVE":
-        return _extract_adaptive(particles, params, progress)
     names = array_infos(particles)
     velocity = velocity_name(names, params.velocity_array)
     if not velocity:
@@ -272,7 +284,8 @@ def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn])
 
 def frame_mesh_from_surface(surface, velocity: str = "", velocity_scale: float = 1.0) -> FrameMesh:
     """Converts an ``isobar.Surface``: float32 positions and normals, int32 triangles,
-    attributes renamed for Blender (the velocity array to 'velocity', scaled)."""
+    attributes renamed for Blender (the velocity array to 'velocity', scaled), its
+    warnings."""
     n = surface.points.shape[0]
     attributes: Dict[str, np.ndarray] = {}
     for name, values in surface.attributes.items():
@@ -296,6 +309,7 @@ def frame_mesh_from_surface(surface, velocity: str = "", velocity_scale: float =
         normals=normals,
         attributes=attributes,
         info=info,
+        warnings=list(surface.warnings),
     )
 
 

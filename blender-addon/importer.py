@@ -5,7 +5,7 @@ the depsgraph), extracts the surface through ``extraction`` (or reads the baked 
 through ``cache`` when one matches the current parameters) and writes it into the object's
 mesh through ``mesh``. No UI here: operators and the frame-change handler call
 :func:`update_object`; errors end up in the object's status text (and are returned), never
-raised into Blender.
+raised into Blender, and the extraction's warnings beside it.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import contextlib
 import os
 import re
 import traceback
-from typing import Dict, Iterator, List, Optional, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import bpy
 import numpy as np
@@ -25,8 +25,9 @@ from .extraction import FrameMesh, Params
 
 # -- runtime state (not saved; cleared when a file is loaded) --------------------------
 
-#: Per object: what the mesh shows now, so that an unchanged frame is not extracted again
-#: (Cycles' motion blur and repeated frame_set calls land on the same frame).
+#: Per object: what the mesh shows now (key, vertices, triangles, origin, warnings), so
+#: that an unchanged frame is not extracted again (Cycles' motion blur and repeated
+#: frame_set calls land on the same frame).
 _shown: Dict[str, Tuple] = {}
 #: Per object: (name, components) of the particle arrays last read, for the UI's search.
 _arrays: Dict[str, List[Tuple[str, int]]] = {}
@@ -354,8 +355,10 @@ def update_object(
 ) -> Tuple[bool, str]:
     """Shows the surface of `frame` (default: the scene's current frame) in `obj`'s mesh.
 
-    Never raises: returns (ok, message) and writes the message into ``obj.isobar.status``.
-    On failure the mesh keeps what it showed (the last good frame).
+    Never raises: returns (ok, message) and writes the message into ``obj.isobar.status``,
+    the extraction's warnings into ``obj.isobar.status_warnings`` (and, for a surface
+    extracted now, the console). On failure the mesh keeps what it showed (the last good
+    frame).
     """
     try:
         settings = obj.isobar
@@ -365,21 +368,24 @@ def update_object(
             _shown.pop(object_key(obj), None)
         mesh, origin, key = frame_mesh(obj, scene, depsgraph, frame)
         if mesh is None:  # the mesh shows this surface already
-            _, n, m, origin = _shown[object_key(obj)]
+            _, n, m, origin, warnings = _shown[object_key(obj)]
             message = f"Frame {frame}: {n} vertices, {m} triangles ({origin})"
-            _set_status(settings, message, False)
+            _set_status(settings, message, False, warnings)
             _set_backend_note(settings)
             return True, message
         mesh_io.write(obj.data, mesh)
         if key is not None:
-            _shown[object_key(obj)] = (key, mesh.n_points, mesh.n_triangles, origin)
+            _shown[object_key(obj)] = (key, mesh.n_points, mesh.n_triangles, origin, mesh.warnings)
         else:
             _shown.pop(object_key(obj), None)
         seconds = mesh.info.get("seconds")
         timing = f", {seconds:.2f} s" if isinstance(seconds, (int, float)) and origin != "bake" else ""
         message = f"Frame {frame}: {mesh.n_points} vertices, {mesh.n_triangles} triangles ({origin}{timing})"
-        _set_status(settings, message, False)
+        _set_status(settings, message, False, mesh.warnings)
         _set_backend_note(settings)
+        if origin != "bake":  # the bake's own extraction was reported then
+            for text in mesh.warnings:
+                print(f"isobar: {obj.name}: Frame {frame}: warning: {text}")
         return True, message
     except Exception as error:  # noqa: BLE001 - nothing may raise into Blender
         message = describe_error(error)
@@ -404,11 +410,31 @@ def _is_expected(error: BaseException) -> bool:
         return False
 
 
-def _set_status(settings, message: str, is_error: bool) -> None:
+def _set_status(settings, message: str, is_error: bool, warnings: Sequence[str] = ()) -> None:
+    """The panel's status line, and the warnings of the surface shown (none after an
+    error: they were about a surface the update did not make)."""
     if settings.status != message:
         settings.status = message
     if settings.status_error != is_error:
         settings.status_error = is_error
+    text = "\n".join(warnings)
+    if settings.status_warnings != text:
+        settings.status_warnings = text
+
+
+def frame_warnings(found: Sequence[Tuple[int, str]]) -> List[str]:
+    """One line per distinct warning of (frame, text) pairs, naming the frames it came
+    from: a range of frames with no surface is one line, not one per frame."""
+    frames: Dict[str, List[int]] = {}
+    for frame, text in found:
+        frames.setdefault(text, []).append(frame)
+    lines = []
+    for text, where in frames.items():
+        if len(where) == 1:
+            lines.append(f"frame {where[0]}: {text}")
+        else:
+            lines.append(f"{len(where)} frames, {min(where)} to {max(where)}: {text}")
+    return lines
 
 
 def _set_backend_note(settings) -> None:
@@ -470,6 +496,7 @@ __all__ = [
     "extract_live",
     "fingerprint",
     "frame_mesh",
+    "frame_warnings",
     "is_fluid",
     "scene_arrays",
     "sequence_path",

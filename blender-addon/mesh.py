@@ -77,8 +77,10 @@ def write_attribute(mesh, name: str, values: np.ndarray, n: int) -> None:
     values = np.asarray(values, dtype=np.float32)
     if values.shape[0] != n:
         raise ValueError(f"attribute '{name}' has {values.shape[0]} values for {n} vertices")
-    values = values.reshape(n, -1)
-    k = values.shape[1]
+    # Components from the shape, not reshape(n, -1): that cannot infer them for n = 0 (a
+    # surface that is empty at this isovalue still carries its attributes).
+    k = int(np.prod(values.shape[1:], dtype=np.int64))
+    values = values.reshape(n, k)
     if k in _TYPES:
         _write_one(mesh, name, values, k)
     else:

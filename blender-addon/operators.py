@@ -50,11 +50,22 @@ def _default_material():
     return material
 
 
-def _report_backend_note(operator, settings) -> None:
-    """A warning, with the CLI's words, when Backend Auto ran on the CPU (the user chose
-    Auto and may expect the GPU); the update that just ran set ``backend_note``."""
+def _report_update_warnings(operator, settings) -> None:
+    """Warnings about the update that just ran, from what it kept for the panel: Backend
+    Auto ran on the CPU (in the CLI's words: the user chose Auto and may expect the GPU;
+    ``backend_note``), and what the extraction warned about (``status_warnings``: the
+    surface was made, but may not be the one the user meant)."""
     if settings.backend_note:
         operator.report({"WARNING"}, f"backend auto: running on the CPU ({settings.backend_note})")
+    for text in settings.status_warnings.splitlines():
+        operator.report({"WARNING"}, text)
+
+
+def _report_frame_warnings(operator, found) -> None:
+    """What the extractions of a frame range warned about ((frame, text) pairs), one
+    report per distinct warning."""
+    for line in importer.frame_warnings(found):
+        operator.report({"WARNING"}, line)
 
 
 class _SurfaceParameters:
@@ -166,7 +177,7 @@ class ISOBAR_OT_import_sequence(bpy.types.Operator, ImportHelper, _SurfaceParame
             self.report({"WARNING"}, f"Imported '{obj.name}', but the current frame failed: {message}")
         else:
             self.report({"INFO"}, f"Imported {len(seq.numbers)} files as '{obj.name}': {message}")
-            _report_backend_note(self, settings)
+            _report_update_warnings(self, settings)
         return {"FINISHED"}
 
 
@@ -330,7 +341,7 @@ class ISOBAR_OT_surface_from_object(bpy.types.Operator, _SurfaceParameters):
             self.report({"WARNING"}, f"Made '{obj.name}', but the current frame failed: {message}")
         else:
             self.report({"INFO"}, f"Made '{obj.name}': {message}")
-            _report_backend_note(self, settings)
+            _report_update_warnings(self, settings)
         return {"FINISHED"}
 
 
@@ -355,7 +366,7 @@ class ISOBAR_OT_refresh(bpy.types.Operator):
             self.report({"ERROR"}, message)
             return {"CANCELLED"}
         self.report({"INFO"}, message)
-        _report_backend_note(self, obj.isobar)
+        _report_update_warnings(self, obj.isobar)
         return {"FINISHED"}
 
 
@@ -412,11 +423,13 @@ class ISOBAR_OT_bake(bpy.types.Operator):
         except Exception as error:  # noqa: BLE001
             frame = job.current_frame
             job.finish()
+            _report_frame_warnings(self, job.warnings)
             self.report({"ERROR"}, f"Bake stopped at frame {frame}: {importer.describe_error(error)}")
             return {"CANCELLED"}
         finally:
             wm.progress_end()
         job.finish()
+        _report_frame_warnings(self, job.warnings)
         self.report({"INFO"}, f"Baked {len(job.baked)} frames to {job.folder}")
         return {"FINISHED"}
 
@@ -461,6 +474,8 @@ class ISOBAR_OT_bake(bpy.types.Operator):
                 self._job.finish()
             except Exception as error:  # noqa: BLE001
                 self.report({"WARNING"}, importer.describe_error(error))
+            # Before the closing report (done, cancelled, stopped), which the status bar shows.
+            _report_frame_warnings(self, self._job.warnings)
         if context.area is not None:
             context.area.tag_redraw()
 

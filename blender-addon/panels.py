@@ -48,6 +48,8 @@ class ISOBAR_PT_main(_Sidebar, bpy.types.Panel):
             row = box.row()
             row.alert = settings.status_error
             row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+        for warning in settings.status_warnings.splitlines():
+            box.label(text=warning, icon="ERROR")
         row = box.row(align=True)
         row.operator("isobar.refresh", text="Refresh", icon="FILE_REFRESH")
         row.prop(settings, "live_update", text="Live", toggle=True)

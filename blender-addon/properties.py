@@ -303,6 +303,11 @@ class IsobarSettings(bpy.types.PropertyGroup):
     )
     status: StringProperty(name="Status", description="Result of the last update of this surface")
     status_error: BoolProperty(name="Status Is Error", default=False)
+    status_warnings: StringProperty(
+        name="Warnings",
+        description="What the extraction of the surface shown warned about, one a line "
+        "(an isovalue the field never crosses, a kernel wider than the particles)",
+    )
     backend_note: StringProperty(
         name="Backend Note",
         description="Why Backend Auto runs on the CPU on this machine (empty: Backend is not Auto, or it runs on a GPU)",

@@ -329,6 +329,7 @@ class ExportJob:
         is_object_source = settings.source_type == "OBJECT"
         result = ObjectResult(name, path, [], "", axis)
         usd = self.usd
+        warned: List[Tuple[int, str]] = []  # (frame, text) the extractions warned about
 
         def frames() -> Iterator[Tuple[int, dict]]:
             for i, frame in enumerate(self.frames):
@@ -349,6 +350,7 @@ class ExportJob:
                     raise ExportError(name, frame, error) from error
                 result.frames.append(frame)
                 result.sources.append(origin)
+                warned.extend((frame, text) for text in mesh.warnings)
                 result.points, result.triangles = mesh.n_points, mesh.n_triangles
                 if progress is not None:
                     progress(base + 1)
@@ -378,6 +380,7 @@ class ExportJob:
         except Exception as error:  # noqa: BLE001
             raise ExportError(name, self.current_frame, error) from error
         result.layout = written.layout
+        self.warnings.extend(f"'{name}' {line}" for line in importer.frame_warnings(warned))
         return result
 
 

@@ -1,6 +1,7 @@
 """Importing particle sequences, stepping frames, parameters, attributes and errors."""
 
 import struct
+import warnings
 
 import bpy
 import numpy as np
@@ -337,3 +338,28 @@ def test_backend_auto_on_the_cpu_is_reported_with_the_core_reason(scene, addon, 
     op = _Reports(obj.name)
     addon.operators.ISOBAR_OT_refresh.execute(op, bpy.context)
     assert not [m for kind, m in op.reports if "WARNING" in kind], op.reports
+
+
+def test_an_isovalue_above_the_field_is_a_warning(scene, addon, isobar, demo_sequence):
+    # The sum of weights never reaches 1e6: no surface, which the core warns about. Not an
+    # error: the mesh is empty, the panel's status keeps the warning, the frame-change
+    # handler prints it, the operators report it as a WARNING, and nothing raises (Python's
+    # own copy of the warning is kept quiet, so the console does not show it twice).
+    with warnings.catch_warnings(record=True) as python_warnings:
+        warnings.simplefilter("always")
+        obj = import_sequence(demo_sequence[0], iso=1e6)  # bpy.ops raises only for errors
+        settings = obj.isobar
+        assert not settings.status_error and settings.status.startswith("Frame 1: 0 vertices"), settings.status
+        assert "no surface at isovalue" in settings.status_warnings, settings.status_warnings
+        scene.frame_set(2)  # the handler
+        assert not settings.status_error and settings.status.startswith("Frame 2: 0 vertices"), settings.status
+        assert settings.status_warnings.startswith("no surface at isovalue"), settings.status_warnings
+        op = _Reports(obj.name)
+        assert addon.operators.ISOBAR_OT_refresh.execute(op, bpy.context) == {"FINISHED"}
+    assert not [w for w in python_warnings if issubclass(w.category, isobar.IsobarWarning)]
+    reported = [m for kind, m in op.reports if "WARNING" in kind]
+    assert len(reported) == 1 and reported[0].startswith("no surface at isovalue"), op.reports
+    assert len(obj.data.polygons) == 0
+    settings.iso = ISO  # a surface again: no warning left in the panel
+    assert not settings.status_error and settings.status_warnings == "", settings.status_warnings
+    assert len(obj.data.polygons) > 0

@@ -87,3 +87,13 @@ def test_a_kernel_wider_than_the_particles_warns_and_a_sound_one_does_not():
         warnings.simplefilter("error", isobar.IsobarWarning)
         sound = isobar.extract(isobar.Particles.from_arrays(cloud), 0.5, h=0.15, trim=None)
     assert sound.warnings == [] and sound.n_triangles > 0
+
+
+def test_quiet_warnings_keeps_them_on_the_surface_only():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", isobar.IsobarWarning)
+        with isobar.quiet_warnings():
+            s = isobar.extract(one_particle(), 2 * iso_for(0.0), field="a", h=H, volume_array="vol", trim=None)
+        with pytest.raises(isobar.IsobarWarning, match="no surface at isovalue"):
+            isobar.extract(one_particle(), 2 * iso_for(0.0), field="a", h=H, volume_array="vol", trim=None)
+    assert s.n_triangles == 0 and len(s.warnings) == 1

@@ -4,10 +4,24 @@ clips layouts, partial rewrites, restitching, parallel writers, patterns."""
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 import pytest
-from conftest import DAM, DEMO, FRAME_01, FRAME_26, ISO, assert_same_mesh, link_frames, mesh_at, need, open_stage, validation_errors
+from conftest import (
+    DAM,
+    DEMO,
+    FRAME_01,
+    FRAME_26,
+    ISO,
+    assert_same_mesh,
+    link_frames,
+    mesh_at,
+    need,
+    open_stage,
+    run_cli,
+    validation_errors,
+)
 
 import isobar
 import isobar_usd
@@ -306,3 +320,26 @@ def test_an_empty_extraction(tmp_path, dam_frames):
     result = isobar_usd.write_frame(dam_frames / "frame_0026.vtk", out, 1e6, h=0.05)
     assert result.triangles == 0 and result.frame == 26
     assert isobar_usd.check(out) == []
+
+
+def test_an_isovalue_the_field_never_crosses_is_a_warning(cli, tmp_path, dam_frames):
+    """No surface at the isovalue: the frames are written empty (exit status 0) and the
+    core's warning is printed once per frame, naming it as an error would, not a second
+    time through Python's warnings (from the parent or a worker process); the API keeps
+    the warnings on the result and the progress reports."""
+    out = tmp_path / "none.usd"
+    proc = run_cli(cli, "sph", dam_frames / "frame_####.vtk", "--iso", "1e6", "--h", "0.05", "-j", "2", "-o", out)
+    warned = sorted(line for line in proc.stderr.splitlines() if "no surface at isovalue" in line)
+    assert len(warned) == 2, proc.stderr
+    for frame, line in zip((1, 26), warned):
+        assert line.startswith(f"isobar-usd: warning: frame {frame} ({dam_frames / f'frame_{frame:04d}.vtk'}): "), line
+    assert "IsobarWarning" not in proc.stderr, proc.stderr
+    assert isobar_usd.check(out) == []
+
+    progress = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", isobar.IsobarWarning)
+        result = isobar_usd.write_sequence(dam_frames / "frame_####.vtk", tmp_path / "api.usd", 1e6, h=0.05, progress=progress.append)
+    assert sorted(result.warnings) == [1, 26]
+    assert all(len(texts) == 1 and texts[0].startswith("no surface at isovalue") for texts in result.warnings.values())
+    assert {p.frame: p.warnings for p in progress} == result.warnings

@@ -226,6 +226,9 @@ def _run_sph(args) -> int:
                 file=sys.stderr,
                 flush=True,
             )
+            # Named as an error names its frame; the library keeps Python's copy quiet.
+            for text in p.warnings:
+                print(f"isobar-usd: warning: frame {p.frame} ({p.source}): {text}", file=sys.stderr, flush=True)
 
     options = _extract_options(args)
     if not args.quiet:

@@ -34,6 +34,9 @@ class FrameMesh:
         velocities: (n, 3) float32 (units per second) or None.
         primvars: USD primvar name -> float32 (n,) or (n, k) values.
         extent: (2, 3) float32 [min, max] (USD's empty extent for no points).
+        warnings: what the extraction warned about although it succeeded (the
+            surface's ``warnings``: an isovalue the field never crosses, a kernel wider
+            than the particles); not written to USD.
     """
 
     points: np.ndarray
@@ -43,6 +46,7 @@ class FrameMesh:
     velocities: Optional[np.ndarray] = None
     primvars: Dict[str, np.ndarray] = field(default_factory=dict)
     extent: np.ndarray = field(default_factory=lambda: EMPTY_EXTENT.copy())
+    warnings: List[str] = field(default_factory=list)
 
     @property
     def n_points(self) -> int:
@@ -116,7 +120,8 @@ def to_mesh(
     Args:
         source: an :class:`isobar.Surface`; a mapping (or object) with ``points`` (n, 3),
             ``triangles`` (m, 3) (or ``faceVertexIndices``), optional ``normals`` (n, 3),
-            ``velocities`` (n, 3) and ``attributes`` (name -> (n,) or (n, k)); or a tuple
+            ``velocities`` (n, 3), ``attributes`` (name -> (n,) or (n, k)) and
+            ``warnings`` (a list of str, as an isobar.Surface has); or a tuple
             ``(points, triangles[, normals[, attributes]])``.
         primvars: attribute names to write as vertex primvars; ``"auto"`` for every
             attribute except the core's own (``SumOfWeights``, ``Isovalue``) and the one
@@ -218,6 +223,7 @@ def to_mesh(
         velocities=vel,
         primvars=out,
         extent=extent_of(points),
+        warnings=[str(w) for w in _get(source, "warnings") or ()],
     )
 
 

@@ -265,10 +265,13 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
                 wanted.append(name)
         keep_going = lambda _f, _p: not _STOP.is_set()  # noqa: E731
         try:
-            if options.pop("method", "correctors") == "adaptive":
-                surface = _extract_adaptive(particles, job, options, wanted, velocity, keep_going)
-            else:
-                surface = isobar.extract(particles, job.iso, attributes=wanted, progress=keep_going, **options)
+            # The warnings travel in FrameMesh.warnings (the results, the progress reports,
+            # across worker processes): Python's copy would print each again, per worker.
+            with isobar.quiet_warnings():
+                if options.pop("method", "correctors") == "adaptive":
+                    surface = _extract_adaptive(particles, job, options, wanted, velocity, keep_going)
+                else:
+                    surface = isobar.extract(particles, job.iso, attributes=wanted, progress=keep_going, **options)
         except isobar.Cancelled:
             _check_stop()
             raise
@@ -303,7 +306,8 @@ def _extract_adaptive(particles, job: Job, options: Dict[str, Any], wanted, velo
 
 
 def produce(item, job: Job) -> FrameMesh:
-    """A FrameMesh from a particle file (extracting it) or an in-memory surface."""
+    """A FrameMesh from a particle file (extracting it) or an in-memory surface, with
+    what the extraction warned about."""
     if _is_path(item):
         return extract_file(item, job)
     return to_mesh(item, primvars=job.primvars if job.primvars is not None else (), velocities=job.velocities)
@@ -338,13 +342,16 @@ def write_clip(frame: int, item, staged: PathLike, job: Job) -> Dict[str, Any]:
     mesh = produce(item, job)
     info = _frame_info(item, job, mesh)
     layer = MeshLayer(job.settings, info)
+    found = mesh.warnings
     try:
         layer.add(mesh, frame)
         del mesh
         layer.export(Path(staged), atomic=False)
     finally:
         layer.release()
+    # For the caller (from a worker process too), not the layer's record.
     info["seconds"] = time.perf_counter() - t0
+    info["warnings"] = found
     return info
 
 
@@ -471,17 +478,21 @@ class FrameProgress:
     points: int
     triangles: int
     seconds: float
+    #: What the frame's extraction warned about (an isovalue the field never crosses, a
+    #: kernel wider than the particles).
+    warnings: List[str] = field(default_factory=list)
 
 
 @dataclass
 class FrameResult:
-    """What :func:`write_frame` wrote."""
+    """What :func:`write_frame` wrote (``warnings``: what the extraction warned about)."""
 
     path: Path
     frame: int
     points: int
     triangles: int
     schema: List[SchemaEntry]
+    warnings: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -496,6 +507,8 @@ class SequenceResult:
         clips: the clips folder (clips layout).
         schema: the time-sampled attributes (name, type, interpolation, elementSize).
         seconds: wall time.
+        warnings: frame number -> what its extraction warned about, for the frames
+            written by this call that warned.
     """
 
     output: Path
@@ -505,6 +518,7 @@ class SequenceResult:
     clips: Optional[Path] = None
     schema: List[SchemaEntry] = field(default_factory=list)
     seconds: float = 0.0
+    warnings: Dict[int, List[str]] = field(default_factory=dict)
 
 
 # -- public API -----------------------------------------------------------------------
@@ -545,6 +559,9 @@ def write_frame(
             the extracted ``attributes`` (plus ``Isovalue`` for several isovalues), for
             surfaces every attribute but ``SumOfWeights``/``Isovalue``/the velocities.
 
+    What the extraction warns about is in the result's ``warnings``, rather than issued
+    through Python's warnings.
+
     Raises:
         InputError: bad input (missing file or array, wrong shapes, bad option).
         FrameError: the extraction failed (``.cause`` is the isobar error).
@@ -567,7 +584,7 @@ def write_frame(
         layer.export(path)
     finally:
         layer.release()
-    return FrameResult(path, frame, frame_mesh.n_points, frame_mesh.n_triangles, entries)
+    return FrameResult(path, frame, frame_mesh.n_points, frame_mesh.n_triangles, entries, frame_mesh.warnings)
 
 
 def write_sequence(
@@ -625,6 +642,10 @@ def write_sequence(
         **extract_options: passed to :func:`isobar.extract` (field, h, h_array, kernel,
             h_scale, grid_factor, correct, tolerance, trim, attributes, ...).
 
+    What the extractions warn about (an isovalue the field never crosses, a kernel wider
+    than the particles) is in each :class:`FrameProgress` and in the result's
+    ``warnings`` (frame -> texts), rather than issued through Python's warnings.
+
     Raises:
         InputError, FrameError, StitchError (all :class:`isobar_usd.Error`).
     """
@@ -657,7 +678,11 @@ def write_sequence(
     return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0)
 
 
-def _report(progress, done, total, frame, item, info) -> None:
+def _report(progress, warned: Dict[int, List[str]], done, total, frame, item, info) -> None:
+    """A frame is written: keeps its warnings in `warned` (for the result) and tells
+    `progress`."""
+    if info.get("warnings"):
+        warned[frame] = list(info["warnings"])
     if progress is not None:
         progress(
             FrameProgress(
@@ -668,6 +693,7 @@ def _report(progress, done, total, frame, item, info) -> None:
                 points=int(info.get("points", 0)),
                 triangles=int(info.get("triangles", 0)),
                 seconds=float(info.get("seconds", 0.0)),
+                warnings=list(info.get("warnings", ())),
             )
         )
 
@@ -676,6 +702,7 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
     _atomic.sweep(output.parent if str(output.parent) else Path("."))
     layer = MeshLayer(job.settings, {"layout": "flat"})
     seen = set()
+    warned: Dict[int, List[str]] = {}
     try:
         for done, entry in enumerate(entries, 1):
             _check_stop()
@@ -690,10 +717,11 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
                 raise frame_error(entry.number, _label(entry.item), e) from e
             info = _frame_info(entry.item, job, frame_mesh)
             info["seconds"] = time.perf_counter() - t
+            info["warnings"] = frame_mesh.warnings
             if "backendNote" in info:  # the flat layer's record says it too
                 layer.info["backendNote"] = info["backendNote"]
             del frame_mesh
-            _report(progress, done, total, entry.number, entry.item, info)
+            _report(progress, warned, done, total, entry.number, entry.item, info)
         if not layer.frames:
             raise InputError("no frames to write")
         _check_stop()
@@ -702,7 +730,7 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
         frames = sorted(layer.frames)
     finally:
         layer.release()
-    return SequenceResult(output, "flat", frames, frames, None, schema, time.perf_counter() - t0)
+    return SequenceResult(output, "flat", frames, frames, None, schema, time.perf_counter() - t0, dict(sorted(warned.items())))
 
 
 def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0) -> SequenceResult:
@@ -712,6 +740,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
     _atomic.sweep(folder)
     _atomic.sweep(output.parent if str(output.parent) else Path("."))
     staged: Dict[int, Tuple[Path, Path]] = {}
+    warned: Dict[int, List[str]] = {}
     try:
         if jobs > 1:
             entries = list(entries)
@@ -742,7 +771,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                     if err is not None:
                         raise frame_error(frame, labels[frame], err)
                     done += 1
-                    _report(progress, done, total, frame, labels[frame], info)
+                    _report(progress, warned, done, total, frame, labels[frame], info)
         else:
             for done, entry in enumerate(entries, 1):
                 _check_stop()
@@ -754,7 +783,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                     info = write_clip(entry.number, entry.item, staged[entry.number][0], job)
                 except Exception as e:
                     raise frame_error(entry.number, _label(entry.item), e) from e
-                _report(progress, done, total, entry.number, entry.item, info)
+                _report(progress, warned, done, total, entry.number, entry.item, info)
         if not staged:
             raise InputError("no frames to write")
 
@@ -775,8 +804,10 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                 result = _stitch_locked(output, job.settings)
                 result.written = written
                 result.seconds = time.perf_counter() - t0
+                result.warnings = dict(sorted(warned.items()))
                 return result
-            return SequenceResult(output, "clips", written, sorted(_committed_clips(output)), folder, [], time.perf_counter() - t0)
+            committed = sorted(_committed_clips(output))
+            return SequenceResult(output, "clips", written, committed, folder, [], time.perf_counter() - t0, dict(sorted(warned.items())))
     except BaseException:
         for tmp, _ in staged.values():
             _atomic.discard(tmp)

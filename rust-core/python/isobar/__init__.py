@@ -34,6 +34,7 @@ from .errors import (
     IsobarWarning,
     OverBudgetError,
     Status,
+    quiet_warnings,
 )
 from .adaptive import extract_adaptive
 from .fe import FeMesh, Samples, sample_fe
@@ -97,6 +98,7 @@ __all__ = [
     "extract",
     "extract_adaptive",
     "library_path",
+    "quiet_warnings",
     "sample_fe",
 ]
 

@@ -6,7 +6,9 @@ particle at fault) and the numeric status code. Catch :class:`Error` for all of 
 
 from __future__ import annotations
 
+import contextlib
 import enum
+import warnings
 
 
 class Status(enum.IntEnum):
@@ -92,6 +94,17 @@ class IsobarWarning(UserWarning):
     """An extraction succeeded but its input looks wrong: an isovalue the field never
     crosses (an empty surface), a kernel wider than the whole particle set (h in other
     units than the positions). Also kept in :attr:`isobar.Surface.warnings`."""
+
+
+@contextlib.contextmanager
+def quiet_warnings():
+    """Inside, extractions keep their warnings in :attr:`isobar.Surface.warnings` only and
+    issue no :class:`IsobarWarning`: for hosts that show them their own way (a panel, a
+    report, a per-frame line), where Python's copy would print each a second time.
+    Other warnings pass as usual."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IsobarWarning)
+        yield
 
 
 _BY_STATUS = {
