@@ -396,3 +396,28 @@ def test_a_cancel_once_the_store_is_in_place_is_too_late(tmp_path):
     isobar.Slider.build_array(vol, late, progress=progress)
     assert calls[-1] == 1.0
     assert late.read_bytes() == quiet.read_bytes()
+
+
+def test_a_long_jump_reports_progress_and_a_cancel_keeps_the_surface(tmp_path):
+    vol = _sphere_distance(64)  # 262,144 ranks: a jump across them passes several reports
+    store = tmp_path / "jump.isoslider"
+    isobar.Slider.build_array(vol, store)
+    lo, hi = float(vol.min()), float(vol.max())
+    near, far = lo + 0.02 * (hi - lo), lo + 0.9 * (hi - lo)
+    with isobar.Slider(store) as slider, isobar.Slider(store) as fresh:
+        before = slider.set_isovalue(near)
+        calls = []
+        with pytest.raises(isobar.Cancelled):
+            slider.set_isovalue(far, progress=_record(calls, answer=False))
+        assert len(calls) == 1
+        # Nothing moved: the same surface, and the next update goes on from it.
+        again = slider.set_isovalue(near)
+        assert len(again.added) == 0 and len(again.removed) == 0
+        assert np.array_equal(again.triangles, before.triangles)
+        calls = []
+        jumped = slider.set_isovalue(far, progress=_record(calls))
+        _check_reports(calls)
+        assert len(calls) >= 2
+        direct = fresh.set_isovalue(far)
+        assert np.array_equal(jumped.points, direct.points)
+        assert len(jumped.triangles) == len(direct.triangles)

@@ -37,10 +37,10 @@ def _budget(memory_budget) -> int:
     return memory_budget
 
 
-def _build(invoke, progress: Optional[ProgressCallback]) -> None:
-    """Runs ``invoke(callback)`` (a core build) with sph's progress/cancel/Ctrl-C wiring.
-    A build has no result handle: nothing to free when a Ctrl-C comes after the core has
-    finished (the store it wrote is complete, so it stays)."""
+def _wired(invoke, progress: Optional[ProgressCallback]) -> None:
+    """Runs ``invoke(callback)`` (a build, an update) with sph's progress/cancel/Ctrl-C
+    wiring. Neither has a result handle: nothing to free when a Ctrl-C comes after the
+    core has finished (the store it wrote is complete, the update applied, so they stay)."""
     _call(lambda callback, _handle: invoke(callback), progress, None, lambda _handle: None)
 
 
@@ -160,7 +160,7 @@ class Slider:
         name = None if array is None else encode(array, "array")
         store = encode(store_path, "store path")
         budget = _budget(memory_budget)
-        _build(
+        _wired(
             lambda callback: lib.isobar_slider_build_file(
                 volume, name, store, float(threshold), int(max_levels), budget, callback, None
             ),
@@ -190,7 +190,7 @@ class Slider:
         s = (c_double * 3)(*[float(v) for v in spacing])
         store = encode(store_path, "store path")
         budget = _budget(memory_budget)
-        _build(
+        _wired(
             lambda callback: lib.isobar_slider_build_f32(
                 data.ctypes.data_as(POINTER(np.ctypeslib.ctypes.c_float)),
                 dims,
@@ -228,11 +228,22 @@ class Slider:
         return {"updates": n.value, "seconds": t.value}
 
     @_one_at_a_time
-    def set_isovalue(self, iso: float) -> SliderUpdate:
-        """Moves the surface to `iso` and returns the new arrays and the change."""
+    def set_isovalue(self, iso: float, progress: Optional[ProgressCallback] = None) -> SliderUpdate:
+        """Moves the surface to `iso` and returns the new arrays and the change.
+
+        `progress(fraction, phase)`, when given, is called during long walks (a jump
+        across much of the value range on a large volume); returning False, or Ctrl-C,
+        cancels the update with :class:`isobar.Cancelled` and the surface stays at the
+        previous isovalue. Without it the call carries no callback: small steps, the
+        slider's usual work, cost only the update itself.
+        """
         h = self._live()
         change = SliderChange()
-        check(lib.isobar_slider_set_isovalue(h, float(iso), _NO_PROGRESS, None, byref(change)))
+        invoke = lambda callback: lib.isobar_slider_set_isovalue(h, float(iso), callback, None, byref(change))  # noqa: E731
+        if progress is None:
+            check(invoke(_NO_PROGRESS))
+        else:
+            _wired(invoke, progress)
         n = lib.isobar_slider_vertex_count(h)
         m = lib.isobar_slider_triangle_count(h)
         u = SliderUpdate()

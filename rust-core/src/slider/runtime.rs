@@ -306,6 +306,9 @@ const BATCH: usize = 1 << 13;
 /// sections' pages are handed back once it ends.
 const RELEASE_AFTER_PAIRS: usize = 1 << 16;
 
+/// A walk reports progress (and hears a cancel) each time it has passed this many ranks.
+const REPORT_RANKS: usize = 1 << 16;
+
 /// A cell's case and its triangles as vertex indices.
 #[derive(Clone, Copy, Debug, Default)]
 struct CellTriangles {
@@ -777,6 +780,7 @@ impl Slider {
         let walked = self
             .walk(target, &mut delta, &mut change, progress)
             .map(|()| delta.net());
+        let walk_failed = walked.is_err();
         let long_walk = delta.bumped >= RELEASE_AFTER_PAIRS;
         if long_walk {
             // A long walk read megabytes of edge lists that the next small steps will
@@ -807,10 +811,11 @@ impl Slider {
         if long_walk || cut {
             return_freed_memory();
         }
-        if applied.is_err() {
+        if applied.is_err() && !walk_failed {
             // A chunk found corrupt while applying leaves cells, edges and buckets half
             // updated; the empty surface is the one state known to be right, so the next
-            // update walks up from it.
+            // update walks up from it. A walk that stopped (a cancel, a corrupt list)
+            // changed nothing but `delta`: the surface stays as it was.
             self.clear();
         }
         applied?;
@@ -844,12 +849,15 @@ impl Slider {
             delta.bump(e, d);
             Ok(())
         };
+        progress.phase("walking the skip list", 0.0, 1.0)?;
         let mut r = self.rank;
         let span = r.abs_diff(target).max(1) as f64;
-        let mut steps = 0u64;
+        // Reported by ranks passed, not by steps: a long jump is a few steps over large
+        // blocks, and a host's cancel must still get a word in.
+        let mut reported = r;
         while r != target {
-            steps += 1;
-            if steps.is_multiple_of(65536) {
+            if r.abs_diff(reported) >= REPORT_RANKS {
+                reported = r;
                 progress.report(1.0 - r.abs_diff(target) as f64 / span)?;
             }
             let up = target > r;
