@@ -70,7 +70,12 @@ def run_case(name, source, **props):
     w.SetInputData(surface)
     w.SetDataModeToBinary()
     w.Write()
-    print(f"CASE {name} {json.dumps(info)}", flush=True)
+    global _last_case
+    _last_case = json.dumps(info)
+    print(f"CASE {name} {_last_case}", flush=True)
+
+
+_last_case = "{}"
 
 
 run_case("auto", pieces)
@@ -87,6 +92,16 @@ run_case("varied", varied, SmoothingLength=0.0, SmoothingLengthArray="hvar",
          Kernel="Quintic spline", HScale=0.75, FieldMode="Point array",
          InputArray=["POINTS", "velocity"], Isovalues=[1.5], Shepard=1,
          CarriedArrays=["velocity", "id"])
+# The coordinate along the slab axis as the field: its level set a quarter of the way
+# along is a plane in one slab only (the other ranks make none of it, which is no news),
+# and 1000 is beyond the data everywhere (news: its warning must come).
+axis = max(json.loads(_last_case)["rank0_piece"]["axis"], 0)  # one rank cuts no slab
+lo, hi = reader.GetDataInformation().GetBounds()[2 * axis: 2 * axis + 2]
+plane = round(lo + 0.25 * (hi - lo), 3)
+coordinate = Calculator(Input=pieces, ResultArrayName="along", Function="coords" + "XYZ"[axis])
+run_case("plane", coordinate, FieldMode="Point array", InputArray=["POINTS", "along"],
+         Shepard=1, Isovalues=[plane, 1000.0])
+print(f"plane at {plane}", flush=True)
 
 # A bad setting under MPI: every rank reports, none waits for another (no deadlock), the
 # output is empty everywhere.

@@ -345,6 +345,24 @@ def test_error_message_property_and_empty_output_on_bad_input():
 
 
 @test
+def test_core_warning_in_paraview_and_empty_output_above_the_field():
+    # The core's warnings reach ParaView as the VTK object's warnings (Output Messages);
+    # an isovalue the field never crosses is no error, and a normal run warns nothing.
+    r = LegacyVTKReader(FileNames=[h.FRAME_26])
+    f = free_surface(r, Isovalues=[100.0])
+    warnings = h.Errors(f.GetClientSideObject(), "WarningEvent")
+    out = output_at(f)
+    assert out.GetNumberOfPoints() == 0 and out.GetNumberOfCells() == 0
+    f.UpdatePropertyInformation()
+    assert f.GetPropertyValue("ErrorMessage") == ""
+    assert len(warnings.messages) == 1, warnings.messages
+    assert "no surface at isovalue 100" in warnings.messages[0], warnings.messages
+    f.Isovalues = [h.ISO]
+    assert output_at(f).GetNumberOfCells() > 100000
+    assert len(warnings.messages) == 1, warnings.messages
+
+
+@test
 def test_bad_inputs_in_a_pvbatch_process():
     """Missing array, NaN positions, no smoothing length: error messages, empty outputs,
     exit status 0."""
@@ -433,7 +451,14 @@ def run_mpi(ranks):
         if ln.startswith("CASE "):
             _, name, info = ln.split(" ", 2)
             cases[name] = json.loads(info)
-    assert set(cases) == {"auto", "reader", "fixed", "frame01", "varied"}, p.stdout[-2000:]
+    assert set(cases) == {"auto", "reader", "fixed", "frame01", "varied", "plane"}, p.stdout[-2000:]
+    # Each rank warns of the isovalues its slab has no triangle of; only those no rank
+    # has reach the user: 1000 (the "plane" case's second isovalue), once per rank, and
+    # not the plane, which lies in one slab.
+    warned = [ln for ln in p.stderr.splitlines() if "no surface at isovalue" in ln]
+    assert len(warned) == ranks and all("no surface at isovalue 1000" in ln for ln in warned), (
+        f"{ranks} ranks: {warned}")
+    assert sum(t > 0 for t in cases["plane"]["triangles"]) >= 1, cases["plane"]
     # Bad settings: empty everywhere, no rank hung (the run ended).
     for bad in ("bad input", "bad nan", "bad budget"):
         assert f"{bad}: 0 cells" in p.stdout, f"{ranks} ranks, {bad}: {p.stdout[-2000:]}"

@@ -205,6 +205,38 @@ def test_backend_auto_on_the_cpu_says_why_in_a_warning_and_field_data():
     assert cpu.GetOutput().GetFieldData().GetAbstractArray("IsobarBackendNote") is None
 
 
+@test
+def test_core_warnings_come_as_one_vtk_warning_a_line():
+    # An isovalue above the field's maximum is a valid question with an empty answer: no
+    # error, an empty output, and the core's warning (isobar_surface_warnings) as a VTK
+    # warning. A normal run warns nothing. Backend CPU: Auto would add its own warning on
+    # a machine without a GPU.
+    def run(method, *isovalues):
+        f = free_surface_filter(reader(h.FRAME_26), Method=method, Backend=0)
+        f.SetNumberOfIsovalues(len(isovalues))
+        for i, iso in enumerate(isovalues):
+            f.SetIsovalue(i, iso)
+        warnings = Errors(f, "WarningEvent")
+        f.Update()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        return f.GetOutput(), warnings.messages
+
+    for method in (vtkIsobarSPHIsosurface.MARCHING_CORRECTORS, vtkIsobarSPHIsosurface.ADAPTIVE):
+        out, messages = run(method, 100.0)
+        assert out.GetNumberOfPoints() == 0 and out.GetNumberOfCells() == 0, method
+        assert len(messages) == 1, messages
+        assert "no surface at isovalue 100" in messages[0], messages
+        out, messages = run(method, h.ISO)
+        assert out.GetNumberOfCells() > 1000, method
+        assert messages == [], messages
+    # Several lines (Marching Correctors takes several isovalues): one warning each.
+    out, messages = run(vtkIsobarSPHIsosurface.MARCHING_CORRECTORS, h.ISO, 100.0, 200.0)
+    assert out.GetNumberOfCells() > 1000
+    assert len(messages) == 2, messages
+    for iso, message in zip((100, 200), messages):
+        assert f"no surface at isovalue {iso}" in message, messages
+
+
 def blobs_image(n=24):
     """Two overlapping Gaussian blobs on an n³ image (origin (1, 2, 3), spacing 0.5)."""
     from vtkmodules.vtkCommonDataModel import vtkImageData

@@ -27,6 +27,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <sstream>
@@ -309,6 +310,35 @@ void SmoothingLengthRange(const ParticleBuffers& particles, const std::string& h
     minH = std::min(minH, v);
     maxH = std::max(maxH, v);
   }
+}
+
+/// Triangles of `output` per isovalue: all of them for one isovalue; for several, by the
+/// "Isovalue" array at each triangle's first point, which holds its isovalue exactly.
+std::vector<vtkIdType> TrianglesPerIsovalue(vtkPolyData* output, const std::vector<double>& isovalues)
+{
+  std::vector<vtkIdType> counts(isovalues.size(), 0);
+  vtkDataArray* tags = output->GetPointData()->GetArray("Isovalue");
+  if (isovalues.empty())
+  {
+    return counts;
+  }
+  if (isovalues.size() == 1 || !tags)
+  {
+    counts[0] = output->GetNumberOfCells();
+    return counts;
+  }
+  vtkCellArray* polys = output->GetPolys();
+  vtkIdType n = 0;
+  const vtkIdType* ids = nullptr;
+  for (polys->InitTraversal(); polys->GetNextCell(n, ids);)
+  {
+    const auto at = std::find(isovalues.begin(), isovalues.end(), tags->GetTuple1(ids[0]));
+    if (at != isovalues.end())
+    {
+      ++counts[at - isovalues.begin()];
+    }
+  }
+  return counts;
 }
 
 /// Cut positions along `axis` splitting the particles of all ranks into `nproc` slabs of
@@ -1000,6 +1030,7 @@ int vtkIsobarSPHIsosurface::RequestData(
 
   // 5. The core does the rest.
   std::string failure; // this rank's error ("cancelled" for an abort)
+  std::string warnings; // the core's, one a line, shown once the ranks agree
   SurfaceHandle surface;
   if (extract)
   {
@@ -1041,6 +1072,7 @@ int vtkIsobarSPHIsosurface::RequestData(
     }
     if (failure.empty())
     {
+      warnings = isobar_surface_warnings(surface.Ptr);
       failure = SurfaceToPolyData(surface.Ptr, output);
     }
     if (failure.empty() && this->Backend == ISOBAR_BACKEND_AUTO)
@@ -1048,8 +1080,18 @@ int vtkIsobarSPHIsosurface::RequestData(
       failure = this->NoteAutoBackend(output);
     }
   }
+  std::vector<vtkIdType> crossed; // triangles per isovalue over all ranks
   if (parallel)
   {
+    // Each rank extracts its slab: its "no surface at isovalue" is news about the whole
+    // only for an isovalue no rank has a triangle of.
+    const std::vector<vtkIdType> local = TrianglesPerIsovalue(output, this->Isovalues);
+    crossed.assign(local.size(), 0);
+    if (!local.empty()) // the same isovalues on every rank: all call, or none
+    {
+      controller->AllReduce(local.data(), crossed.data(), static_cast<vtkIdType>(local.size()),
+        vtkCommunicator::SUM_OP);
+    }
     // All pieces or none: a rank that failed empties every rank's output.
     std::vector<int> states(nproc, 0);
     const int state = failure.empty() ? 0 : (failure == "cancelled" ? 2 : 1);
@@ -1078,8 +1120,38 @@ int vtkIsobarSPHIsosurface::RequestData(
     this->Fail(failure);
     return 1;
   }
+  // Warnings, not errors: the surface is what was asked for, but perhaps not what was
+  // meant (an isovalue the field never crosses, h in other units than the positions).
+  this->Warn(warnings, crossed);
   this->UpdateProgress(1.0);
   return 1;
+}
+
+//------------------------------------------------------------------------------
+void vtkIsobarSPHIsosurface::Warn(
+  const std::string& warnings, const std::vector<vtkIdType>& crossed)
+{
+  static const std::string noSurface = "no surface at isovalue ";
+  std::istringstream lines(warnings);
+  std::string line;
+  while (std::getline(lines, line))
+  {
+    if (line.empty())
+    {
+      continue;
+    }
+    if (!crossed.empty() && line.rfind(noSurface, 0) == 0)
+    {
+      // The core writes the isovalue in its shortest exact form: strtod gives it back.
+      const double iso = std::strtod(line.c_str() + noSurface.size(), nullptr);
+      const auto at = std::find(this->Isovalues.begin(), this->Isovalues.end(), iso);
+      if (at != this->Isovalues.end() && crossed[at - this->Isovalues.begin()] > 0)
+      {
+        continue; // another rank's slab has this surface
+      }
+    }
+    vtkWarningMacro(<< line);
+  }
 }
 
 //------------------------------------------------------------------------------

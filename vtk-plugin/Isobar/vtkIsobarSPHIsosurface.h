@@ -10,8 +10,9 @@
  *
  * All numeric work is done by the isobar core (Rust, linked statically through
  * isobar.h); this class converts arrays, maps its parameters onto IsobarSphParams,
- * reports progress, honours AbortExecute and turns core errors into vtkErrorMacro with
- * an empty output.
+ * reports progress, honours AbortExecute, turns core errors into vtkErrorMacro with
+ * an empty output and the core's warnings (isobar_surface_warnings) into vtkWarningMacro,
+ * one a line, keeping the output.
  *
  * Field: the sum of weights sum_j V_j W (the free surface; isovalue 0.6 with computed
  * volumes is splashsurf's surface) or the point array chosen with
@@ -292,6 +293,13 @@ protected:
 
   /// Reports `message` through vtkErrorMacro and remembers it for GetErrorMessage.
   void Fail(const std::string& message);
+
+  /// Each line of `warnings` (isobar_surface_warnings: one a line, "" for none) as its
+  /// own vtkWarningMacro, so that ParaView's Output Messages lists them one by one. In a
+  /// parallel run `crossed` holds every rank's triangles per isovalue: "no surface at
+  /// isovalue" then speaks of this rank's slab, and is left out for an isovalue another
+  /// slab has triangles of. Empty `crossed`: a serial run, every line is shown.
+  void Warn(const std::string& warnings, const std::vector<vtkIdType>& crossed);
 
   /// With Backend Auto on a machine where Auto runs on the CPU: the core's reason
   /// (isobar_auto_backend_note) as a warning and as the output's field data string array
