@@ -397,8 +397,12 @@ fn build_store_sorted(
         let held = cascade.held_bytes();
         if on_disk && held > levels_budget {
             return Err(Error::OverBudget {
+                // The open blocks follow the surfaces of the isovalues passed so far: this
+                // is where they crossed the budget, not their peak, which may lie ahead.
                 what: format!(
-                    "precomputing a slider store for {nx}×{ny}×{nz} nodes (the skip-list levels' open blocks)"
+                    "precomputing a slider store for {nx}×{ny}×{nz} nodes (the skip-list \
+                     levels' open blocks, which grow with the surface: counted {rank} of \
+                     the {n} nodes in, so the whole build may need more)"
                 ),
                 needed_bytes: params.memory_budget - levels_budget + held,
                 budget_bytes: params.memory_budget,
