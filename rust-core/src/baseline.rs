@@ -71,6 +71,7 @@ pub fn extract(
         virtual_cells: grid.cell_count(),
         node_evaluations: count as u64,
         field_evaluations: count as u64,
+        warnings: field.warnings().to_vec(),
         ..Stats::default()
     };
     let attributes = surface::AttributeSource::new(field, data, &params.attributes)?;

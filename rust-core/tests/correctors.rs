@@ -672,6 +672,8 @@ fn warnings_name_an_isovalue_never_crossed_and_a_kernel_wider_than_the_data() {
     );
     let blob = run(&data, &wide, &crossed);
     assert_eq!(blob.stats.warnings[0], *warning);
+    let full_grid = baseline::extract(&field, &data, &crossed, &mut Progress::none()).unwrap();
+    assert_eq!(full_grid.stats.warnings, blob.stats.warnings);
     let adaptive = isobar::adaptive::extract_sph(
         &field,
         &isobar::adaptive::Params {
