@@ -1,6 +1,7 @@
 """Shared fixtures of the isobar Python tests (run them with tests/python/run.sh)."""
 
 import os
+import signal
 from pathlib import Path
 
 # PyPI's vtk renders offscreen through EGL without an X server; set before vtk loads.
@@ -42,3 +43,13 @@ def cubic_shape(q):
     """Monaghan's cubic spline shape f(q) (support 2), written out independently."""
     q = np.asarray(q, dtype=np.float64)
     return np.where(q < 1, 1 - 1.5 * q**2 + 0.75 * q**3, np.where(q < 2, 0.25 * (2 - q) ** 3, 0.0))
+
+
+@pytest.fixture
+def python_sigint():
+    """Python's own Ctrl-C handler for the test, as an interactive session has it: a test
+    run started in the background by a shell without job control inherits an ignored
+    SIGINT, under which isobar rightly leaves Ctrl-C alone."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

@@ -9,7 +9,7 @@ import pytest
 import isobar
 
 
-def test_ctrl_c_raises_keyboard_interrupt(dam_break_path):
+def test_ctrl_c_raises_keyboard_interrupt(dam_break_path, python_sigint):
     particles = isobar.Particles.read(dam_break_path)
     isobar.extract(particles, 0.6, h=0.05, grid_factor=0.2)  # warm up
     for _ in range(5):

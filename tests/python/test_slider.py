@@ -364,7 +364,7 @@ def test_an_exception_in_progress_stops_the_build_and_propagates(tmp_path):
         assert os.listdir(tmp_path) == ["sphere.npy"]
 
 
-def test_ctrl_c_during_a_build_cancels_it(tmp_path):
+def test_ctrl_c_during_a_build_cancels_it(tmp_path, python_sigint):
     vol = _sphere_distance(64)
     store = tmp_path / "s.isoslider"
     calls = []

@@ -155,6 +155,9 @@ def test_sigterm_and_ctrl_c_unwind_and_clean_up(cli, sequence_on_disk, tmp_path,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        # Ctrl-C as a terminal delivers it: a test run started in the background by a
+        # shell without job control would hand the writer an ignored SIGINT.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     clips = isobar_usd.clips_folder(out)
     deadline = time.monotonic() + 120
