@@ -416,6 +416,11 @@ enum IsobarStatus isobar_samples_attribute(const struct IsobarSamples *s,
                                            size_t *components,
                                            const double **data);
 
+// What the run warns about although it succeeded, one warning a line: an isovalue that
+// gave no sample (outside the field's range on the mesh). "" when there is nothing to
+// say, and for NULL. Valid until `isobar_samples_free`.
+const char *isobar_samples_warnings(const struct IsobarSamples *s);
+
 // Copies the run's statistics into `out` (whose `struct_size` the caller sets).
 enum IsobarStatus isobar_samples_stats(const struct IsobarSamples *s, struct IsobarFeStats *out);
 

@@ -267,6 +267,16 @@ int main(int argc, char **argv) {
         IsobarFeStats fs;
         fs.struct_size = sizeof fs;
         CHECK(isobar_samples_stats(samples, &fs) == ISOBAR_STATUS_OK && fs.particles == ns, "fe stats");
+        CHECK(strcmp(isobar_samples_warnings(samples), "") == 0, "fe warnings: %s", isobar_samples_warnings(samples));
+        /* f = x lies in [0, 1]: an isovalue of 2 gives no sample, and says so. */
+        IsobarSamples *none = NULL;
+        fp.iso = 2.0;
+        CHECK(isobar_fe_sample(fe, "f", &fp, NULL, NULL, &none) == ISOBAR_STATUS_OK && isobar_samples_count(none) == 0,
+              "fe beyond the field: %s", isobar_last_error_message());
+        CHECK(strcmp(isobar_samples_warnings(none), "no surface at isovalue 2: the field never crosses it") == 0,
+              "fe warning: '%s'", isobar_samples_warnings(none));
+        isobar_samples_free(none);
+        fp.iso = 0.3;
         CHECK(isobar_fe_sample(fe, "g", &fp, NULL, NULL, &samples) == ISOBAR_STATUS_ERR_INVALID_INPUT, "fe missing field");
         CHECK(strstr(isobar_last_error_message(), "g") != NULL, "message names the field");
         isobar_samples_free(samples);

@@ -62,6 +62,12 @@ def test_samples_lie_on_the_analytic_teardrop_with_outward_normals():
     cells = samples.arrays["Element"]
     assert cells.min() >= 0 and cells.max() < mesh.n_cells
     assert (samples.radii > 0).all()
+    assert samples.warnings == []
+    # An isovalue beyond the field on the mesh: no sample, and a warning saying so.
+    with pytest.warns(isobar.IsobarWarning, match=r"no surface at isovalue 1000") as caught:
+        none = isobar.sample_fe(mesh, "f", 1000.0, spacing=0.1)
+    assert len(none) == 0 and none.warnings == [str(w.message) for w in caught]
+    assert caught[0].filename == __file__
 
 
 def test_the_pyvista_adaptor_and_the_file_round_trip_give_the_same_samples(tmp_path):

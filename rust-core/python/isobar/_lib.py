@@ -362,6 +362,7 @@ _PROTOTYPES = {
         [POINTER(SamplesHandle), c_size_t, POINTER(c_char_p), POINTER(c_size_t), POINTER(POINTER(c_double))],
     ),
     "isobar_samples_stats": (_Status, [POINTER(SamplesHandle), POINTER(FeStats)]),
+    "isobar_samples_warnings": (c_char_p, [POINTER(SamplesHandle)]),
     "isobar_samples_write": (_Status, [POINTER(SamplesHandle), c_char_p]),
     "isobar_samples_free": (None, [POINTER(SamplesHandle)]),
     # surface

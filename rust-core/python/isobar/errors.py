@@ -96,6 +96,13 @@ class IsobarWarning(UserWarning):
     units than the positions). Also kept in :attr:`isobar.Surface.warnings`."""
 
 
+def issue(texts, stacklevel: int) -> None:
+    """Issues each of a result's warnings as an :class:`IsobarWarning`; `stacklevel`
+    counts as :func:`warnings.warn` does, from the function calling this one."""
+    for text in texts:
+        warnings.warn(text, IsobarWarning, stacklevel=stacklevel + 1)
+
+
 @contextlib.contextmanager
 def quiet_warnings():
     """Inside, extractions keep their warnings in :attr:`isobar.Surface.warnings` only and

@@ -21,7 +21,7 @@ from typing import Dict, Mapping, Optional, Tuple
 import numpy as np
 
 from ._lib import FeMeshHandle, FeParams, FeStats, SamplesHandle, check, encode, lib
-from .errors import InvalidArgumentError
+from .errors import InvalidArgumentError, issue
 from .sph import ProgressCallback, _call
 from .surface import _attributes, _copy
 
@@ -195,9 +195,11 @@ class Samples:
             ``Curvature`` (sqrt(k1² + k2²)), ``Energy``.
         stats: particles, seeds, iterations, evaluations, splits, deletes, spacing,
             max_residual.
+        warnings: what the run warned about although it succeeded (an isovalue that gave
+            no sample); each was also issued as an :class:`isobar.IsobarWarning`.
     """
 
-    __slots__ = ("points", "normals", "radii", "arrays", "stats", "_handle", "_finalizer", "__weakref__")
+    __slots__ = ("points", "normals", "radii", "arrays", "stats", "warnings", "_handle", "_finalizer", "__weakref__")
 
     def __init__(self, handle):
         try:
@@ -212,6 +214,7 @@ class Samples:
             stats.struct_size = sizeof(FeStats)
             check(lib.isobar_samples_stats(handle, byref(stats)))
             self.stats = {f: getattr(stats, f) for f, _ in FeStats._fields_ if f != "struct_size"}
+            self.warnings = lib.isobar_samples_warnings(handle).decode("utf-8", "replace").splitlines()
         except BaseException:
             lib.isobar_samples_free(handle)
             raise
@@ -288,7 +291,9 @@ def sample_fe(
         POINTER(SamplesHandle)(),
         lib.isobar_samples_free,
     )
-    return Samples(handle)
+    samples = Samples(handle)
+    issue(samples.warnings, stacklevel=2)  # the line that called sample_fe()
+    return samples
 
 
 __all__ = ["FeMesh", "Samples", "sample_fe", "default_fe_params"]

@@ -7,14 +7,13 @@ import math
 import numbers
 import signal
 import threading
-import warnings
 from ctypes import POINTER, byref, c_char_p, c_double
 from typing import Callable, Iterable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from ._lib import BACKENDS, KERNELS, PROGRESS_FN, SphParams, SurfaceHandle, check, encode, lib
-from .errors import InvalidArgumentError, IsobarWarning, Status
+from .errors import InvalidArgumentError, Status, issue
 from .particles import Particles
 from .surface import Surface
 
@@ -251,9 +250,7 @@ def _run(invoke, progress: Optional[ProgressCallback], normals: bool) -> Surface
     the progress/cancel/Ctrl-C wiring, and wraps the result."""
     handle = _call(invoke, progress, POINTER(SurfaceHandle)(), lib.isobar_surface_free)
     surface = Surface._from_handle(handle, normals_requested=bool(normals))
-    for text in surface.warnings:
-        # stacklevel 3: the line that called extract() or extract_adaptive().
-        warnings.warn(text, IsobarWarning, stacklevel=3)
+    issue(surface.warnings, stacklevel=3)  # the line that called extract(_adaptive)
     return surface
 
 

@@ -41,6 +41,8 @@ pub struct IsobarSamples {
     samples: PointSamples,
     stats: Stats,
     names: Vec<CString>,
+    /// The run's warnings, one a line.
+    warnings: CString,
 }
 
 /// Options of the particle system (the paper's s, ρ, ε_T ...). Fill with
@@ -414,10 +416,12 @@ pub extern "C" fn isobar_fe_sample(
             highorder::sample(&mesh.mesh, &field, &(&p).into(), sink)
         })?;
         let names = names_of(&samples.attributes);
+        let warnings = super::warning_lines(&stats.warnings);
         let handle = IsobarSamples {
             samples,
             stats,
             names,
+            warnings,
         };
         put(out, Box::into_raw(Box::new(handle)), "out")
     })
@@ -478,6 +482,15 @@ pub extern "C" fn isobar_samples_attribute(
             data,
         )
     })
+}
+
+/// What the run warns about although it succeeded, one warning a line: an isovalue that
+/// gave no sample (outside the field's range on the mesh). "" when there is nothing to
+/// say, and for NULL. Valid until `isobar_samples_free`.
+#[no_mangle]
+pub extern "C" fn isobar_samples_warnings(s: *const IsobarSamples) -> *const c_char {
+    // SAFETY: null or a live handle.
+    unsafe { s.as_ref() }.map_or(c"".as_ptr(), |s| s.warnings.as_ptr())
 }
 
 /// Copies the run's statistics into `out` (whose `struct_size` the caller sets).

@@ -228,6 +228,11 @@ pub(crate) fn names_of(arrays: &[crate::field::particles::Attribute]) -> Vec<CSt
         .collect()
 }
 
+/// A result's warnings as one NUL-terminated text, one a line, for `*_warnings`.
+pub(crate) fn warning_lines(warnings: &[String]) -> CString {
+    CString::new(warnings.join("\n").replace('\0', " ")).unwrap_or_default()
+}
+
 /// Adds (or replaces) a named array of `count` items × `components` to `arrays`, whose
 /// owner holds `items` items (`what`: "particles", "points" in messages). `read` copies the
 /// caller's `count × components` values; it runs only after the counts are checked, so a

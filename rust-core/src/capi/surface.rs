@@ -18,8 +18,7 @@ pub struct IsobarSurface {
 impl IsobarSurface {
     pub(crate) fn new(extraction: Extraction) -> Box<Self> {
         let names = names_of(&extraction.mesh.attributes);
-        let text = extraction.stats.warnings.join("\n").replace('\0', " ");
-        let warnings = CString::new(text).unwrap_or_default();
+        let warnings = super::warning_lines(&extraction.stats.warnings);
         Box::new(IsobarSurface {
             extraction,
             names,

@@ -89,6 +89,7 @@ pub fn run(args: &FeArgs) -> Result<()> {
     })?;
     let sample_s = t.elapsed().as_secs_f64();
     crate::io::write_samples(&args.output, &samples)?;
+    crate::io::print_warnings(&args.input, &stats.warnings);
     print_stats(&stats, mesh.cell_count(), read_s, sample_s);
     Ok(())
 }

@@ -102,6 +102,9 @@ pub struct Stats {
     pub spacing: f64,
     /// Largest |F − C| over the returned samples.
     pub max_residual: f64,
+    /// What the caller should tell the user although nothing failed: an isovalue that
+    /// gave no sample (see [`crate::correctors::Stats::warnings`]).
+    pub warnings: Vec<String>,
 }
 
 /// Samples the isosurface `params.iso` of the point array `field` of `mesh` with the
@@ -141,6 +144,9 @@ pub fn sample(
     stats.particles = particles.len();
     stats.evaluations = surface.evaluations.into_inner();
     stats.max_residual = particles.iter().map(|p| p.residual).fold(0.0, f64::max);
+    if particles.is_empty() {
+        stats.warnings.push(crate::mesh::no_surface(params.iso));
+    }
     Ok((to_samples(&particles, params, spacing), stats))
 }
 
