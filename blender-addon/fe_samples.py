@@ -98,10 +98,14 @@ def point_cloud(name: str, samples) -> "bpy.types.PointCloud":
 
 def resample(obj, path: str, field: str, iso: float, spacing: float, rho: float, progress=None):
     """Samples the isosurface again on the object's mesh and swaps its point cloud (the
-    materials stay). Returns the isobar.Samples."""
-    samples = isobar_module().sample_fe(
-        mesh_for(obj, path), field, float(iso), spacing=float(spacing), rho=float(rho), progress=progress
-    )
+    materials stay). Returns the isobar.Samples; what the sampling warns about (an
+    isovalue the field never crosses) is in its ``warnings`` and nowhere else: the caller
+    shows them, so Python's copy would print each twice."""
+    isobar = isobar_module()
+    with isobar.quiet_warnings():
+        samples = isobar.sample_fe(
+            mesh_for(obj, path), field, float(iso), spacing=float(spacing), rho=float(rho), progress=progress
+        )
     old = obj.data
     cloud = point_cloud(old.name if old is not None else obj.name, samples)
     if old is not None:

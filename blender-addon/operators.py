@@ -285,6 +285,8 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
             self.report({"ERROR"}, settings.status)
             return {"FINISHED"}
         self.report({"INFO"}, f"'{obj.name}': {settings.status}")
+        for text in settings.status_warnings.splitlines():
+            self.report({"WARNING"}, text)
         return {"FINISHED"}
 
 

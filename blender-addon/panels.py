@@ -160,6 +160,8 @@ def _draw_isovalue_object(layout, context, import_op: str, import_text: str, gro
         row = layout.row()
         row.alert = settings.status_error
         row.label(text=settings.status, icon="ERROR" if settings.status_error else "CHECKMARK")
+    for warning in getattr(settings, "status_warnings", "").splitlines():
+        layout.label(text=warning, icon="ERROR")
 
 
 class ISOBAR_PT_slider(_Sidebar, bpy.types.Panel):

@@ -384,8 +384,9 @@ def _resample(self, context):
             obj, bpy.path.abspath(self.filepath), self.field, self.isovalue, self.spacing, self.curvature_adaptivity
         )
     except Exception as error:  # noqa: BLE001 - shown in the panel, never raised into Blender
-        self.status, self.status_error = str(error), True
+        self.status, self.status_error, self.status_warnings = str(error), True, ""
         return
+    self.status_warnings = "\n".join(samples.warnings)
     self.samples = len(samples)
     seconds = time.perf_counter() - start
     self.status = f"{self.samples:,} samples, max |F - C| {samples.stats['max_residual']:.1e}, {seconds:.2f} s"
@@ -420,6 +421,10 @@ class IsobarFESettings(bpy.types.PropertyGroup):
     samples: IntProperty(name="Samples", description="Points of the current isosurface")
     status: StringProperty(name="Status", description="Result of the last sampling")
     status_error: BoolProperty(name="Status Is Error", default=False)
+    status_warnings: StringProperty(
+        name="Warnings",
+        description="What the last sampling warned about, one a line (an isovalue the field never crosses)",
+    )
 
 
 def register():

@@ -99,3 +99,20 @@ def test_bad_files_and_fields_are_reported_without_an_object(scene, tmp_path):
     with pytest.raises(RuntimeError, match="nope"):
         bpy.ops.isobar.import_fe(filepath=str(FIXTURE), field="nope")
     assert set(bpy.data.objects.keys()) == before
+
+
+def test_an_isovalue_the_field_never_crosses_is_a_warning_under_the_status(scene, isobar, tmp_path):
+    import warnings
+
+    path = _cube_vtu(tmp_path / "cube.vtu")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert bpy.ops.isobar.import_fe(filepath=str(path), field="f", isovalue=10.0, spacing=0.08) == {"FINISHED"}
+    settings = bpy.context.active_object.isobar_fe
+    assert not settings.status_error and settings.samples == 0, settings.status
+    assert "no surface at isovalue" in settings.status_warnings, settings.status_warnings
+    assert len(settings.status_warnings.splitlines()) == 1
+    # Shown by the panel and the operator's report only: Python's copy is kept quiet.
+    assert not [w for w in caught if issubclass(w.category, isobar.IsobarWarning)], caught
+    settings.isovalue = 0.49
+    assert settings.samples > 50 and settings.status_warnings == "", settings.status_warnings

@@ -84,3 +84,17 @@ def test_bad_inputs_are_refused_and_the_old_stage_stays(cli, tmp_path):
     with pytest.raises(isobar_usd.InputError, match=".usdz|.usd"):
         isobar_usd.write_points(samples, tmp_path / "x.abc")
     assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_an_isovalue_beyond_the_field_is_one_warning_on_stderr(cli, tmp_path):
+    out = tmp_path / "none.usd"
+    proc = run_cli(cli, "fe", FIXTURE, "--field", "p", "--iso", "1e6", "-o", out)
+    lines = [line for line in proc.stderr.splitlines() if "no surface at isovalue" in line]
+    assert len(lines) == 1 and lines[0].startswith("isobar-usd: warning: "), proc.stderr
+    assert "IsobarWarning" not in proc.stderr, proc.stderr  # Python's copy stays quiet
+    assert "0 samples" in proc.stdout
+    proc = run_cli(cli, "fe", FIXTURE, "--field", "p", "--iso", "1e6", "-o", out, "--quiet")
+    assert "warning" not in proc.stderr, proc.stderr
+    grid = isobar.FeMesh.read(str(FIXTURE))
+    proc = run_cli(cli, "fe", FIXTURE, "--field", "p", "--iso", repr(float(np.median(grid.arrays["p"]))), "-o", out)
+    assert "warning" not in proc.stderr, proc.stderr

@@ -191,6 +191,24 @@ def test_bad_inputs_give_an_error_naming_the_problem_and_empty_output():
 
 
 @test
+def test_isovalue_beyond_the_field_warns_once_with_empty_output():
+    grid = fixture()
+    p = vtk_to_numpy(grid.GetPointData().GetArray("p"))
+    f = samples_filter(grid, float(p.max()) + 1000.0)
+    warnings, errors = Errors(f, "WarningEvent"), Errors(f)
+    f.Update()
+    assert f.GetErrorMessage() == "" and not errors.messages, errors.messages
+    assert f.GetOutput().GetNumberOfPoints() == 0
+    assert len(warnings.messages) == 1, warnings.messages
+    assert "no surface at isovalue" in warnings.messages[0], warnings.messages
+    # A crossed isovalue: samples and no warning.
+    f.SetIsovalue(median_p(grid))
+    warnings.messages.clear()
+    f.Update()
+    assert f.GetOutput().GetNumberOfPoints() > 20 and warnings.messages == [], warnings.messages
+
+
+@test
 def test_progress_and_abort():
     grid = fixture()
     f = samples_filter(grid, median_p(grid), Spacing=0.05)

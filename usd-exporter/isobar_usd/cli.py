@@ -210,6 +210,9 @@ def _run_fe(args) -> int:
     if not args.quiet:
         st = samples.stats
         print(f"wrote {path}: {len(samples):,} samples, max |F - C| {st['max_residual']:.2e}, {st['evaluations']:,} evaluations")
+        # Named by the input, as an error is; the library keeps Python's copy quiet.
+        for text in samples.warnings:
+            print(f"isobar-usd: warning: {args.input}: {text}", file=sys.stderr, flush=True)
     if args.check:
         return _report_problems(check(path), args.quiet)
     return 0

@@ -95,13 +95,16 @@ def write_fe_samples(
 ):
     """Samples the isosurface ``field == iso`` of the Lagrange cells in `input` (.vtu) with
     isobar's particle system and writes the samples with :func:`write_points`. Returns
-    (path, samples)."""
+    (path, samples). What the sampling warns about (an isovalue the field never crosses,
+    which writes no points) is in ``samples.warnings``, not issued again through Python's
+    ``warnings``: the CLI prints it."""
     import isobar
 
     check_output_path(Path(output))
-    samples = isobar.sample_fe(
-        isobar.FeMesh.read(str(input)), field, iso, spacing=spacing, rho=rho, tolerance=tolerance, progress=progress
-    )
+    with isobar.quiet_warnings():
+        samples = isobar.sample_fe(
+            isobar.FeMesh.read(str(input)), field, iso, spacing=spacing, rho=rho, tolerance=tolerance, progress=progress
+        )
     return write_points(samples, output, **stage), samples
 
 

@@ -18,6 +18,7 @@
 #include "vtkUnsignedCharArray.h"
 #include "vtkUnstructuredGrid.h"
 
+#include "IsobarLines.h"
 #include "isobar.h"
 
 #include <sstream>
@@ -334,6 +335,13 @@ int vtkIsobarFESamples::RequestData(
       return 1;
     }
     AddDoubleArray(pd, name, static_cast<int>(components), n, data);
+  }
+  // Warnings, not errors: the samples are what was asked for, but perhaps not what was
+  // meant (an isovalue the field never crosses). One vtkWarningMacro a line. In an MPI
+  // run each process warns about its own piece.
+  for (const std::string& line : IsobarLines(isobar_samples_warnings(samples.Ptr)))
+  {
+    vtkWarningMacro(<< line);
   }
   this->UpdateProgress(1.0);
   return 1;

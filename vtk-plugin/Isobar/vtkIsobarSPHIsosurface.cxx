@@ -23,6 +23,7 @@
 #include "vtkStringArray.h"
 #include "vtkUnsignedCharArray.h"
 
+#include "IsobarLines.h"
 #include "isobar.h"
 
 #include <algorithm>
@@ -1132,14 +1133,8 @@ void vtkIsobarSPHIsosurface::Warn(
   const std::string& warnings, const std::vector<vtkIdType>& crossed)
 {
   static const std::string noSurface = "no surface at isovalue ";
-  std::istringstream lines(warnings);
-  std::string line;
-  while (std::getline(lines, line))
+  for (const std::string& line : IsobarLines(warnings.c_str()))
   {
-    if (line.empty())
-    {
-      continue;
-    }
     if (!crossed.empty() && line.rfind(noSurface, 0) == 0)
     {
       // The core writes the isovalue in its shortest exact form: strtod gives it back.
