@@ -66,7 +66,8 @@ def test_single_particle_cloud_gives_the_kernel_sphere_volume():
 
 def test_to_pyvista_of_an_empty_surface():
     p = isobar.Particles.from_arrays(lattice(3))
-    s = isobar.extract(p, 50.0, h=0.1)  # far above any value: nothing
+    with pytest.warns(isobar.IsobarWarning, match="no surface at isovalue 50"):
+        s = isobar.extract(p, 50.0, h=0.1)  # far above any value: nothing
     assert s.n_triangles == 0
     assert ipv.to_pyvista(s).n_points == 0
 
