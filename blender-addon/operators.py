@@ -54,9 +54,11 @@ def _report_update_warnings(operator, settings) -> None:
     """Warnings about the update that just ran, from what it kept for the panel: Backend
     Auto ran on the CPU (in the CLI's words: the user chose Auto and may expect the GPU;
     ``backend_note``), and what the extraction warned about (``status_warnings``: the
-    surface was made, but may not be the one the user meant)."""
-    if settings.backend_note:
-        operator.report({"WARNING"}, f"backend auto: running on the CPU ({settings.backend_note})")
+    surface was made, but may not be the one the user meant). FE samples have no back end
+    to choose, hence no ``backend_note``."""
+    note = getattr(settings, "backend_note", "")
+    if note:
+        operator.report({"WARNING"}, f"backend auto: running on the CPU ({note})")
     for text in settings.status_warnings.splitlines():
         operator.report({"WARNING"}, text)
 
@@ -285,8 +287,7 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
             self.report({"ERROR"}, settings.status)
             return {"FINISHED"}
         self.report({"INFO"}, f"'{obj.name}': {settings.status}")
-        for text in settings.status_warnings.splitlines():
-            self.report({"WARNING"}, text)
+        _report_update_warnings(self, settings)
         return {"FINISHED"}
 
 

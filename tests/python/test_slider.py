@@ -414,6 +414,19 @@ def test_a_long_jump_reports_progress_and_a_cancel_keeps_the_surface(tmp_path):
         again = slider.set_isovalue(near)
         assert len(again.added) == 0 and len(again.removed) == 0
         assert np.array_equal(again.triangles, before.triangles)
+        # Cancelled halfway, with blocks of edge changes already gathered: still nothing moved.
+        calls = []
+
+        def stop_midway(fraction, phase):
+            calls.append((fraction, phase))
+            return fraction == 0.0
+
+        with pytest.raises(isobar.Cancelled):
+            slider.set_isovalue(far, progress=stop_midway)
+        assert len(calls) == 2 and calls[1][0] > 0.0
+        again = slider.set_isovalue(near)
+        assert len(again.added) == 0 and len(again.removed) == 0
+        assert np.array_equal(again.triangles, before.triangles)
         calls = []
         jumped = slider.set_isovalue(far, progress=_record(calls))
         _check_reports(calls)
