@@ -366,6 +366,12 @@ size_t isobar_fe_mesh_point_count(const struct IsobarFeMesh *mesh);
 // Number of cells of a mesh (0 for NULL).
 size_t isobar_fe_mesh_cell_count(const struct IsobarFeMesh *mesh);
 
+// The box that holds every cell of a mesh, curved cells' bulges included: the box whose
+// diagonal a spacing of 0 takes 1/40 of. Writes lo xyz, then hi xyz, to `bounds_out`
+// (6 f64). A data-parallel host that samples the pieces of one mesh reduces its pieces'
+// boxes and passes the whole mesh's spacing, so that every piece is sampled alike.
+enum IsobarStatus isobar_fe_mesh_bounds(const struct IsobarFeMesh *mesh, double *bounds_out);
+
 // Frees a mesh (NULL is ignored).
 void isobar_fe_mesh_free(struct IsobarFeMesh *mesh);
 

@@ -276,6 +276,30 @@ int main(int argc, char **argv) {
         CHECK(strcmp(isobar_samples_warnings(none), "no surface at isovalue 2: the field never crosses it") == 0,
               "fe warning: '%s'", isobar_samples_warnings(none));
         isobar_samples_free(none);
+        /* The mesh's box (widened for rounding), and a spacing of 0 as 1/40 of its
+         * diagonal: a host that passes the spacing from the box (as a data-parallel one
+         * must) samples alike. */
+        double box[6];
+        CHECK(isobar_fe_mesh_bounds(fe, box) == ISOBAR_STATUS_OK, "fe bounds: %s", isobar_last_error_message());
+        for (int k = 0; k < 3; k++)
+            CHECK(box[k] <= 0.0 && box[k] > -1e-6 && box[3 + k] >= 1.0 && box[3 + k] < 1.0 + 1e-6,
+                  "fe bounds axis %d: %g %g", k, box[k], box[3 + k]);
+        CHECK(isobar_fe_mesh_bounds(NULL, box) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "fe bounds NULL mesh");
+        CHECK(isobar_fe_mesh_bounds(fe, NULL) == ISOBAR_STATUS_ERR_INVALID_ARGUMENT, "fe bounds NULL out");
+        IsobarSamples *by_default = NULL, *by_box = NULL;
+        fp.iso = 0.3;
+        fp.spacing = 0.0;
+        CHECK(isobar_fe_sample(fe, "f", &fp, NULL, NULL, &by_default) == ISOBAR_STATUS_OK, "fe default spacing");
+        fp.spacing = sqrt((box[3] - box[0]) * (box[3] - box[0]) + (box[4] - box[1]) * (box[4] - box[1]) +
+                          (box[5] - box[2]) * (box[5] - box[2])) / 40.0;
+        CHECK(isobar_fe_sample(fe, "f", &fp, NULL, NULL, &by_box) == ISOBAR_STATUS_OK, "fe spacing from the box");
+        size_t nd = isobar_samples_count(by_default);
+        CHECK(nd > 30 && nd == isobar_samples_count(by_box), "fe samples %zu vs %zu", nd, isobar_samples_count(by_box));
+        CHECK(memcmp(isobar_samples_positions(by_default), isobar_samples_positions(by_box), 3 * nd * sizeof(double)) == 0,
+              "fe samples from the box's spacing differ");
+        isobar_samples_free(by_default);
+        isobar_samples_free(by_box);
+        fp.spacing = 0.1;
         fp.iso = 0.3;
         CHECK(isobar_fe_sample(fe, "g", &fp, NULL, NULL, &samples) == ISOBAR_STATUS_ERR_INVALID_INPUT, "fe missing field");
         CHECK(strstr(isobar_last_error_message(), "g") != NULL, "message names the field");

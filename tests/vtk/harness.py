@@ -26,6 +26,8 @@ PLUGIN = os.path.join(
 XML = os.path.join(REPO, "vtk-plugin", "paraview", "IsobarSPHIsosurface.xml")
 FRAME_01 = os.path.join(DATA, "double_dam_break_frame_01_4732_particles.vtk")
 FRAME_26 = os.path.join(DATA, "double_dam_break_frame_26_4732_particles.vtk")
+# A real MFEM solution (Poisson, Q3 hexahedra) as VTK Lagrange cells, point array "u".
+FE_MFEM = os.path.join(REPO, "rust-core", "data", "fe", "mfem_poisson_q3.vtu")
 BUNNY = os.path.join(DATA, "bunny_frame_14_7705_particles.vtk")
 
 # splashsurf's settings for these frames: r = 0.025, h = 2r, cube 0.75r, iso 0.6.

@@ -10,6 +10,8 @@ appended, unmerged) as .vtp files:
   PREFIX_frame01.vtp frame 1 (particles on a regular lattice) from the reader;
   PREFIX_varied.vtp per-particle h, quintic kernel, H Scale, a point-array field with
                     Shepard and trimming, carried arrays;
+  PREFIX_fe_*.vtp   the FE filter's samples of an MFEM solution: from the reader's one
+                    piece, from its cells split over the ranks, beyond the field;
 
 and prints one JSON line per case: `CASE name {"particles": [...], "triangles": [...],
 "points": [...], "rank0_piece": {...}}` (per rank: input particles, output triangles and
@@ -19,6 +21,8 @@ points; rank 0's slab and the particles it extracted from), then one
 import json
 import os
 import sys
+
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness as h  # noqa: E402
@@ -30,7 +34,9 @@ from paraview.simple import (  # noqa: E402
     LoadPlugin,
     RedistributeDataSet,
     XMLPolyDataReader,
+    XMLUnstructuredGridReader,
 )
+from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: E402
 from vtkmodules.vtkCommonCore import vtkPoints  # noqa: E402
 from vtkmodules.vtkCommonDataModel import vtkPolyData  # noqa: E402
 from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter  # noqa: E402
@@ -102,6 +108,38 @@ coordinate = Calculator(Input=pieces, ResultArrayName="along", Function="coords"
 run_case("plane", coordinate, FieldMode="Point array", InputArray=["POINTS", "along"],
          Shepard=1, Isovalues=[plane, 1000.0])
 print(f"plane at {plane}", flush=True)
+
+# High-order samples (the FE filter) of a real MFEM solution (Q3 hexahedra): the reader's
+# single piece (rank 0 holds every cell, the others none) and the cells split over the
+# ranks. Each case prints the samples and the median Radius (which follows the spacing)
+# per rank and writes the joined samples.
+HighOrderSamples = globals()["HighOrderIsosurfaceSamples"]
+fe_reader = XMLUnstructuredGridReader(FileName=[h.FE_MFEM])
+fe_range = fe_reader.PointData["u"].GetRange()
+
+
+def run_fe_case(name, source, iso):
+    f = HighOrderSamples(Input=source, Isovalue=iso)
+    f.Scalars = ["POINTS", "u"]
+    per_rank = [sm.Fetch(f, p) for p in range(ranks)]
+    radius = [vtk_to_numpy(d.GetPointData().GetArray("Radius")) for d in per_rank
+              if d.GetNumberOfPoints() > 0]
+    info = {"cells": [sm.Fetch(source, p).GetNumberOfCells() for p in range(ranks)],
+            "samples": [d.GetNumberOfPoints() for d in per_rank],
+            "radius_median": float(np.median(np.concatenate(radius))) if radius else None}
+    w = vtkXMLPolyDataWriter()
+    w.SetFileName(f"{prefix}_{name}.vtp")
+    w.SetInputData(sm.Fetch(f))
+    w.SetDataModeToBinary()
+    w.Write()
+    print(f"CASE {name} {json.dumps(info)}", flush=True)
+
+
+fe_middle = 0.5 * (fe_range[0] + fe_range[1])
+run_fe_case("fe_reader", fe_reader, fe_middle)
+run_fe_case("fe_split", RedistributeDataSet(Input=fe_reader), fe_middle)
+# Beyond the field: no piece has a sample, so this one must be warned about.
+run_fe_case("fe_beyond", RedistributeDataSet(Input=fe_reader), fe_range[1] + 1.0)
 
 # A bad setting under MPI: every rank reports, none waits for another (no deadlock), the
 # output is empty everywhere.

@@ -191,6 +191,29 @@ def test_bad_inputs_give_an_error_naming_the_problem_and_empty_output():
 
 
 @test
+def test_settings_out_of_range_are_refused_naming_them_not_clamped():
+    """VTK's clamping setters turned Spacing -1 into 0 (the default spacing) and a Levels of
+    20 into 8, running without a word; each is now an error naming the setting."""
+    grid = fixture()
+    iso = median_p(grid)
+    good = samples_filter(grid, iso)
+    good.Update()
+    assert good.GetErrorMessage() == "" and good.GetOutput().GetNumberOfPoints() > 20
+    for setting, value, expected in (
+            ("Spacing", -0.1, "Spacing must be >= 0 (0: 1/40 of the mesh's diagonal), got -0.1"),
+            ("CurvatureAdaptivity", -1.0, "Curvature Adaptivity must be >= 0"),
+            ("Tolerance", 0.0, "Tolerance must lie in (0, 1)"),
+            ("Tolerance", float("nan"), "Tolerance must lie in (0, 1)"),
+            ("Levels", 20, "Levels must lie in [0, 8], got 20")):
+        f = samples_filter(grid, iso, **{setting: value})
+        errors = Errors(f)
+        f.Update()
+        assert f.GetOutput().GetNumberOfPoints() == 0, setting
+        assert expected in f.GetErrorMessage(), (setting, f.GetErrorMessage())
+        assert len(errors.messages) == 1, errors.messages
+
+
+@test
 def test_isovalue_beyond_the_field_warns_once_with_empty_output():
     grid = fixture()
     p = vtk_to_numpy(grid.GetPointData().GetArray("p"))

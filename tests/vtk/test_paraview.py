@@ -451,13 +451,21 @@ def run_mpi(ranks):
         if ln.startswith("CASE "):
             _, name, info = ln.split(" ", 2)
             cases[name] = json.loads(info)
-    assert set(cases) == {"auto", "reader", "fixed", "frame01", "varied", "plane"}, p.stdout[-2000:]
+    assert set(cases) == {"auto", "reader", "fixed", "frame01", "varied", "plane",
+                          "fe_reader", "fe_split", "fe_beyond"}, p.stdout[-2000:]
     # Each rank warns of the isovalues its slab has no triangle of; only those no rank
     # has reach the user: 1000 (the "plane" case's second isovalue), once per rank, and
     # not the plane, which lies in one slab.
-    warned = [ln for ln in p.stderr.splitlines() if "no surface at isovalue" in ln]
+    warned = [ln for ln in p.stderr.splitlines()
+              if "vtkIsobarSPHIsosurface" in ln and "no surface at isovalue" in ln]
     assert len(warned) == ranks and all("no surface at isovalue 1000" in ln for ln in warned), (
         f"{ranks} ranks: {warned}")
+    # The FE filter likewise: only the isovalue beyond the field, once per rank; and a
+    # rank whose piece holds no cell (the reader's one piece) is no error.
+    fe_warned = [ln for ln in p.stderr.splitlines()
+                 if "vtkIsobarFESamples" in ln and "no surface at isovalue" in ln]
+    assert len(fe_warned) == ranks, f"{ranks} ranks: {fe_warned}"
+    assert "has no cells" not in p.stderr, p.stderr[-3000:]
     assert sum(t > 0 for t in cases["plane"]["triangles"]) >= 1, cases["plane"]
     # Bad settings: empty everywhere, no rank hung (the run ended).
     for bad in ("bad input", "bad nan", "bad budget"):
@@ -565,6 +573,32 @@ def test_mpi_varied_h_quintic_point_array_field_and_carried_arrays():
     for ranks in (2, 3):
         check_pieces(ranks, "varied", one, arrays=("SumOfWeights", "velocity", "id"),
                      least=500)
+
+
+@test
+def test_mpi_fe_samples_take_the_whole_meshs_spacing_and_empty_pieces_are_no_error():
+    """The FE filter under mpiexec: a rank whose piece holds no cell gives no samples and
+    no error, and the default spacing follows the whole mesh's box, not each piece's (from
+    a piece's smaller box the pieces were sampled denser than the one-rank surface)."""
+    prefix1, cases1, _ = run_mpi(1)
+    one = cases1["fe_reader"]
+    assert one["samples"][0] > 500, one
+    ref_points, _ = h.arrays(h.read_vtp(f"{prefix1}_fe_reader.vtp"))
+    for ranks in (2, 3):
+        prefix, cases, _ = run_mpi(ranks)
+        reader = cases["fe_reader"]
+        assert reader["cells"][1:] == [0] * (ranks - 1), reader
+        # Rank 0 holds the whole mesh: the one-rank samples, bit for bit.
+        points, _ = h.arrays(h.read_vtp(f"{prefix}_fe_reader.vtp"))
+        assert np.array_equal(points, ref_points), f"{ranks} ranks: samples differ"
+        split = cases["fe_split"]
+        assert min(split["cells"]) > 0 and min(split["samples"]) > 0, split
+        assert abs(split["radius_median"] - one["radius_median"]) <= 1e-12 * one["radius_median"], (
+            split, one)
+        assert 0.8 < sum(split["samples"]) / one["samples"][0] < 1.25, (split, one)
+        assert cases["fe_beyond"]["samples"] == [0] * ranks, cases["fe_beyond"]
+        print(f"  {ranks} ranks: split cells {split['cells']}, samples {split['samples']} "
+              f"(one rank: {one['samples'][0]})", flush=True)
 
 
 @test

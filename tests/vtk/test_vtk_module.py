@@ -429,6 +429,87 @@ def test_volume_slider_without_scalars_reports_an_error():
 
 
 @test
+def test_settings_out_of_range_are_refused_naming_them_not_clamped():
+    """VTK's clamping setters turned a negative Max Error into 0 (the error criterion off)
+    and a negative Smoothing Length beside an h array into 0 (the array used), running
+    without a word; each bad value is now an error naming the setting, output empty."""
+    from isobar_vtk import vtkIsobarVolumeSlider
+
+    r = reader(h.FRAME_26)
+    cases = (
+        ("SmoothingLength", -0.02, "Smoothing Length must be >= 0"),
+        ("HScale", 0.0, "H Scale must be > 0, got 0"),
+        ("Mass", -1.0, "Mass must be >= 0 (0: none)"),
+        ("GridFactor", -0.5, "Grid Factor must be > 0"),
+        ("SplashThreshold", -3, "Splash Threshold must be >= 0"),
+        ("MaxError", -1.0, "Max Error must be >= 0 (0: no error criterion), got -1"),
+        ("BisectionIterations", 17, "Bisection Iterations must lie in [0, 16], got 17"),
+        ("Tolerance", -1.0, "Tolerance must lie in (0, 1), got -1"),
+        ("Tolerance", 1.0, "Tolerance must lie in (0, 1), got 1"),
+        ("TrimNode", -0.1, "Trim Node must be >= 0"),
+        ("TrimVertex", float("inf"), "Trim Vertex must be >= 0"),
+        ("MemoryBudget", 0.0, "Memory Budget must be > 0"),
+        ("LatticeCellSize", -1.0, "Lattice Cell Size must be >= 0"),
+        ("FieldComponent", -2, "Field Component must be >= -1"),
+    )
+    for setting, value, expected in cases:
+        f = free_surface_filter(r, **{setting: value})
+        errors = Errors(f)
+        f.Update()
+        assert f.GetOutput().GetNumberOfCells() == 0, setting
+        assert expected in f.GetErrorMessage(), (setting, f.GetErrorMessage())
+        assert len(errors.messages) == 1, errors.messages
+    # The same filter, the value put right: it runs again.
+    f.SetFieldComponent(-1)
+    f.Update()
+    assert f.GetErrorMessage() == "" and f.GetOutput().GetNumberOfCells() > 100000
+    img, _arr = blobs_image()
+    s = vtkIsobarVolumeSlider()
+    s.SetInputData(img)
+    s.SetIsovalue(0.5)
+    for setting, value, expected in (("LodErrorBound", -0.1, "Lod Error Bound must be >= 0"),
+                                     ("LodMaxLevel", -1, "Lod Max Level must be >= 0"),
+                                     ("MemoryBudget", -1.0, "Memory Budget must be > 0")):
+        getattr(s, "Set" + setting)(value)
+        errors = Errors(s)
+        s.Update()
+        assert s.GetOutput().GetNumberOfCells() == 0 and expected in s.GetErrorMessage(), (
+            setting, s.GetErrorMessage())
+        getattr(s, "Set" + setting)({"LodErrorBound": 0.0, "LodMaxLevel": 0, "MemoryBudget": 4.0}[setting])
+    s.Update()
+    assert s.GetErrorMessage() == "" and s.GetOutput().GetNumberOfCells() > 1000
+
+
+@test
+def test_volume_slider_refuses_a_cell_array_and_a_vector_naming_them():
+    """The core reads one value a point: a cell array (39³ values for 40³ points) used to
+    be read past its end into a wrong surface, a vector as its first components."""
+    from isobar_vtk import vtkIsobarVolumeSlider
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+
+    img = vtkImageData()
+    img.SetDimensions(10, 10, 10)
+    cells = numpy_to_vtk(np.linspace(0.0, 1.0, 9 ** 3), deep=True)
+    cells.SetName("c")
+    img.GetCellData().AddArray(cells)
+    vectors = numpy_to_vtk(np.random.default_rng(1).random((1000, 3)), deep=True)
+    vectors.SetName("v")
+    img.GetPointData().AddArray(vectors)
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(0.5)
+    errors = Errors(f)
+    for association, name, expected in (
+            (vtkDataObject.FIELD_ASSOCIATION_CELLS, "c", "array 'c' is not point data (729 values for 1000 points)"),
+            (vtkDataObject.FIELD_ASSOCIATION_POINTS, "v", "array 'v' has 3 components")):
+        f.SetInputArrayToProcess(0, 0, 0, association, name)
+        f.Update()
+        assert f.GetOutput().GetNumberOfCells() == 0, name
+        assert expected in f.GetErrorMessage(), f.GetErrorMessage()
+    assert len(errors.messages) == 2, errors.messages
+
+
+@test
 def test_volume_slider_places_the_surface_in_the_images_own_coordinates():
     from isobar_vtk import vtkIsobarVolumeSlider
     from vtkmodules.vtkFiltersCore import vtkFlyingEdges3D

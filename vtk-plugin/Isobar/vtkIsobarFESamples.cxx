@@ -19,12 +19,16 @@
 #include "vtkUnstructuredGrid.h"
 
 #include "IsobarLines.h"
+#include "IsobarRanks.h"
+#include "IsobarSettings.h"
 #include "isobar.h"
 
+#include <cmath>
 #include <sstream>
 #include <vector>
 
 vtkStandardNewMacro(vtkIsobarFESamples);
+vtkCxxSetObjectMacro(vtkIsobarFESamples, Controller, vtkMultiProcessController);
 
 namespace
 {
@@ -137,7 +141,9 @@ vtkIsobarFESamples::vtkIsobarFESamples()
   , LastMaxResidual(0.0)
   , LastProgress(-1.0)
   , Mesh(nullptr)
+  , Controller(nullptr)
 {
+  this->SetController(vtkMultiProcessController::GetGlobalController());
   IsobarFeParams defaults;
   if (isobar_fe_params_default(&defaults) == ISOBAR_STATUS_OK)
   {
@@ -153,6 +159,7 @@ vtkIsobarFESamples::vtkIsobarFESamples()
 vtkIsobarFESamples::~vtkIsobarFESamples()
 {
   this->FreeMesh();
+  this->SetController(nullptr);
 }
 
 //------------------------------------------------------------------------------
@@ -199,20 +206,127 @@ int vtkIsobarFESamples::RequestData(
   this->LastProgress = -1.0;
   output->Initialize();
 
-  if (!input || input->GetNumberOfCells() == 0)
+  // Settings alone fail alike on every rank, before any collective call.
+  const std::string badSetting = this->CheckSettings();
+  if (!badSetting.empty())
   {
-    this->Fail("the input has no cells: give an unstructured grid of Lagrange cells");
+    this->Fail(badSetting);
     return 1;
   }
+
+  // In an MPI run each rank samples its own piece, and every rank takes part in every
+  // collective call below whatever happened to it, so that none waits for ever.
+  vtkMultiProcessController* controller = this->Controller;
+  const bool parallel = controller && controller->GetNumberOfProcesses() > 1;
+  const vtkIdType cells = input ? input->GetNumberOfCells() : 0;
+  vtkIdType allCells = cells;
+  if (parallel)
+  {
+    controller->AllReduce(&cells, &allCells, 1, vtkCommunicator::SUM_OP);
+  }
+  std::string failure;
+  std::string field;
+  if (allCells == 0)
+  {
+    failure = "the input has no cells: give an unstructured grid of Lagrange cells";
+  }
+  else if (cells > 0)
+  {
+    failure = this->PrepareMesh(input, inputVector, field);
+  }
+  // else: other ranks hold the cells; this rank's piece and output are empty.
+
+  double spacing = this->Spacing;
+  if (parallel)
+  {
+    failure = IsobarAgreeOnFailure(controller, failure);
+    if (failure.empty() && spacing <= 0.0)
+    {
+      // The default spacing follows the whole mesh's box, as in one process: from each
+      // piece's own box the pieces would be sampled at different densities.
+      double local[6] = { VTK_DOUBLE_MAX, VTK_DOUBLE_MAX, VTK_DOUBLE_MAX, VTK_DOUBLE_MAX,
+        VTK_DOUBLE_MAX, VTK_DOUBLE_MAX };
+      double box[6];
+      if (cells > 0 && isobar_fe_mesh_bounds(this->Mesh, box) == ISOBAR_STATUS_OK)
+      {
+        for (int k = 0; k < 3; ++k)
+        {
+          local[k] = box[k];
+          local[3 + k] = -box[3 + k];
+        }
+      }
+      double whole[6];
+      controller->AllReduce(local, whole, 6, vtkCommunicator::MIN_OP);
+      // As the core computes it from one box: (hi - lo) per axis, then the length.
+      const double dx = -whole[3] - whole[0], dy = -whole[4] - whole[1],
+                   dz = -whole[5] - whole[2];
+      spacing = std::sqrt(dx * dx + dy * dy + dz * dz) / 40.0;
+    }
+  }
+  std::string warnings;
+  if (failure.empty() && cells > 0)
+  {
+    failure = this->SamplePiece(field, spacing, output, warnings);
+  }
+
+  vtkIdType allSamples = output->GetNumberOfPoints();
+  if (parallel)
+  {
+    const vtkIdType here = allSamples;
+    controller->AllReduce(&here, &allSamples, 1, vtkCommunicator::SUM_OP);
+    // All pieces or none: a rank that failed empties every rank's output.
+    failure = IsobarAgreeOnFailure(controller, failure);
+  }
+  if (failure == "cancelled")
+  {
+    output->Initialize();
+    this->ErrorMessage = failure;
+    return 1;
+  }
+  if (!failure.empty())
+  {
+    output->Initialize();
+    this->Fail(failure);
+    return 1;
+  }
+  // Warnings, not errors: the samples are what was asked for, but perhaps not what was
+  // meant (an isovalue the field never crosses). One vtkWarningMacro a line. In an MPI
+  // run a piece without samples is no news when another piece has some.
+  static const std::string noSurface = "no surface at isovalue ";
+  for (const std::string& line : IsobarLines(warnings.c_str()))
+  {
+    if (!(parallel && allSamples > 0 && line.rfind(noSurface, 0) == 0))
+    {
+      vtkWarningMacro(<< line);
+    }
+  }
+  this->UpdateProgress(1.0);
+  return 1;
+}
+
+//------------------------------------------------------------------------------
+std::string vtkIsobarFESamples::CheckSettings() const
+{
+  return IsobarSettingsCheck()
+    .AtLeast("Spacing", this->Spacing, 0.0, "0: 1/40 of the mesh's diagonal")
+    .AtLeast("Curvature Adaptivity", this->CurvatureAdaptivity, 0.0, "0: uniform")
+    .Inside("Tolerance", this->Tolerance, 0.0, 1.0)
+    .Within("Levels", this->Levels, 0, 8)
+    .Failure();
+}
+
+//------------------------------------------------------------------------------
+std::string vtkIsobarFESamples::PrepareMesh(
+  vtkUnstructuredGrid* input, vtkInformationVector** inputVector, std::string& field)
+{
   vtkDataArray* values = this->GetInputArrayToProcess(0, inputVector);
   if (!values || values->GetNumberOfTuples() != input->GetNumberOfPoints())
   {
-    this->Fail("the input has no point scalars: choose a point array to contour");
-    return 1;
+    return "the input has no point scalars: choose a point array to contour";
   }
-  const std::string field = values->GetName() ? values->GetName() : "field";
+  field = values->GetName() ? values->GetName() : "field";
 
-  // 1. The core's copy of the mesh, made again only when the points, the cells or the
+  // The core's copy of the mesh, made again only when the points, the cells or the
   // array changed. The arrays themselves are the key, not the data set: ParaView touches
   // the data set's MTime on re-execution without changing what it holds.
   std::ostringstream key;
@@ -233,8 +347,7 @@ int vtkIsobarFESamples::RequestData(
     if (status != ISOBAR_STATUS_OK)
     {
       this->Mesh = nullptr;
-      this->Fail(CoreError("isobar_fe_mesh_create", status));
-      return 1;
+      return CoreError("isobar_fe_mesh_create", status);
     }
     const vtkIdType n = values->GetNumberOfTuples();
     std::vector<double> scalars(static_cast<size_t>(n));
@@ -247,18 +360,23 @@ int vtkIsobarFESamples::RequestData(
     if (status != ISOBAR_STATUS_OK)
     {
       this->FreeMesh();
-      this->Fail(CoreError("isobar_fe_mesh_add_array", status));
-      return 1;
+      return CoreError("isobar_fe_mesh_add_array", status);
     }
     this->BuiltFrom = key.str();
     ++this->NumberOfMeshBuilds;
   }
+  return std::string();
+}
 
-  // 2. Sample.
+//------------------------------------------------------------------------------
+std::string vtkIsobarFESamples::SamplePiece(
+  const std::string& field, double spacing, vtkPolyData* output, std::string& warnings)
+{
+  // Sample.
   IsobarFeParams params;
   isobar_fe_params_default(&params);
   params.iso = this->Isovalue;
-  params.spacing = this->Spacing;
+  params.spacing = spacing;
   params.rho = this->CurvatureAdaptivity;
   params.tolerance = this->Tolerance;
   params.levels = static_cast<uint32_t>(this->Levels);
@@ -269,13 +387,11 @@ int vtkIsobarFESamples::RequestData(
     &vtkIsobarFESamplesProgress::Call, this, &samples.Ptr);
   if (status == ISOBAR_STATUS_CANCELLED)
   {
-    this->ErrorMessage = "cancelled";
-    return 1;
+    return "cancelled";
   }
   if (status != ISOBAR_STATUS_OK)
   {
-    this->Fail(CoreError("isobar_fe_sample", status));
-    return 1;
+    return CoreError("isobar_fe_sample", status);
   }
   IsobarFeStats stats;
   stats.struct_size = sizeof(stats);
@@ -285,7 +401,7 @@ int vtkIsobarFESamples::RequestData(
     this->LastMaxResidual = stats.max_residual;
   }
 
-  // 3. Vertices with Normals, Radius and the per-sample arrays.
+  // Vertices with Normals, Radius and the per-sample arrays.
   const vtkIdType n = static_cast<vtkIdType>(isobar_samples_count(samples.Ptr));
   vtkNew<vtkDoubleArray> xyz;
   xyz->SetNumberOfComponents(3);
@@ -330,21 +446,13 @@ int vtkIsobarFESamples::RequestData(
       isobar_samples_attribute(samples.Ptr, i, &name, &components, &data);
     if (got != ISOBAR_STATUS_OK)
     {
-      output->Initialize();
-      this->Fail(CoreError("isobar_samples_attribute", got));
-      return 1;
+      return CoreError("isobar_samples_attribute", got);
     }
     AddDoubleArray(pd, name, static_cast<int>(components), n, data);
   }
-  // Warnings, not errors: the samples are what was asked for, but perhaps not what was
-  // meant (an isovalue the field never crosses). One vtkWarningMacro a line. In an MPI
-  // run each process warns about its own piece.
-  for (const std::string& line : IsobarLines(isobar_samples_warnings(samples.Ptr)))
-  {
-    vtkWarningMacro(<< line);
-  }
-  this->UpdateProgress(1.0);
-  return 1;
+  const char* text = isobar_samples_warnings(samples.Ptr);
+  warnings = text ? text : "";
+  return std::string();
 }
 
 //------------------------------------------------------------------------------
@@ -358,4 +466,5 @@ void vtkIsobarFESamples::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Levels: " << this->Levels << "\n";
   os << indent << "Seed: " << this->Seed << "\n";
   os << indent << "NumberOfMeshBuilds: " << this->NumberOfMeshBuilds << "\n";
+  os << indent << "Controller: " << this->Controller << "\n";
 }

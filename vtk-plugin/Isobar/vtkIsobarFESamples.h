@@ -14,8 +14,12 @@
  *
  * The core's copy of the mesh is kept between updates while the input and its array are
  * unchanged, so moving Isovalue or Spacing re-samples without checking and linking the
- * cells again (NumberOfMeshBuilds counts the copies made). In an MPI run each process
- * samples its own piece.
+ * cells again (NumberOfMeshBuilds counts the copies made).
+ *
+ * In an MPI run each process samples its own piece ("Element" numbers the cells of that
+ * piece): the default Spacing follows the whole mesh's bounding box, a piece with no
+ * cells gives no samples and no error, a failure on one rank empties every rank's output,
+ * and "no surface" is warned only when no piece has a sample.
  */
 
 #ifndef vtkIsobarFESamples_h
@@ -27,6 +31,8 @@
 #include <string> // For members
 
 struct IsobarFeMesh;
+class vtkMultiProcessController;
+class vtkUnstructuredGrid;
 
 class ISOBARVTK_EXPORT vtkIsobarFESamples : public vtkPolyDataAlgorithm
 {
@@ -44,25 +50,25 @@ public:
   ///@{
   /// Distance between samples on flat parts, world units; 0 (default) picks 1/40 of the
   /// bounding-box diagonal.
-  vtkSetClampMacro(Spacing, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(Spacing, double);
   vtkGetMacro(Spacing, double);
   ///@}
 
   ///@{
   /// Curvature adaptivity ρ: extra density on curved parts (default 0: uniform).
-  vtkSetClampMacro(CurvatureAdaptivity, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(CurvatureAdaptivity, double);
   vtkGetMacro(CurvatureAdaptivity, double);
   ///@}
 
   ///@{
   /// ε_T: every sample has |F - C| at most this (default 1e-6).
-  vtkSetClampMacro(Tolerance, double, 1e-15, 1.0);
+  vtkSetMacro(Tolerance, double);
   vtkGetMacro(Tolerance, double);
   ///@}
 
   ///@{
   /// Coarse-to-fine levels, each halving the spacing (default 2).
-  vtkSetClampMacro(Levels, int, 0, 8);
+  vtkSetMacro(Levels, int);
   vtkGetMacro(Levels, int);
   ///@}
 
@@ -81,6 +87,11 @@ public:
   /// The last error ("" when the last update succeeded).
   const char* GetErrorMessage() const { return this->ErrorMessage.c_str(); }
 
+  ///@{
+  /// The processes that share the input's pieces (default: the global controller).
+  virtual void SetController(vtkMultiProcessController*);
+  vtkGetObjectMacro(Controller, vtkMultiProcessController);
+  ///@}
   /// Called by the core's progress callback; true asks the core to stop.
   bool ReportProgress(double fraction, const char* phase);
 
@@ -96,6 +107,16 @@ private:
   void operator=(const vtkIsobarFESamples&) = delete;
 
   void Fail(const std::string& message);
+  /// The first setting outside its range, as a message naming it ("" when all are fine).
+  std::string CheckSettings() const;
+  /// Makes the core's copy of this rank's piece (kept while the input is unchanged) and
+  /// names the array to contour in `field`; returns the failure ("" on success).
+  std::string PrepareMesh(
+    vtkUnstructuredGrid* input, vtkInformationVector** inputVector, std::string& field);
+  /// Samples the core's mesh into `output`; returns the failure ("" on success,
+  /// "cancelled") and the core's warnings in `warnings`.
+  std::string SamplePiece(
+    const std::string& field, double spacing, vtkPolyData* output, std::string& warnings);
   void FreeMesh();
 
   double Isovalue;
@@ -110,6 +131,7 @@ private:
   double LastProgress;
   std::string ErrorMessage;
   IsobarFeMesh* Mesh;
+  vtkMultiProcessController* Controller;
   /// What the core's mesh was made from: the input's identity and MTime, the array.
   std::string BuiltFrom;
 };

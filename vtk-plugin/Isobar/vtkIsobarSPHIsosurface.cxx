@@ -24,6 +24,8 @@
 #include "vtkUnsignedCharArray.h"
 
 #include "IsobarLines.h"
+#include "IsobarRanks.h"
+#include "IsobarSettings.h"
 #include "isobar.h"
 
 #include <algorithm>
@@ -796,6 +798,13 @@ int vtkIsobarSPHIsosurface::RequestData(
   this->PieceBounds[0] = this->PieceBounds[1] = 0.0;
   this->PieceParticles = 0;
 
+  const std::string badSetting = this->CheckSettings();
+  if (!badSetting.empty())
+  {
+    this->Fail(badSetting);
+    return 1;
+  }
+
   // 1. The particle arrays to collect, in an order every rank shares. Errors found from
   // the settings alone happen alike on every rank, so no rank skips a collective call.
   const std::string fieldArray = this->FieldArrayName();
@@ -1094,19 +1103,7 @@ int vtkIsobarSPHIsosurface::RequestData(
         vtkCommunicator::SUM_OP);
     }
     // All pieces or none: a rank that failed empties every rank's output.
-    std::vector<int> states(nproc, 0);
-    const int state = failure.empty() ? 0 : (failure == "cancelled" ? 2 : 1);
-    controller->AllGather(&state, states.data(), 1);
-    for (int p = 0; p < nproc && failure.empty(); ++p)
-    {
-      if (states[p] != 0)
-      {
-        std::ostringstream msg;
-        msg << "rank " << p
-            << (states[p] == 2 ? " was cancelled" : " failed (see its error message)");
-        failure = msg.str();
-      }
-    }
+    failure = IsobarAgreeOnFailure(controller, failure);
   }
   if (failure == "cancelled")
   {
@@ -1170,6 +1167,28 @@ std::string vtkIsobarSPHIsosurface::NoteAutoBackend(vtkPolyData* output)
   array->InsertNextValue(note);
   output->GetFieldData()->AddArray(array);
   return "";
+}
+
+//------------------------------------------------------------------------------
+std::string vtkIsobarSPHIsosurface::CheckSettings() const
+{
+  IsobarSettingsCheck check;
+  check.AtLeast("Field Component", this->FieldComponent, -1, "-1: the magnitude")
+    .AtLeast("Smoothing Length", this->SmoothingLength, 0.0,
+      "0: from the Smoothing Length Array or the data")
+    .Above("H Scale", this->HScale, 0.0)
+    .AtLeast("Mass", this->Mass, 0.0, "0: none")
+    .Above("Grid Factor", this->GridFactor, 0.0)
+    .AtLeast("Splash Threshold", this->SplashThreshold, 0, "0: no splash rule")
+    .AtLeast("Max Error", this->MaxError, 0.0, "0: no error criterion")
+    .Within("Bisection Iterations", this->BisectionIterations, 0, 16)
+    .Inside("Tolerance", this->Tolerance, 0.0, 1.0)
+    .AtLeast("Trim Node", this->TrimNode, 0.0)
+    .AtLeast("Trim Vertex", this->TrimVertex, 0.0)
+    .Above("Memory Budget", this->MemoryBudget, 0.0, "GiB")
+    .AtLeast("Lattice Cell Size", this->LatticeCellSize, 0.0,
+      "0: Grid Factor x the smallest smoothing length");
+  return check.Failure();
 }
 
 //------------------------------------------------------------------------------

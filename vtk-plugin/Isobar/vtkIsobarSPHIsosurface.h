@@ -75,7 +75,7 @@ public:
   ///@{
   /// For a multi-component input array: -1 (default) contours its magnitude, k >= 0 its
   /// component k. Ignored for one-component arrays.
-  vtkSetClampMacro(FieldComponent, int, -1, VTK_INT_MAX);
+  vtkSetMacro(FieldComponent, int);
   vtkGetMacro(FieldComponent, int);
   ///@}
 
@@ -91,7 +91,7 @@ public:
   /// Constant smoothing length h, used when no smoothing-length array is named. 0 (the
   /// default) means: use the point array "h", "smoothing_length" or "hsml", whichever
   /// exists first (as the isobar CLI does); with none, RequestData reports an error.
-  vtkSetClampMacro(SmoothingLength, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(SmoothingLength, double);
   vtkGetMacro(SmoothingLength, double);
   ///@}
 
@@ -103,7 +103,7 @@ public:
 
   ///@{
   /// Multiplies every smoothing length (1, 0.75, 0.5 ... for quick previews).
-  vtkSetClampMacro(HScale, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(HScale, double);
   vtkGetMacro(HScale, double);
   ///@}
 
@@ -120,7 +120,7 @@ public:
 
   ///@{
   /// Constant particle mass (0: none).
-  vtkSetClampMacro(Mass, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(Mass, double);
   vtkGetMacro(Mass, double);
   ///@}
 
@@ -139,7 +139,7 @@ public:
 
   ///@{
   /// Virtual cell size in units of the smallest smoothing length (core default 0.5).
-  vtkSetClampMacro(GridFactor, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(GridFactor, double);
   vtkGetMacro(GridFactor, double);
   ///@}
 
@@ -163,7 +163,7 @@ public:
   /// Adaptive method: coarse cells holding 1 to this many particles (splashes) are refined
   /// to the finest level (the paper's rule: 1; core default 0, none: the error criterion
   /// alone decides).
-  vtkSetClampMacro(SplashThreshold, int, 0, VTK_INT_MAX);
+  vtkSetMacro(SplashThreshold, int);
   vtkGetMacro(SplashThreshold, int);
   ///@}
 
@@ -171,7 +171,7 @@ public:
   /// Adaptive method, error criterion added to the splash one: each cell at the surface
   /// takes the lowest level whose surface lies within this many finest cells of the
   /// finest level's there (core default; 0 turns it off).
-  vtkSetClampMacro(MaxError, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(MaxError, double);
   vtkGetMacro(MaxError, double);
   ///@}
 
@@ -179,7 +179,7 @@ public:
   /// Adaptive method: halvings n of a level-3 edge when placing its surface point (n+1 on
   /// level 2, n+2 on level 1, so shared points coincide; core default 5). 0 places level-3
   /// points linearly between the finest nodes, as marching cubes does: faster, coarser.
-  vtkSetClampMacro(BisectionIterations, int, 0, 16);
+  vtkSetMacro(BisectionIterations, int);
   vtkGetMacro(BisectionIterations, int);
   ///@}
 
@@ -204,7 +204,7 @@ public:
 
   ///@{
   /// Relative tolerance of the correction (core default 1e-6).
-  vtkSetClampMacro(Tolerance, double, 0.0, 1.0);
+  vtkSetMacro(Tolerance, double);
   vtkGetMacro(Tolerance, double);
   ///@}
 
@@ -215,9 +215,9 @@ public:
   vtkSetMacro(Trim, vtkTypeBool);
   vtkGetMacro(Trim, vtkTypeBool);
   vtkBooleanMacro(Trim, vtkTypeBool);
-  vtkSetClampMacro(TrimNode, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(TrimNode, double);
   vtkGetMacro(TrimNode, double);
-  vtkSetClampMacro(TrimVertex, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(TrimVertex, double);
   vtkGetMacro(TrimVertex, double);
   ///@}
 
@@ -230,7 +230,7 @@ public:
 
   ///@{
   /// Memory the core may use for extent-sized structures, in GiB (core default 4).
-  vtkSetClampMacro(MemoryBudget, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(MemoryBudget, double);
   vtkGetMacro(MemoryBudget, double);
   ///@}
 
@@ -253,7 +253,7 @@ public:
   vtkBooleanMacro(FixedLattice, vtkTypeBool);
   vtkSetVector3Macro(LatticeOrigin, double);
   vtkGetVector3Macro(LatticeOrigin, double);
-  vtkSetClampMacro(LatticeCellSize, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(LatticeCellSize, double);
   vtkGetMacro(LatticeCellSize, double);
   ///@}
 
@@ -293,6 +293,9 @@ protected:
 
   /// Reports `message` through vtkErrorMacro and remembers it for GetErrorMessage.
   void Fail(const std::string& message);
+  /// The first setting outside its range, as a message naming it ("" when all are fine):
+  /// a bad value is refused, not clamped to another that would run without a word.
+  std::string CheckSettings() const;
 
   /// Each line of `warnings` (isobar_surface_warnings: one a line, "" for none) as its
   /// own vtkWarningMacro, so that ParaView's Output Messages lists them one by one. In a

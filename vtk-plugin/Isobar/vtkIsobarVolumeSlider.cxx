@@ -13,6 +13,7 @@
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
 
+#include "IsobarSettings.h"
 #include "isobar.h"
 
 #include <algorithm>
@@ -127,19 +128,44 @@ int vtkIsobarVolumeSlider::RequestData(
     this->Fail("the input image has a direction matrix (rotated axes): not supported");
     return 1;
   }
+  // The core reads one value a point: a cell array (one fewer along each axis) or a
+  // vector would be read past its end or as the wrong values.
+  const char* name = values->GetName() ? values->GetName() : "(unnamed)";
+  int association = vtkDataObject::FIELD_ASSOCIATION_POINTS;
+  this->GetInputArrayToProcess(0, inputVector, association);
+  if (association != vtkDataObject::FIELD_ASSOCIATION_POINTS ||
+    values->GetNumberOfTuples() != input->GetNumberOfPoints())
+  {
+    std::ostringstream msg;
+    msg << "array '" << name << "' is not point data (" << values->GetNumberOfTuples()
+        << " values for " << input->GetNumberOfPoints() << " points): choose a point array";
+    this->Fail(msg.str());
+    return 1;
+  }
+  if (values->GetNumberOfComponents() != 1)
+  {
+    std::ostringstream msg;
+    msg << "array '" << name << "' has " << values->GetNumberOfComponents()
+        << " components: choose a one-component point array (a Calculator can make a "
+           "magnitude or pick a component)";
+    this->Fail(msg.str());
+    return 1;
+  }
   // The first point, not the image origin: an extent need not start at index 0
   // (ParaView's Wavelet spans -10..10), and the core's lattice starts at its first node.
   input->GetPoint(0, origin);
 
   // The core checks the rest (a bound below 1, at most 6 levels) in isobar_slider_set_lod.
-  if (!(this->LodErrorBound >= 0.0))
+  const std::string badSetting = IsobarSettingsCheck()
+                                   .AtLeast("Lod Error Bound", this->LodErrorBound, 0.0,
+                                     "0: the exact surface")
+                                   .AtLeast("Lod Max Level", this->LodMaxLevel, 0,
+                                     "0: the core's default")
+                                   .Above("Memory Budget", this->MemoryBudget, 0.0, "GiB")
+                                   .Failure();
+  if (!badSetting.empty())
   {
-    this->Fail("LodErrorBound must be >= 0 (0: the exact surface)");
-    return 1;
-  }
-  if (this->LodMaxLevel < 0)
-  {
-    this->Fail("LodMaxLevel must be >= 0 (0: the core's default)");
+    this->Fail(badSetting);
     return 1;
   }
 

@@ -65,7 +65,7 @@ public:
   /// default). Past about 29 bytes a node the core sorts the values on disk, beside the
   /// store, and writes the same store; too small a budget even for that is an error.
   /// Changing it does not rebuild a store already built.
-  vtkSetClampMacro(MemoryBudget, double, 0.0, VTK_DOUBLE_MAX);
+  vtkSetMacro(MemoryBudget, double);
   vtkGetMacro(MemoryBudget, double);
   ///@}
 

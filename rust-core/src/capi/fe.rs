@@ -300,6 +300,24 @@ pub extern "C" fn isobar_fe_mesh_cell_count(mesh: *const IsobarFeMesh) -> usize 
     unsafe { mesh.as_ref() }.map_or(0, |m| m.mesh.cell_count())
 }
 
+/// The box that holds every cell of a mesh, curved cells' bulges included: the box whose
+/// diagonal a spacing of 0 takes 1/40 of. Writes lo xyz, then hi xyz, to `bounds_out`
+/// (6 f64). A data-parallel host that samples the pieces of one mesh reduces its pieces'
+/// boxes and passes the whole mesh's spacing, so that every piece is sampled alike.
+#[no_mangle]
+pub extern "C" fn isobar_fe_mesh_bounds(
+    mesh: *const IsobarFeMesh,
+    bounds_out: *mut f64,
+) -> IsobarStatus {
+    guard(|| {
+        let m = non_null(mesh, "mesh")?;
+        let (lo, hi) = m.mesh.bounds();
+        // Six doubles, as documented: [f64; 6] has f64's alignment.
+        let out = bounds_out.cast::<[f64; 6]>();
+        put(out, [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z], "bounds_out")
+    })
+}
+
 /// Frees a mesh (NULL is ignored).
 #[no_mangle]
 pub extern "C" fn isobar_fe_mesh_free(mesh: *mut IsobarFeMesh) {
