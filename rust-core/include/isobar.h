@@ -191,7 +191,8 @@ typedef struct IsobarAdaptiveStats {
 // fields at the end.
 typedef struct IsobarFeParams {
   uint32_t struct_size;
-  // Coarse-to-fine levels above the final spacing (each halves s; at most 8).
+  // Coarse-to-fine levels above the final spacing (each halves s; at most 8): at least
+  // this many, more while the seeds lie sparser than the coarsest spacing.
   uint32_t levels;
   // The isovalue C.
   double iso;

@@ -52,7 +52,8 @@ pub struct IsobarSamples {
 #[derive(Clone, Copy, Debug)]
 pub struct IsobarFeParams {
     pub struct_size: u32,
-    /// Coarse-to-fine levels above the final spacing (each halves s; at most 8).
+    /// Coarse-to-fine levels above the final spacing (each halves s; at most 8): at least
+    /// this many, more while the seeds lie sparser than the coarsest spacing.
     pub levels: u32,
     /// The isovalue C.
     pub iso: f64,

@@ -41,7 +41,7 @@ pub struct FeArgs {
     /// ε_T: every sample has |F − C| at most this.
     #[arg(long, default_value_t = 1e-6)]
     pub tolerance: f64,
-    /// Coarse-to-fine levels (each halves the spacing).
+    /// Coarse-to-fine levels (each halves the spacing; more while the seeds are sparser).
     #[arg(long, default_value_t = 2)]
     pub levels: usize,
     /// Seed of the split/delete random bias.

@@ -51,7 +51,8 @@ pub struct Params {
     /// Upper bound on the curvature scaling of α, as a multiple of the flat value
     /// (bounds the density near singular points).
     pub max_density: f64,
-    /// Coarse-to-fine levels above the final spacing (each halves s).
+    /// Coarse-to-fine levels above the final spacing (each halves s): at least this many,
+    /// more while the seeds lie sparser than the coarsest spacing.
     pub levels: usize,
     /// Most sweeps per relaxation.
     pub max_iterations: usize,

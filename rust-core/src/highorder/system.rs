@@ -84,15 +84,11 @@ pub(crate) fn run(
     if seeds.is_empty() {
         return Ok((seeds, stats));
     }
-    // Start no coarser than a quarter of the surface's extent.
     let (lo, hi) = seeds.iter().fold((seeds[0].x, seeds[0].x), |(a, b), p| {
         (a.min(p.x), b.max(p.x))
     });
     let extent = (hi - lo).max_element();
-    let mut top = 0;
-    while top < params.levels && spacing * 2f64.powi(top as i32 + 1) <= extent / 4.0 {
-        top += 1;
-    }
+    let top = coarsest_level(params.levels, spacing, extent, seeds.len());
     let mut particles = thin(seeds, spacing * 2f64.powi(top as i32));
     let mut sc = Scratch::default();
     for level in (0..=top).rev() {
@@ -127,10 +123,49 @@ pub(crate) fn run(
             }
         }
         if level > 0 {
+            check_population(particles.len(), level, spacing)?;
             particles = refine(surface, &lv, params, &particles, level as u64);
         }
     }
     Ok((particles, stats))
+}
+
+/// Most samples a run may make: a spacing far below the surface's scale would otherwise run
+/// for hours and fill memory (about 200 bytes a particle with its neighbour lists).
+pub(crate) const MAX_SAMPLES: usize = 1 << 24;
+
+/// The coarsest level: at least `levels` above the final spacing, more while the seeds are
+/// sparser than that level's spacing, and no coarser than a quarter of the surface's
+/// extent. The seeds are a few per cut cell whatever the spacing, and splitting grows the
+/// population about one spacing a round, so from seeds far apart at a fine coarsest level
+/// it never covers the surface (a plane through one cell at s = 1/100 of it was sampled in
+/// patches around its 16 seeds). `gap` guesses the seeds' distance as if they were spread
+/// evenly over a square of the extent's side.
+fn coarsest_level(levels: usize, spacing: f64, extent: f64, seeds: usize) -> usize {
+    let gap = extent / (seeds as f64).sqrt();
+    let at = |level: usize| spacing * 2f64.powi(level as i32);
+    let mut top = 0;
+    while at(top + 1) <= extent / 4.0 && (top < levels || at(top) < gap) {
+        top += 1;
+    }
+    top
+}
+
+/// Refuses a run whose final spacing needs more than [`MAX_SAMPLES`]: `count` particles
+/// settled at `level` above it become about `count · 4^level` at the final spacing.
+fn check_population(count: usize, level: usize, spacing: f64) -> Result<()> {
+    let expected = count as f64 * 4f64.powi(level as i32);
+    if expected <= MAX_SAMPLES as f64 {
+        return Ok(());
+    }
+    Err(crate::error::Error::InvalidParameter {
+        name: "spacing",
+        message: format!(
+            "{spacing} would need about {expected:.2e} samples on this surface, over the \
+             {MAX_SAMPLES} the particle system takes; choose a spacing of at least {:.3e}",
+            spacing * (expected / MAX_SAMPLES as f64).sqrt()
+        ),
+    })
 }
 
 /// Keeps the first particle of each bin of size `h`, in order.

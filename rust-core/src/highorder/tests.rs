@@ -271,6 +271,91 @@ fn missing_field_and_bad_parameters_are_errors() {
     assert!(s.is_empty());
 }
 
+/// A plane through one cell sampled at a spacing far below the cell: its seeds (16, from
+/// the cell's probe lattice) are a third of the cell apart, so the coarse-to-fine levels
+/// must start coarse enough to spread them; at the default two levels the run used to
+/// return patches around the seeds with holes wider than the bins searched here (at
+/// s = 0.01 and 0.006; s = 0.02 happened to fill in). Every point of the
+/// plane now has a sample within 1.5 spacings, and the count is the plane's area over the
+/// area a sample covers.
+#[test]
+fn a_fine_spacing_covers_the_whole_surface_from_few_seeds() {
+    let mesh = grid_mesh(1, 1, |y| y, |y| y.x - 0.2);
+    let s = 0.01;
+    let params = Params {
+        spacing: s,
+        ..Params::default()
+    };
+    let (samples, stats) = run(&mesh, &params);
+    assert!(stats.seeds <= 32, "{} seeds", stats.seeds);
+    // The samples binned by (y, z) in bins of 2 s: a point's nearest sample within 2 s
+    // lies in its bin or the eight around it.
+    let bin = |y: f64, z: f64| {
+        (
+            (y / (2.0 * s)).floor() as i64,
+            (z / (2.0 * s)).floor() as i64,
+        )
+    };
+    let mut bins: rustc_hash::FxHashMap<(i64, i64), Vec<DVec3>> = Default::default();
+    for p in &samples.positions {
+        assert!((p[0] - 0.2).abs() <= 1e-6, "off the plane: {p:?}");
+        bins.entry(bin(p[1], p[2]))
+            .or_default()
+            .push(DVec3::from(*p));
+    }
+    let mut worst = 0.0f64;
+    for j in 0..=38 {
+        for k in 0..=38 {
+            let at = DVec3::new(0.2, -0.95 + 0.05 * j as f64, -0.95 + 0.05 * k as f64);
+            let (bj, bk) = bin(at.y, at.z);
+            let mut nearest = f64::INFINITY;
+            for dj in -1..=1 {
+                for dk in -1..=1 {
+                    for q in bins.get(&(bj + dj, bk + dk)).into_iter().flatten() {
+                        nearest = nearest.min(q.distance(at));
+                    }
+                }
+            }
+            worst = worst.max(nearest);
+        }
+    }
+    assert!(
+        worst <= 1.5 * s,
+        "a hole: a point of the plane {worst} from every sample"
+    );
+    // Area 4 over the ~0.87 s² a sample of a hexagonal packing covers.
+    let expected = 4.0 / (0.87 * s * s);
+    let ratio = samples.len() as f64 / expected;
+    assert!(
+        (0.7..1.3).contains(&ratio),
+        "{} samples, {expected:.0} expected",
+        samples.len()
+    );
+}
+
+/// A spacing far below the surface's scale is refused at the first coarse level, naming
+/// the spacing that would do, instead of running for hours.
+#[test]
+fn an_absurd_spacing_is_refused_early() {
+    let mesh = grid_mesh(1, 1, |y| y, |y| y.x - 0.2);
+    let params = Params {
+        spacing: 1e-6,
+        ..Params::default()
+    };
+    let err = sample(&mesh, "f", &params, &mut Progress::none()).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        matches!(
+            err,
+            crate::error::Error::InvalidParameter {
+                name: "spacing",
+                ..
+            }
+        ) && text.contains("choose a spacing of at least"),
+        "{text}"
+    );
+}
+
 /// "NAME:K" picks component K of a vector point array, as `isobar sph --field` does: the
 /// same samples as a scalar array holding that component. Magnitudes, missing components
 /// and vector arrays named without a component are refused, naming the array.
