@@ -36,8 +36,8 @@ class BakeJob:
         self.frames = list(frames)
         self.index = 0
         self.settings_params = Params.from_settings(obj.isobar)
-        self.fingerprint = importer.fingerprint(obj.isobar, self.settings_params)
         self.folder = importer.cache_folder(obj, obj.isobar, assign_name=True)
+        self.fingerprint = importer.fingerprint(obj.isobar, self.settings_params, self.folder)
         os.makedirs(self.folder, exist_ok=True)
         self.original_frame = scene.frame_current
         self.baked: List[int] = []
@@ -96,11 +96,21 @@ class BakeJob:
         if self.baked:
             with importer.suspend_updates():
                 settings.use_cache = True
-                settings.baked_start = min(self.baked)
-                settings.baked_end = max(self.baked)
+                settings.baked_start, settings.baked_end = self._playable_range()
         if self.is_object_source and self.scene.frame_current != self.original_frame:
             self.scene.frame_set(self.original_frame)  # the handler updates the surface
         importer.update_object(obj, self.scene, force=True)
+
+
+    def _playable_range(self) -> Tuple[int, int]:
+        """First and last frame in the folder that playback uses: this bake's and those an
+        earlier bake with the same settings left (re-baking a sub-range keeps them)."""
+        playable = [
+            frame
+            for frame in cache.frames(self.folder)
+            if cache.read_fingerprint(cache.frame_path(self.folder, frame)) == self.fingerprint
+        ] or self.baked
+        return min(playable), max(playable)
 
 
 def scene_frames(scene, start: Optional[int] = None, end: Optional[int] = None) -> List[int]:
@@ -110,20 +120,25 @@ def scene_frames(scene, start: Optional[int] = None, end: Optional[int] = None) 
     return list(range(start, end + 1, max(1, scene.frame_step)))
 
 
-def free(obj) -> int:
+def free(obj) -> Tuple[int, List[str]]:
     """Deletes `obj`'s baked frames and turns playback from the cache off; returns how
-    many files were deleted."""
+    many files were deleted and the other surfaces using the same folder (a duplicated
+    object copies its original's cache name): their frames are kept, and `obj` only lets
+    go of the folder."""
     settings = obj.isobar
+    sharers = importer.cache_sharers(obj)
     try:
         folder = importer.cache_folder(obj, settings)
     except ValueError:
         folder = ""
-    removed = cache.clear(folder) if folder else 0
+    removed = cache.clear(folder) if folder and not sharers else 0
     with importer.suspend_updates():
         settings.use_cache = False
         settings.baked_start, settings.baked_end = 0, -1
+        if sharers:
+            settings.cache_name = ""  # the next bake picks a folder of its own
     importer.update_object(obj, force=True)
-    return removed
+    return removed, sharers
 
 
 __all__ = ["BakeJob", "free", "scene_frames"]

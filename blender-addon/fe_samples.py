@@ -107,13 +107,15 @@ def resample(obj, path: str, field: str, iso: float, spacing: float, rho: float,
             mesh_for(obj, path), field, float(iso), spacing=float(spacing), rho=float(rho), progress=progress
         )
     old = obj.data
-    cloud = point_cloud(old.name if old is not None else obj.name, samples)
+    name = old.name if old is not None else obj.name
+    cloud = point_cloud(name, samples)
     if old is not None:
         for material in old.materials:
             cloud.materials.append(material)
     obj.data = cloud
     if old is not None and old.users == 0:
         bpy.data.pointclouds.remove(old)
+        cloud.name = name  # it was made beside the old one (name.001): one name for good
     return samples
 
 

@@ -1,4 +1,4 @@
-"""The persistent frame-change and load handlers."""
+"""The persistent frame-change, load, save and render handlers."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import traceback
 import bpy
 from bpy.app.handlers import persistent
 
-from . import importer
+from . import importer, paths
 
 
 @persistent
@@ -25,9 +25,45 @@ def isobar_load_post(*_args):
     importer.clear_runtime()
 
 
+@persistent
+def isobar_render_init(*_args):
+    """A render starts: a frame that fails must not render as the last good one."""
+    importer.set_rendering(True)
+
+
+@persistent
+def isobar_render_end(*_args):
+    """The render completed or was cancelled: back to keeping the last good frame."""
+    importer.set_rendering(False)
+
+
+@persistent
+def isobar_save_pre(filepath="", *_args):
+    """The .blend is about to be written to `filepath`: the add-on's '//' paths are
+    rewritten to point at the same files from there (Blender remaps only its own)."""
+    try:
+        paths.before_save(filepath)
+    except Exception:  # noqa: BLE001 - a handler must never raise into Blender
+        traceback.print_exc()
+
+
+@persistent
+def isobar_save_post(filepath="", *_args):
+    """The .blend was written: after Save Copy the open file's paths go back."""
+    try:
+        paths.after_save(filepath)
+    except Exception:  # noqa: BLE001
+        traceback.print_exc()
+
+
 _HANDLERS = (
     (bpy.app.handlers.frame_change_post, isobar_frame_change_post),
     (bpy.app.handlers.load_post, isobar_load_post),
+    (bpy.app.handlers.save_pre, isobar_save_pre),
+    (bpy.app.handlers.save_post, isobar_save_post),
+    (bpy.app.handlers.render_init, isobar_render_init),
+    (bpy.app.handlers.render_complete, isobar_render_end),
+    (bpy.app.handlers.render_cancel, isobar_render_end),
 )
 
 

@@ -35,13 +35,23 @@ _arrays: Dict[str, List[Tuple[str, int]]] = {}
 _baking: set = set()
 #: Depth of suspend_updates(): property updates do nothing while > 0.
 _suspended = 0
+#: A render is running (set by the render handlers): a frame that fails shows nothing
+#: rather than the last good frame, which would be a wrong picture.
+_rendering = False
 
 
 def clear_runtime() -> None:
     """Forgets the runtime state (on file load)."""
+    global _rendering
     _shown.clear()
     _arrays.clear()
     _baking.clear()
+    _rendering = False
+
+
+def set_rendering(rendering: bool) -> None:
+    global _rendering
+    _rendering = rendering
 
 
 @contextlib.contextmanager
@@ -103,24 +113,56 @@ def describe_error(error: BaseException) -> str:
 # -- sources ---------------------------------------------------------------------------
 
 
-def source_description(settings) -> str:
-    """What the surface is made from, for the bake fingerprint."""
+def source_description(settings, cache_dir: str = "") -> str:
+    """What the surface is made from, for the bake fingerprint of frames baked into
+    `cache_dir`."""
     if settings.source_type == "OBJECT":
         src = settings.source_object
         return f"object:{src.name_full if src else ''}:{settings.particle_system}"
     return (
-        f"sequence:{settings.directory}:{settings.pattern}:{settings.file_first}:{settings.file_last}:"
-        f"{settings.frame_offset}:{int(settings.hold)}"
+        f"sequence:{_particle_folder_seen_from(settings, cache_dir)}:{settings.pattern}:{settings.file_first}:"
+        f"{settings.file_last}:{settings.frame_offset}:{int(settings.hold)}"
     )
 
 
-def fingerprint(settings, params: Optional[Params] = None) -> str:
-    return (params or Params.from_settings(settings)).fingerprint(source_description(settings))
+def _particle_folder_seen_from(settings, cache_dir: str) -> str:
+    """The particle folder relative to the bake folder: unchanged when the .blend is
+    saved elsewhere (its '//' spelling changes) or the project folder moves as a whole,
+    so a bake stays valid; absolute when there is no bake folder or no relative path."""
+    folder = settings.directory
+    if not folder:
+        return ""
+    folder = os.path.normpath(bpy.path.abspath(folder))
+    if not cache_dir:
+        return folder
+    try:
+        return os.path.relpath(folder, cache_dir)
+    except ValueError:  # another drive
+        return folder
+
+
+def fingerprint(settings, params: Optional[Params] = None, cache_dir: str = "") -> str:
+    return (params or Params.from_settings(settings)).fingerprint(source_description(settings, cache_dir))
+
+
+def bake_fingerprint(obj, params: Optional[Params] = None) -> str:
+    """The fingerprint a baked frame of `obj` must have to be played with the current
+    settings."""
+    try:
+        folder = cache_folder(obj)
+    except ValueError:
+        folder = ""
+    return fingerprint(obj.isobar, params, folder)
 
 
 def sequence_path(settings, frame: int) -> Optional[str]:
     """The particle file of scene `frame` (None: no file, an empty surface)."""
-    number = sequence.file_number(frame, settings.frame_offset, settings.file_first, settings.file_last, settings.hold)
+    if sequence.is_static(settings.pattern):
+        number = 0  # one file for every frame
+    else:
+        number = sequence.file_number(
+            frame, settings.frame_offset, settings.file_first, settings.file_last, settings.hold
+        )
     if number is None:
         return None
     directory = bpy.path.abspath(settings.directory) if settings.directory else ""
@@ -258,12 +300,46 @@ def cache_folder(obj, settings=None, assign_name: bool = False) -> str:
     base = settings.cache_directory or "//isobar_cache/"
     if base.startswith("//") and not bpy.data.filepath:
         raise ValueError("save the .blend file first, or choose an absolute cache folder")
-    name = settings.cache_name
-    if not name:
-        name = re.sub(r"[^0-9A-Za-z_.-]", "_", obj.name) or "surface"
-        if assign_name:
-            settings.cache_name = name
+    name = settings.cache_name or _cache_name_of(obj)
+    if assign_name and (not settings.cache_name or cache_sharers(obj, name)):
+        # A duplicated object (Shift+D) copies the cache name: baking it into the same
+        # folder would overwrite the other object's frames.
+        name = _unused_cache_name(obj, _cache_name_of(obj))
+        settings.cache_name = name
     return os.path.join(bpy.path.abspath(base), name)
+
+
+def _cache_name_of(obj) -> str:
+    return re.sub(r"[^0-9A-Za-z_.-]", "_", obj.name) or "surface"
+
+
+def _unused_cache_name(obj, name: str) -> str:
+    """`name`, or `name`_2, _3, ...: the first that no other surface bakes into."""
+    candidate, n = name, 1
+    while cache_sharers(obj, candidate):
+        n += 1
+        candidate = f"{name}_{n}"
+    return candidate
+
+
+def cache_sharers(obj, name: Optional[str] = None) -> List[str]:
+    """Names of the other fluid surfaces whose bake folder is `obj`'s (with cache name
+    `name`, default its own)."""
+    settings = obj.isobar
+    mine = _resolved_cache_folder(settings, name if name is not None else settings.cache_name or _cache_name_of(obj))
+    return [
+        other.name
+        for other in bpy.data.objects
+        if other != obj
+        and is_fluid(other)
+        and other.isobar.cache_name
+        and _resolved_cache_folder(other.isobar, other.isobar.cache_name) == mine
+    ]
+
+
+def _resolved_cache_folder(settings, name: str) -> str:
+    base = settings.cache_directory or "//isobar_cache/"
+    return os.path.normcase(os.path.normpath(os.path.join(bpy.path.abspath(base), name)))
 
 
 def extract_live(
@@ -318,13 +394,13 @@ def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progre
     its fingerprint matches the current settings; else the particles are extracted."""
     settings = obj.isobar
     params = Params.from_settings(settings)
-    current = fingerprint(settings, params)
-    note = ""
+    note = missing = ""
     if use_cache and settings.use_cache:
         try:
             folder = cache_folder(obj, settings)
         except ValueError:
             folder = ""
+        current = fingerprint(settings, params, folder)
         path = cache.frame_path(folder, frame) if folder else ""
         if path and os.path.isfile(path):
             if cache.read_fingerprint(path) == current:
@@ -335,11 +411,19 @@ def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progre
                 mesh, _ = cache.read(path)
                 return mesh, "bake", key
             note = ", baked frame made with other settings"
-    key = _live_key(settings, frame, current)
+        elif settings.baked_start <= frame <= settings.baked_end:
+            # Baked, but not where the bake folder points now: say so, or the user
+            # would never learn why playback is slow (or why the particles are read).
+            missing = f"the baked frame {frame} is missing ({path or settings.cache_directory}): extracted again"
+            note = ", baked frame missing"
+    key = _live_key(settings, frame, fingerprint(settings, params) + missing)
     if _is_shown(obj, key):
         return None, "unchanged", key
     mesh, origin = extract_live(obj, scene, depsgraph, frame, params, progress)
-    return (mesh if mesh is not None else empty_mesh()), origin + note, key
+    mesh = mesh if mesh is not None else empty_mesh()
+    if missing:
+        mesh.warnings = [missing] + list(mesh.warnings)
+    return mesh, origin + note, key
 
 
 def _is_shown(obj, key) -> bool:
@@ -358,7 +442,7 @@ def update_object(
     Never raises: returns (ok, message) and writes the message into ``obj.isobar.status``,
     the extraction's warnings into ``obj.isobar.status_warnings`` (and, for a surface
     extracted now, the console). On failure the mesh keeps what it showed (the last good
-    frame).
+    frame) for interactive work; during a render it is emptied (see :func:`_fail_render_frame`).
     """
     try:
         settings = obj.isobar
@@ -394,11 +478,22 @@ def update_object(
         try:
             frame_text = f"Frame {frame}: " if isinstance(frame, int) else ""
             message = frame_text + message
+            if _rendering:
+                message = _fail_render_frame(obj, message)
             _set_status(obj.isobar, message, True)
         except Exception:  # noqa: BLE001 - the object may be gone
             pass
         print(f"isobar: {getattr(obj, 'name', '?')}: {message}")
         return False, message
+
+
+def _fail_render_frame(obj, message: str) -> str:
+    """A frame failed during a render: the last good frame would render as this one
+    and the render would look right, so the mesh is emptied instead (a handler cannot
+    stop the render); returns the message saying so."""
+    mesh_io.write(obj.data, empty_mesh())
+    _shown.pop(object_key(obj), None)
+    return message + " (rendering: the surface of this frame is left empty)"
 
 
 def _is_expected(error: BaseException) -> bool:
@@ -490,8 +585,10 @@ def array_suggestions(settings, text: str) -> List[str]:
 
 
 __all__ = [
+    "bake_fingerprint",
     "baking",
     "cache_folder",
+    "cache_sharers",
     "clear_runtime",
     "extract_live",
     "fingerprint",
@@ -500,6 +597,7 @@ __all__ = [
     "is_fluid",
     "scene_arrays",
     "sequence_path",
+    "set_rendering",
     "suspend_updates",
     "update_all",
     "update_object",

@@ -10,7 +10,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import bake, extraction, fe_samples, importer, sequence, usd_export, volume_slider
+from . import bake, extraction, fe_samples, importer, paths, sequence, usd_export, volume_slider
 
 
 def _fluid_object(context, name: str = ""):
@@ -145,15 +145,10 @@ class ISOBAR_OT_import_sequence(bpy.types.Operator, ImportHelper, _SurfaceParame
             self.report({"ERROR"}, importer.describe_error(error))
             return {"CANCELLED"}
 
-        stem = sequence.split_pattern(seq.pattern)[0].rstrip("_-. ") or "fluid"
+        stem = sequence.name_stem(seq.pattern) or "fluid"
         obj = _new_surface_object(context, f"{stem}_surface")
         obj.data.materials.append(_default_material())
-        directory = seq.directory
-        if self.relative_path and bpy.data.filepath:
-            try:
-                directory = bpy.path.relpath(directory)
-            except ValueError:  # another drive
-                pass
+        directory = paths.for_blend(seq.directory) if self.relative_path else seq.directory
         settings = obj.isobar
         with importer.suspend_updates():
             settings.enabled = True
@@ -167,7 +162,7 @@ class ISOBAR_OT_import_sequence(bpy.types.Operator, ImportHelper, _SurfaceParame
         if self.y_up:
             obj.rotation_euler = (1.5707963267948966, 0.0, 0.0)
         scene = context.scene
-        if self.set_frame_range:
+        if self.set_frame_range and not seq.is_static:  # a static file has no range
             scene.frame_start = seq.first + self.frame_offset
             scene.frame_end = seq.last + self.frame_offset
 
@@ -215,7 +210,7 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
     )
 
     def execute(self, context):
-        path = bpy.path.abspath(self.filepath)
+        path = paths.resolve(self.filepath)
         stem = os.path.splitext(os.path.basename(path))[0] or "volume"
         obj = None
         try:
@@ -230,7 +225,7 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
             self.report({"ERROR"}, importer.describe_error(error))
             return {"CANCELLED"}
         settings = obj.isobar_slider
-        settings.volume, settings.store = path, store
+        settings.volume, settings.store = paths.for_blend(path), paths.for_blend(store)
         settings.value_min, settings.value_max = lo, hi
         settings.lod_error_bound = self.lod_error_bound  # not enabled yet: no slide
         settings.enabled = True
@@ -253,7 +248,7 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
     spacing: FloatProperty(name="Spacing", description="Sample spacing on flat parts (0: 1/40 of the diagonal)", default=0.0, min=0.0)
 
     def execute(self, context):
-        path = bpy.path.abspath(self.filepath)
+        path = paths.resolve(self.filepath)
         stem = os.path.splitext(os.path.basename(path))[0] or "fe"
         obj = None
         try:
@@ -278,7 +273,7 @@ class ISOBAR_OT_import_fe(bpy.types.Operator, ImportHelper):
         _link_and_select(context, obj)
         settings = obj.isobar_fe
         settings.value_min, settings.value_max = lo, hi
-        settings.filepath = path
+        settings.filepath = paths.for_blend(path)
         settings.spacing = self.spacing
         settings.isovalue = iso
         settings.enabled = True
@@ -523,11 +518,15 @@ class ISOBAR_OT_free_bake(bpy.types.Operator):
             self.report({"ERROR"}, "select an isobar fluid surface")
             return {"CANCELLED"}
         try:
-            removed = bake.free(obj)
+            removed, sharers = bake.free(obj)
         except Exception as error:  # noqa: BLE001
             self.report({"ERROR"}, importer.describe_error(error))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Deleted {removed} baked frames")
+        if sharers:
+            names = ", ".join(f"'{n}'" for n in sharers)
+            self.report({"INFO"}, f"Bake off; its frames are kept: {names} bakes into the same folder")
+        else:
+            self.report({"INFO"}, f"Deleted {removed} baked frames")
         return {"FINISHED"}
 
 

@@ -13,6 +13,11 @@ from bpy.props import (
 )
 
 
+#: Options of a path property: '//' paths are relative to the .blend file (the add-on
+#: resolves them with bpy.path.abspath; without this Blender warns about the prefix).
+_BLEND_RELATIVE = {"PATH_SUPPORTS_BLEND_RELATIVE"}
+
+
 def _changed(self, context):
     """A parameter changed: re-extract the current frame (errors go to the status)."""
     from . import importer  # late: avoids an import cycle
@@ -87,11 +92,16 @@ class IsobarSettings(bpy.types.PropertyGroup):
         update=_changed,
     )
     directory: StringProperty(
-        name="Folder", subtype="DIR_PATH", description="Folder of the particle files", update=_changed
+        name="Folder",
+        subtype="DIR_PATH",
+        options=_BLEND_RELATIVE,
+        description="Folder of the particle files ('//' is the folder of the .blend file)",
+        update=_changed,
     )
     pattern: StringProperty(
         name="Files",
-        description="File name pattern; a run of # is the frame number, zero padded (frame_####.vtk)",
+        description="File name pattern; a run of # is the frame number, zero padded (frame_####.vtk; "
+        "frame_#.vtk: unpadded); without #, one file for every frame",
         default="frame_####.vtk",
         update=_changed,
     )
@@ -282,6 +292,7 @@ class IsobarSettings(bpy.types.PropertyGroup):
     cache_directory: StringProperty(
         name="Cache Folder",
         subtype="DIR_PATH",
+        options=_BLEND_RELATIVE,
         description="Folder of baked frames ('//' is the folder of the .blend file)",
         default="//isobar_cache/",
     )
@@ -315,13 +326,20 @@ class IsobarSettings(bpy.types.PropertyGroup):
 
 
 def _slide(self, context):
-    from . import volume_slider  # late: keeps this module free of the core
+    from . import paths, volume_slider  # late: keeps this module free of the core
 
     obj = self.id_data
     if not self.enabled or not self.store:
         return
+    store = paths.resolve(self.store)
+    note = ""
     try:
-        shown = volume_slider.show(obj, bpy.path.abspath(self.store), self.isovalue, self.lod_error_bound)
+        # The import checked the store against the volume; the volume may have been
+        # written since (a new simulation step): slide on its surface, not the old one.
+        if volume_slider.rebuild_if_stale(obj, paths.resolve(self.volume), store):
+            self.value_min, self.value_max = volume_slider.slider_for(obj, store).value_range
+            note = "; store rebuilt, the volume changed"
+        shown = volume_slider.show(obj, store, self.isovalue, self.lod_error_bound)
     except Exception as error:  # noqa: BLE001 - shown in the panel, never raised into Blender
         self.status, self.status_error = str(error), True
         return
@@ -329,15 +347,26 @@ def _slide(self, context):
     if shown.slid:
         self.update_ms = 1e3 * shown.seconds
     detail = f" (level of detail {self.lod_error_bound:g})" if self.lod_error_bound > 0 else ""
-    self.status, self.status_error = f"{self.triangles:,} triangles{detail}, update {self.update_ms:.2f} ms", False
+    self.status = f"{self.triangles:,} triangles{detail}, update {self.update_ms:.2f} ms{note}"
+    self.status_error = False
 
 
 class IsobarSliderSettings(bpy.types.PropertyGroup):
     """Isovalue sliding on a volume (an object whose mesh follows its isovalue)."""
 
     enabled: BoolProperty(name="Volume Slider", description="This object's mesh is an isobar volume isosurface", default=False)
-    volume: StringProperty(name="Volume", description="The volume file the store was built from", subtype="FILE_PATH")
-    store: StringProperty(name="Store", description="The pre-encoded isovalue store (.isoslider)", subtype="FILE_PATH")
+    volume: StringProperty(
+        name="Volume",
+        description="The volume file the store was built from",
+        subtype="FILE_PATH",
+        options=_BLEND_RELATIVE,
+    )
+    store: StringProperty(
+        name="Store",
+        description="The pre-encoded isovalue store (.isoslider)",
+        subtype="FILE_PATH",
+        options=_BLEND_RELATIVE,
+    )
     isovalue: FloatProperty(
         name="Isovalue",
         description="Drag to slide the isosurface: each change updates the mesh from the store",
@@ -371,7 +400,7 @@ class IsobarSliderSettings(bpy.types.PropertyGroup):
 
 
 def _resample(self, context):
-    from . import fe_samples  # late: keeps this module free of the core
+    from . import fe_samples, paths  # late: keeps this module free of the core
 
     if not self.enabled or not self.filepath or not self.field:
         return
@@ -381,7 +410,7 @@ def _resample(self, context):
     start = time.perf_counter()
     try:
         samples = fe_samples.resample(
-            obj, bpy.path.abspath(self.filepath), self.field, self.isovalue, self.spacing, self.curvature_adaptivity
+            obj, paths.resolve(self.filepath), self.field, self.isovalue, self.spacing, self.curvature_adaptivity
         )
     except Exception as error:  # noqa: BLE001 - shown in the panel, never raised into Blender
         self.status, self.status_error, self.status_warnings = str(error), True, ""
@@ -398,7 +427,12 @@ class IsobarFESettings(bpy.types.PropertyGroup):
     isovalue)."""
 
     enabled: BoolProperty(name="FE Samples", description="This object is an isobar high-order FE isosurface", default=False)
-    filepath: StringProperty(name="File", description="The .vtu of Lagrange cells or Gmsh .msh v4 file", subtype="FILE_PATH")
+    filepath: StringProperty(
+        name="File",
+        description="The .vtu of Lagrange cells or Gmsh .msh v4 file",
+        subtype="FILE_PATH",
+        options=_BLEND_RELATIVE,
+    )
     field: StringProperty(name="Field", description="The scalar point array to contour", update=_resample)
     isovalue: FloatProperty(name="Isovalue", description="The isovalue C", default=0.0, precision=4, update=_resample)
     spacing: FloatProperty(

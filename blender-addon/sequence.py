@@ -2,7 +2,9 @@
 
 Plain Python, no bpy: a sequence is a folder and a pattern in which a run of ``#`` stands
 for the frame number, padded with zeros to the run's length (Blender's convention):
-``frame_####.vtk`` names frame_0001.vtk, frame_0002.vtk, ... and also frame_12345.vtk.
+``frame_####.vtk`` names frame_0001.vtk, frame_0002.vtk, ... and also frame_12345.vtk;
+``frame_#.vtk`` names unpadded frame_1.vtk ... frame_12.vtk. A pattern without ``#`` is
+one static file, the same for every frame.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from typing import List, Optional, Tuple
 #: File extensions the isobar core reads particles from.
 PARTICLE_EXTENSIONS = (".vtk", ".vtp", ".vtu", ".bgeo", ".ply", ".npz", ".npy", ".csv", ".xyz")
 
-_LAST_NUMBER = re.compile(r"(\d+)(?!.*\d)")
+_NUMBER = re.compile(r"\d+")
 _LAST_HASHES = re.compile(r"(#+)(?!.*#)")
 
 
@@ -38,6 +40,10 @@ class Sequence:
     def path(self, number: int) -> str:
         return path_for(self.directory, self.pattern, number)
 
+    @property
+    def is_static(self) -> bool:
+        return is_static(self.pattern)
+
     def missing(self) -> List[int]:
         """Numbers between first and last with no file."""
         have = set(self.numbers)
@@ -56,11 +62,26 @@ def split_pattern(pattern: str) -> Tuple[str, int, str]:
     return pattern[: match.start()], len(match.group(1)), pattern[match.end() :]
 
 
+def is_static(pattern: str) -> bool:
+    """Whether `pattern` names one file for every frame (it has no ``#``)."""
+    return "#" not in pattern
+
+
 def format_number(pattern: str, number: int) -> str:
-    """The file name for `number` (negative numbers keep their sign before the padding)."""
+    """The file name for `number` (negative numbers keep their sign before the padding;
+    a static pattern is the file's own name)."""
+    if is_static(pattern):
+        return pattern
     prefix, width, suffix = split_pattern(pattern)
     digits = str(abs(number)).zfill(width)
     return f"{prefix}{'-' if number < 0 else ''}{digits}{suffix}"
+
+
+def name_stem(pattern: str) -> str:
+    """What names the files of `pattern`: the text before the number (the name without
+    its extension for a static file)."""
+    stem = _split_ext(pattern)[0] if is_static(pattern) else split_pattern(pattern)[0]
+    return stem.rstrip("_-. ")
 
 
 def path_for(directory: str, pattern: str, number: int) -> str:
@@ -75,12 +96,27 @@ def pattern_from_file(filename: str) -> Tuple[str, int]:
     Raises:
         ValueError: no digits in the name.
     """
-    stem, ext = _split_ext(os.path.basename(filename))
-    match = _LAST_NUMBER.search(stem)
-    if not match:
+    candidates = candidate_patterns(filename)
+    if not candidates:
         raise ValueError(f"'{os.path.basename(filename)}' has no frame number in its name")
-    digits = match.group(1)
-    return stem[: match.start()] + "#" * len(digits) + stem[match.end() :] + ext, int(digits)
+    return candidates[0]
+
+
+def candidate_patterns(filename: str) -> List[Tuple[str, int]]:
+    """(pattern, number) for each way the name can be a member of a sequence: any run of
+    digits before the extension may be the frame number (a name may hold other numbers,
+    such as a particle count), last run first; an unpadded number (no leading zero) may
+    also belong to an unpadded sequence, whose other members have fewer or more digits."""
+    stem, ext = _split_ext(os.path.basename(filename))
+    out = []
+    for match in reversed(list(_NUMBER.finditer(stem))):
+        digits = match.group(0)
+        widths = [len(digits)]
+        if len(digits) > 1 and not digits.startswith("0"):
+            widths.append(1)
+        for width in widths:
+            out.append((stem[: match.start()] + "#" * width + stem[match.end() :] + ext, int(digits)))
+    return out
 
 
 def scan(directory: str, pattern: str) -> List[int]:
@@ -100,17 +136,22 @@ def scan(directory: str, pattern: str) -> List[int]:
 
 
 def detect(filepath: str) -> Sequence:
-    """The sequence a file belongs to (the file alone when its siblings are missing).
+    """The sequence a file belongs to: of the ways its name can be numbered, the one that
+    finds the most files beside it; the file alone, static (its own name as the pattern),
+    when no sibling file is found.
 
     Raises:
-        ValueError: no frame number in the name, or the file does not exist.
+        ValueError: the file does not exist.
     """
     if not os.path.isfile(filepath):
         raise ValueError(f"particle file not found: {filepath}")
     directory = os.path.dirname(os.path.abspath(filepath))
-    pattern, number = pattern_from_file(filepath)
-    numbers = scan(directory, pattern) or [number]
-    return Sequence(directory, pattern, tuple(numbers))
+    best = Sequence(directory, os.path.basename(filepath), (0,))
+    for pattern, number in candidate_patterns(filepath):
+        numbers = scan(directory, pattern)
+        if number in numbers and len(numbers) > max(1, len(best.numbers)):
+            best = Sequence(directory, pattern, tuple(numbers))
+    return best
 
 
 def file_number(frame: int, offset: int, first: int, last: int, hold: bool = True) -> Optional[int]:
@@ -133,9 +174,12 @@ def _split_ext(name: str) -> Tuple[str, str]:
 __all__ = [
     "PARTICLE_EXTENSIONS",
     "Sequence",
+    "candidate_patterns",
     "detect",
     "file_number",
     "format_number",
+    "is_static",
+    "name_stem",
     "path_for",
     "pattern_from_file",
     "scan",

@@ -317,7 +317,7 @@ class ExportJob:
         obj = self._obj(name)
         settings = obj.isobar
         params = Params.from_settings(settings)
-        fingerprint = importer.fingerprint(settings, params)
+        fingerprint = importer.bake_fingerprint(obj, params)
         axis, plain = placement(obj)
         if self.options.up_axis != "AUTO":
             axis = self.options.up_axis

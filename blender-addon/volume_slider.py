@@ -77,6 +77,20 @@ def _store_is_current(store: str, volume: str) -> bool:
     return True
 
 
+def rebuild_if_stale(obj, volume: str, store: str) -> bool:
+    """Rebuilds `store` when the file `volume` was written after it (the object's open
+    slider, on the old store, is closed); returns whether it did. Only the dates are
+    compared, cheap enough for every isovalue change; a store imported by itself, or
+    whose volume is gone, is used as it is."""
+    if not volume or volume == store or not os.path.isfile(volume):
+        return False
+    if os.path.exists(store) and os.path.getmtime(store) >= os.path.getmtime(volume):
+        return False
+    close(obj)
+    ensure_store(volume)
+    return True
+
+
 def slider_for(obj, store: str):
     """The object's open slider on `store` (opened on first use or after a change)."""
     key = obj.session_uid
@@ -137,4 +151,4 @@ def show(obj, store: str, isovalue: float, lod_error_bound: float = 0.0) -> Show
     )
 
 
-__all__ = ["STORE_EXTENSION", "VOLUME_EXTENSIONS", "close", "close_all", "Shown", "ensure_store", "show", "slider_for", "store_path_for"]
+__all__ = ["STORE_EXTENSION", "VOLUME_EXTENSIONS", "close", "close_all", "Shown", "ensure_store", "rebuild_if_stale", "show", "slider_for", "store_path_for"]

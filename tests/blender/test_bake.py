@@ -148,3 +148,50 @@ def test_modal_bake_one_frame_per_tick_and_esc(scene, addon, demo_sequence, tmp_
     assert results == [{"RUNNING_MODAL"}, {"RUNNING_MODAL"}, {"CANCELLED"}]
     kind, message = modal.reports[-1]
     assert "ERROR" in kind and "frame 3" in message and "frame_0003.vtk" in message
+
+
+def _snapshot(folder):
+    return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+
+
+def test_a_duplicated_surface_bakes_and_frees_its_own_folder(scene, demo_sequence, tmp_path):
+    obj = import_sequence(demo_sequence[0])
+    obj.isobar.cache_directory = str(tmp_path / "cache")
+    assert bpy.ops.isobar.bake() == {"FINISHED"}
+    original = tmp_path / "cache" / obj.isobar.cache_name
+    before = _snapshot(original)
+
+    assert bpy.ops.object.duplicate() == {"FINISHED"}  # Shift+D copies the cache name
+    dup = bpy.context.active_object
+    assert dup != obj and dup.isobar.cache_name == obj.isobar.cache_name
+    dup.isobar.iso = 0.5
+    assert bpy.ops.isobar.bake(object_name=dup.name) == {"FINISHED"}
+    assert dup.isobar.cache_name != obj.isobar.cache_name
+    assert _snapshot(original) == before  # not overwritten
+    assert bpy.ops.isobar.free_bake(object_name=dup.name) == {"FINISHED"}
+    assert not (tmp_path / "cache" / dup.isobar.cache_name).exists()
+    assert _snapshot(original) == before
+
+    # A copy that never baked shares the original's folder: freeing it keeps the frames.
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    dup.select_set(False)
+    assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copy = bpy.context.active_object
+    assert copy.isobar.cache_name == obj.isobar.cache_name
+    assert bpy.ops.isobar.free_bake(object_name=copy.name) == {"FINISHED"}
+    assert _snapshot(original) == before and not copy.isobar.use_cache
+    scene.frame_set(2)
+    assert obj.isobar.use_cache and "bake" in obj.isobar.status, obj.isobar.status
+
+
+def test_rebaking_a_sub_range_shows_every_frame_playback_uses(scene, demo_sequence, tmp_path):
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    settings.cache_directory = str(tmp_path / "cache")
+    assert bpy.ops.isobar.bake() == {"FINISHED"}
+    assert bpy.ops.isobar.bake(use_scene_range=False, frame_start=2, frame_end=2) == {"FINISHED"}
+    assert (settings.baked_start, settings.baked_end) == (1, 3)  # 1 and 3 still play
+    settings.iso = 0.5  # frames 1 and 3 no longer match
+    assert bpy.ops.isobar.bake(use_scene_range=False, frame_start=2, frame_end=2) == {"FINISHED"}
+    assert (settings.baked_start, settings.baked_end) == (2, 2)

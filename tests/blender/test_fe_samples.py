@@ -116,3 +116,14 @@ def test_an_isovalue_the_field_never_crosses_is_a_warning_under_the_status(scene
     assert not [w for w in caught if issubclass(w.category, isobar.IsobarWarning)], caught
     settings.isovalue = 0.49
     assert settings.samples > 50 and settings.status_warnings == "", settings.status_warnings
+
+
+def test_resampling_keeps_the_point_clouds_name(scene, tmp_path):
+    assert bpy.ops.isobar.import_fe(filepath=str(_cube_vtu(tmp_path / "cube.vtu")), field="f", isovalue=1.0) == {"FINISHED"}
+    obj = bpy.context.active_object
+    name = obj.data.name
+    for iso in (0.8, 1.2, 0.9):
+        obj.isobar_fe.isovalue = iso
+        assert not obj.isobar_fe.status_error, obj.isobar_fe.status
+        assert obj.data.name == name
+    assert [c.name for c in bpy.data.pointclouds] == [name]  # no orphans either

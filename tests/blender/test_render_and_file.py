@@ -32,11 +32,8 @@ def _attribute_emission_material():
     return material
 
 
-def test_render_cycles_cpu(scene, demo_sequence, tmp_path):
-    obj = import_sequence(demo_sequence[1])
-    scene.frame_set(2)
-    obj.data.materials.clear()
-    obj.data.materials.append(_attribute_emission_material())
+def _camera_on(scene, obj):
+    """A camera that sees the whole of `obj`'s mesh as it is now."""
     points, _ = mesh_arrays(obj)
     lo, hi = points.min(axis=0), points.max(axis=0)
     center, size = Vector((lo + hi) / 2), float((hi - lo).max())
@@ -46,13 +43,26 @@ def test_render_cycles_cpu(scene, demo_sequence, tmp_path):
     camera.rotation_euler = (center - camera.location).to_track_quat("-Z", "Y").to_euler()
     scene.camera = camera
 
+
+def _cycles_cpu(scene, samples=8):
+    """Cycles on the CPU, 160x120, transparent film (alpha: where the fluid is)."""
     render = scene.render
     render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 8
+    scene.cycles.samples = samples
     scene.cycles.use_denoising = False
     render.resolution_x, render.resolution_y, render.resolution_percentage = 160, 120, 100
     render.film_transparent = True
+    return render
+
+
+def test_render_cycles_cpu(scene, demo_sequence, tmp_path):
+    obj = import_sequence(demo_sequence[1])
+    scene.frame_set(2)
+    obj.data.materials.clear()
+    obj.data.materials.append(_attribute_emission_material())
+    _camera_on(scene, obj)
+    render = _cycles_cpu(scene)
     render.use_motion_blur = True  # uses the 'velocity' attribute of the mesh
     scene.view_settings.view_transform = "Standard"
     render.image_settings.file_format = "PNG"
@@ -78,6 +88,26 @@ def test_render_cycles_cpu(scene, demo_sequence, tmp_path):
     difference = np.abs(sharp[:, 3] - pixels[:, 3])
     print("motion blur alpha difference: max", difference.max(), "pixels > 0.05:", int((difference > 0.05).sum()))
     assert difference.max() > 0.2
+
+
+def test_a_frame_that_fails_during_a_render_renders_empty_not_the_last_frame(scene, demo_sequence, tmp_path):
+    obj = import_sequence(demo_sequence[0])
+    _camera_on(scene, obj)
+    render = _cycles_cpu(scene, samples=1)
+    render.image_settings.file_format = "PNG"
+    render.image_settings.color_mode = "RGBA"
+    render.filepath = str(tmp_path / "frame_")
+    demo_sequence[1].unlink()  # frame 2 is missing
+    scene.frame_start, scene.frame_end = 1, 2
+    bpy.ops.render.render(animation=True)
+    covered = [(_load_png(tmp_path / f"frame_000{f}.png")[:, 3] > 0.5).mean() for f in (1, 2)]
+    assert covered[0] > 0.05  # frame 1: the fluid
+    assert covered[1] == 0.0, covered  # frame 2: nothing, not frame 1's surface again
+    # Interactive again: a failing frame keeps the last good mesh.
+    scene.frame_set(1)
+    scene.frame_set(2)
+    assert obj.isobar.status_error and "frame_0002.vtk" in obj.isobar.status
+    assert len(obj.data.polygons) > 0
 
 
 def _load_png(path):

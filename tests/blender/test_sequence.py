@@ -1,5 +1,6 @@
 """Importing particle sequences, stepping frames, parameters, attributes and errors."""
 
+import shutil
 import struct
 import warnings
 
@@ -225,8 +226,44 @@ def test_import_errors_are_reported(scene, tmp_path):
     with pytest.raises(RuntimeError):
         bpy.ops.isobar.import_sequence(filepath=str(bad))
     assert len(bpy.data.objects) == 0  # nothing half-made is left behind
-    with pytest.raises(RuntimeError, match="frame number"):
+    with pytest.raises(RuntimeError):  # no number: a static file, which the core refuses
         bpy.ops.isobar.import_sequence(filepath=str(FRAME_01.parent / "LICENSE"))
+    assert len(bpy.data.objects) == 0
+
+
+def test_unpadded_numbers_import_the_whole_sequence_from_any_member(scene, isobar, tmp_path):
+    paths = make_sequence(tmp_path / "sim", [FRAME_01, FRAME_26] * 6, "ParticleData_Fluid_{}.vtk")
+    for picked in (paths[11], paths[2]):  # ParticleData_Fluid_12.vtk, ParticleData_Fluid_3.vtk
+        obj = import_sequence(picked)
+        settings = obj.isobar
+        assert settings.pattern == "ParticleData_Fluid_#.vtk"
+        assert (settings.file_first, settings.file_last) == (1, 12)
+        assert (scene.frame_start, scene.frame_end) == (1, 12)
+    scene.frame_set(2)
+    assert "ParticleData_Fluid_2.vtk" in settings.status, settings.status
+    assert_mesh_equals(obj, reference(isobar, paths[1]))
+
+
+def test_the_frame_number_need_not_be_the_last_number(scene, tmp_path):
+    make_sequence(tmp_path / "sim", [FRAME_01, FRAME_26, FRAME_01], "run_{}_4732_particles.vtk")
+    obj = import_sequence(tmp_path / "sim" / "run_2_4732_particles.vtk")
+    assert obj.isobar.pattern == "run_#_4732_particles.vtk"
+    assert (obj.isobar.file_first, obj.isobar.file_last) == (1, 3)
+
+
+@pytest.mark.parametrize("name", ["bunny_frame_14_7705_particles.vtk", "demo_dam_break.vtk"])
+def test_a_file_alone_imports_static_without_moving_the_timeline(scene, isobar, tmp_path, name):
+    path = tmp_path / name
+    shutil.copyfile(FRAME_26, path)
+    scene.frame_start, scene.frame_end = 1, 48
+    scene.frame_set(5)
+    obj = import_sequence(path)
+    assert (scene.frame_start, scene.frame_end, scene.frame_current) == (1, 48, 5)
+    expected = reference(isobar, path)
+    for frame in (5, 40, 1):
+        scene.frame_set(frame)
+        assert not obj.isobar.status_error and name in obj.isobar.status, obj.isobar.status
+        assert_mesh_equals(obj, expected)
 
 
 def test_adaptive_method(scene, isobar, demo_sequence):

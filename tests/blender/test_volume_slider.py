@@ -1,6 +1,7 @@
 """Isovalue sliding on a volume: the object's mesh follows its isovalue property, each
 change served by the core's slider, and equals the core's own slider mesh."""
 
+import os
 import sys
 
 import bpy
@@ -205,3 +206,21 @@ def test_a_store_of_another_version_beside_the_volume_is_rebuilt(scene, isobar, 
     with isobar.Slider(store) as core:
         want = core.set_isovalue(settings.isovalue)
     np.testing.assert_array_equal(mesh_arrays(obj)[1], want.triangles.astype(np.int32))
+
+
+def test_a_volume_rewritten_after_import_is_rebuilt_on_the_next_slide(scene, isobar, tmp_path):
+    volume = _volume(tmp_path / "blobs.npy")
+    obj = _import(volume)
+    settings = obj.isobar_slider
+    old_max = settings.value_max
+    values = np.load(volume)
+    np.save(volume, values * 2)  # the next simulation step, twice as strong
+    later = os.path.getmtime(settings.store) + 10
+    os.utime(volume, (later, later))  # written after the store, whatever the clock's grain
+    settings.isovalue = 1.5 * old_max  # above every value of the old volume
+    assert not settings.status_error and "rebuilt" in settings.status, settings.status
+    assert settings.value_max == pytest.approx(2 * old_max, rel=1e-5)
+    with isobar.Slider(settings.store) as core:
+        want = core.set_isovalue(settings.isovalue)
+    assert settings.triangles == len(want.triangles) > 0
+    assert len(mesh_arrays(obj)[1]) == len(want.triangles)
