@@ -111,6 +111,7 @@ pub fn extract(
                 })
             })
             .collect();
+        let crossed = active.len() as u64;
         clip_cells(&grid, &mut active, params);
         stats.cells_used += active.len() as u64;
         let span = (0.5 + 0.5 * k as f64 / n, 0.5 + 0.5 * (k as f64 + 1.0) / n);
@@ -133,7 +134,7 @@ pub fn extract(
             span,
             &mut stats,
         )?;
-        surface::append_surface(&mut mesh, part, iso, params, &mut stats.warnings);
+        surface::append_surface(&mut mesh, part, iso, crossed, params, &mut stats.warnings);
     }
     stats.vertices = mesh.vertex_count() as u64;
     stats.triangles = mesh.triangles.len() as u64;

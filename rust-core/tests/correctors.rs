@@ -661,6 +661,29 @@ fn warnings_name_an_isovalue_never_crossed_and_a_kernel_wider_than_the_data() {
         ["no surface at isovalue 1000000000000: the field never crosses it"]
     );
 
+    // Trimming that cuts every crossed cell away: the field does cross the isovalue, and
+    // the warning says what removed the surface instead of blaming the field.
+    let all_trimmed = Params {
+        trim: Some(Trim {
+            node: 5.0,
+            vertex: 5.0,
+        }),
+        ..crossed.clone()
+    };
+    let trimmed = run(&data, &pressure, &all_trimmed);
+    assert!(trimmed.mesh.triangles.is_empty() && trimmed.stats.discarded_cells > 0);
+    let [cut_away] = &trimmed.stats.warnings[..] else {
+        panic!("{:?}", trimmed.stats.warnings)
+    };
+    assert_eq!(
+        *cut_away,
+        format!(
+            "no surface at isovalue 2000 after trimming and clipping: the field crosses it in \
+             {} cells, all cut away by the trim thresholds or the clip box",
+            trimmed.stats.discarded_cells
+        )
+    );
+
     let wide = settings(Kernel::CubicSpline, 2.0, Quantity::SumOfWeights);
     let field = SphField::new(&data, &wide).unwrap();
     let [warning] = field.warnings() else {

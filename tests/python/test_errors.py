@@ -80,6 +80,8 @@ def test_bad_parameters():
         (lambda: isobar.extract(cube(), 0.5, h=0.1, kernel=2**32), "kernel"),
         (lambda: isobar.extract(cube(), 0.5, h=0.1, memory_budget=2**64), "memory_budget"),
         (lambda: isobar.extract(cube(), 0.5, h=0.1, memory_budget=float("nan")), "memory_budget"),
+        # A fraction (GiB in mind) used to be truncated to a budget of 0 bytes.
+        (lambda: isobar.extract(cube(), 0.5, h=0.1, memory_budget=0.25), "memory_budget"),
         (lambda: isobar.extract_adaptive(cube(), 0.5, h=0.1, splash_threshold=-1), "splash_threshold"),
         (lambda: isobar.extract_adaptive(cube(), 0.5, h=0.1, splash_dilation=2**32 + 1), "splash_dilation"),
     ],

@@ -113,7 +113,8 @@ def extract(
         mass: constant particle mass (> 0).
         mass_array: per-particle mass array.
         shepard: divide the field by the sum of weights.
-        memory_budget: bytes that extent-sized structures may use (default: the core's).
+        memory_budget: bytes (a whole number; the CLI's --memory-budget is in GiB) that
+            extent-sized structures may use (default: the core's, 4 GiB).
         full_grid: resample onto a full grid and run marching cubes (the baseline).
         lattice: (x, y, z, cell): put the virtual grid on nodes x + i·cell, ... instead of
             grid_factor × smallest h, so separately extracted pieces share their nodes.
@@ -227,8 +228,13 @@ def _sph_params(particles, iso, field, kernel, h, h_array, h_scale, grid_factor,
         params.attribute_count = len(names)
 
     if memory_budget is not None:
-        if not (isinstance(memory_budget, numbers.Real) and math.isfinite(memory_budget) and memory_budget > 0):
-            raise InvalidArgumentError(f"parameter 'memory_budget': must be a positive byte count, got {memory_budget!r}")
+        # Bytes, as in Slider.build: a fraction (0.25 meant as GiB, the CLI's unit) must not
+        # be truncated to a budget of 0.
+        if not (isinstance(memory_budget, numbers.Integral) and not isinstance(memory_budget, bool)
+                and 0 < memory_budget < 2**64):
+            raise InvalidArgumentError(
+                f"parameter 'memory_budget': must be a positive whole number of bytes "
+                f"(4 GiB: 4 << 30), got {memory_budget!r}")
         params.memory_budget = int(memory_budget)
     params.full_grid = _flag(full_grid)
     if lattice is not None:

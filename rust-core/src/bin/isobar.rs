@@ -38,7 +38,8 @@ enum Command {
         #[command(flatten)]
         adaptive: isobar::adaptive::cli::AdaptiveArgs,
     },
-    /// Extract the free surface and a pressure isosurface of the embedded dam-break frame.
+    /// Extract the free surface of the embedded dam-break frame (46,656 SPlisHSPlasH
+    /// particles), its velocity, pressure and density carried onto the vertices.
     Demo {
         /// Where to write the surface (.ply, .obj or .vtp).
         #[arg(short, long, default_value = "isobar_demo.ply")]

@@ -349,6 +349,8 @@ pub fn extract(
                     params.memory_budget,
                 )
             })?;
+        // Cells the surface crosses, before trimming (discarded) and clipping took some.
+        let crossed = tracked.active.len() as u64 + tracked.discarded;
         clip_cells(&grid, &mut tracked.active, params);
         stats.non_intersected_seeds += tracked.non_intersected_seeds;
         stats.discarded_cells += tracked.discarded;
@@ -397,7 +399,7 @@ pub fn extract(
             span,
             &mut stats,
         )?;
-        surface::append_surface(&mut mesh, part, iso, params, &mut stats.warnings);
+        surface::append_surface(&mut mesh, part, iso, crossed, params, &mut stats.warnings);
     }
     stats.field_evaluations += stats.node_evaluations;
     stats.vertices = mesh.vertex_count() as u64;

@@ -190,3 +190,12 @@ impl Mesh {
 pub(crate) fn no_surface(iso: f64) -> String {
     format!("no surface at isovalue {iso}: the field never crosses it")
 }
+
+/// The warning for an isovalue whose surface was all cut away although the field crosses
+/// it in `cells` cells: blaming the field would send the user to the wrong setting.
+pub(crate) fn surface_cut_away(iso: f64, cells: u64) -> String {
+    format!(
+        "no surface at isovalue {iso} after trimming and clipping: the field crosses it in \
+         {cells} cells, all cut away by the trim thresholds or the clip box"
+    )
+}
