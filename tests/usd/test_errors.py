@@ -138,3 +138,188 @@ def test_the_wrong_isobar_is_refused(tmp_path):
                           env={**os.environ, "PYTHONPATH": str(fake.parent)})
     assert proc.returncode != 0
     assert "is not isobar's SPH package" in proc.stderr and "pip install ./rust-core/python" in proc.stderr
+
+
+# --- an output folder that cannot be written in ---------------------------------------
+
+def _fe_fixture():
+    from conftest import REPO, need
+
+    return need(REPO / "rust-core" / "data" / "fe" / "mixed_lagrange.vtu")
+
+
+class _Unwritable:
+    """`folder` cannot be written in: "immutable" (chattr +i: it stops root too, which
+    chmod does not) or "file" (the output's parent is a regular file)."""
+
+    def __init__(self, tmp_path, kind):
+        import subprocess
+
+        self.kind = kind
+        self.locked = []
+        if kind == "file":
+            self.folder = tmp_path / "some_file"
+            self.folder.write_text("not a folder\n")
+            self.reason = "is not a folder"
+            return
+        self.folder = tmp_path / "ro"
+        self.folder.mkdir()
+        # What is there already must stay as it was.
+        (self.folder / "t.usd").write_bytes(b"previous root")
+        (self.folder / "t.clips").mkdir()
+        (self.folder / "t.clips" / "t.0001.usdc").write_bytes(b"previous frame")
+        (self.folder / "fe.usd").write_bytes(b"previous fe")
+        self.before = self.snapshot()
+        proc = subprocess.run(["chattr", "+i", str(self.folder)], capture_output=True, text=True)
+        if proc.returncode != 0:
+            pytest.skip(f"chattr +i is not available here: {proc.stderr.strip()}")
+        self.locked.append(self.folder)
+        try:
+            (self.folder / "probe").write_bytes(b"")
+        except OSError:
+            pass
+        else:
+            (self.folder / "probe").unlink()
+            self.close()
+            pytest.skip("chattr +i does not stop writes here")
+        self.reason = "cannot write in folder"
+
+    def lock(self, folder):
+        import subprocess
+
+        subprocess.run(["chattr", "+i", str(folder)], check=True)
+        self.locked.append(folder)
+
+    def snapshot(self):
+        return {p.relative_to(self.folder): (p.read_bytes() if p.is_file() else None) for p in sorted(self.folder.rglob("*"))}
+
+    def close(self):
+        import subprocess
+
+        while self.locked:
+            subprocess.run(["chattr", "-i", str(self.locked.pop())], check=False)
+
+
+@pytest.fixture(params=["immutable", "file"])
+def unwritable(request, tmp_path):
+    folder = _Unwritable(tmp_path, request.param)
+    try:
+        yield folder
+    finally:
+        folder.close()
+
+
+def _assert_clean_error(proc, folder, reason):
+    assert proc.returncode == 1, (proc.returncode, proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.startswith("isobar-usd: error: "), proc.stderr
+    assert f"'{folder}'" in proc.stderr and reason in proc.stderr, proc.stderr
+    # Refused before any extraction: no frame was reported.
+    assert "] frame " not in proc.stderr and proc.stdout == "", (proc.stdout, proc.stderr)
+
+
+def test_unwritable_output_folder_cli(cli, dam_frames, unwritable):
+    """Clips and flat layouts and the fe command: `isobar-usd: error:` naming the folder and
+    the reason, before any extraction; no traceback; the files there stay as they were."""
+    src = dam_frames / "frame_####.vtk"
+    for layout in ("clips", "flat"):
+        proc = run_cli(cli, "sph", src, *CLI_DAM, "--layout", layout, "-o", unwritable.folder / "t.usd", check=False)
+        _assert_clean_error(proc, unwritable.folder, unwritable.reason)
+    proc = run_cli(cli, "sph", src, *CLI_DAM, "--jobs", "2", "-o", unwritable.folder / "t.usd", check=False)
+    _assert_clean_error(proc, unwritable.folder, unwritable.reason)
+    proc = run_cli(cli, "fe", _fe_fixture(), "--field", "p", "--iso", "0", "-o", unwritable.folder / "fe.usd", check=False)
+    _assert_clean_error(proc, unwritable.folder, unwritable.reason)
+    if unwritable.kind == "immutable":
+        assert unwritable.snapshot() == unwritable.before
+
+
+def test_unwritable_output_folder_api(dam_frames, unwritable):
+    """The Python API raises InputError (an isobar_usd.Error) with the same message, not a
+    PermissionError or USD's Tf error."""
+    src = dam_frames / "frame_####.vtk"
+    out = unwritable.folder / "t.usd"
+    for layout in ("clips", "flat"):
+        with pytest.raises(isobar_usd.InputError, match=unwritable.reason) as info:
+            isobar_usd.write_sequence(src, out, ISO, layout=layout, **DAM)
+        assert f"'{unwritable.folder}'" in str(info.value)
+    with pytest.raises(isobar_usd.InputError, match=unwritable.reason):
+        isobar_usd.write_frame(FRAME_01, out, ISO, **DAM)
+    with pytest.raises(isobar_usd.InputError, match=unwritable.reason):
+        isobar_usd.write_fe_samples(_fe_fixture(), unwritable.folder / "fe.usd", "p", 0.0)
+    with pytest.raises(isobar_usd.InputError, match=unwritable.reason):
+        isobar_usd.stitch(out)
+    if unwritable.kind == "immutable":
+        assert unwritable.snapshot() == unwritable.before
+
+
+def test_unwritable_clips_folder(cli, tmp_path, dam_frames):
+    """The output's folder is writable, its clips folder is not: refused before extracting,
+    naming the clips folder."""
+    unwritable = _Unwritable(tmp_path, "immutable")
+    try:
+        clips = unwritable.folder / "t.clips"
+        unwritable.close()
+        unwritable.lock(clips)
+        proc = run_cli(cli, "sph", dam_frames / "frame_####.vtk", *CLI_DAM, "-o", unwritable.folder / "t.usd", check=False)
+        _assert_clean_error(proc, clips, "cannot write in folder")
+        with pytest.raises(isobar_usd.InputError, match="cannot write in folder"):
+            isobar_usd.write_sequence(dam_frames / "frame_####.vtk", unwritable.folder / "t.usd", ISO, **DAM)
+        assert unwritable.snapshot() == unwritable.before
+    finally:
+        unwritable.close()
+
+
+# --- jobs > 1 from a script without the __main__ guard ----------------------------------
+
+_SCRIPT = """\
+import sys
+import isobar_usd
+
+{indent}result = isobar_usd.write_sequence(sys.argv[1], sys.argv[2], 0.6, h=0.05, grid_factor=0.375, jobs=2,
+{indent}                                   progress=lambda p: print(p.frame, p.triangles))
+{indent}print("wrote", result.frames)
+"""
+
+
+def _run_script(path, *args, timeout=90):
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, str(path), *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)  # the script and the workers it spawned
+        proc.communicate()
+        pytest.fail(f"{path.name} did not end within {timeout} s (the worker pool respawns forever?)")
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    return proc.returncode, out, err
+
+
+def test_parallel_write_from_an_unguarded_script_fails_clearly(tmp_path, dam_frames):
+    """The README's jobs=2 example pasted at the top level of a script: every spawned worker
+    re-imports the script. It must end with an error that names the guard, not respawn the
+    workers forever; under the guard it writes the sequence."""
+    src = dam_frames / "frame_####.vtk"
+    bare = tmp_path / "bare.py"
+    bare.write_text(_SCRIPT.format(indent=""))
+    out = tmp_path / "bare.usd"
+    code, stdout, stderr = _run_script(bare, src, out)
+    assert code != 0, (stdout, stderr)
+    assert 'if __name__ == "__main__":' in stderr, stderr
+    assert "bootstrapping phase" not in stderr, stderr
+    assert stderr.count("Traceback") <= 4, stderr  # the script's and one per started worker at most
+    assert "wrote" not in stdout
+    assert not out.exists() and not isobar_usd.clips_folder(out).exists()
+
+    guarded = tmp_path / "guarded.py"
+    guarded.write_text(_SCRIPT.format(indent="    ").replace("import isobar_usd\n", "import isobar_usd\n\nif __name__ == \"__main__\":"))
+    out = tmp_path / "guarded.usd"
+    code, stdout, stderr = _run_script(guarded, src, out)
+    assert code == 0, (stdout, stderr)
+    assert "wrote [1, 26]" in stdout, stdout
+    assert out.is_file()

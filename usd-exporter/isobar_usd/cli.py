@@ -326,6 +326,12 @@ def main(argv: Optional[List[str]] = None) -> int:
         message = str(e).replace("pass h=VALUE or h_array=NAME", "pass --h VALUE or --h-array NAME")
         print(f"isobar-usd: error: {message}", file=sys.stderr)
         return 1
+    except OSError as e:  # a write that fails after the checks (disk full, a folder made read-only meanwhile)
+        if _STOP.is_set():
+            print("isobar-usd: interrupted; the previous files were left as they were", file=sys.stderr)
+            return 130
+        print(f"isobar-usd: error: {e}", file=sys.stderr)
+        return 1
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

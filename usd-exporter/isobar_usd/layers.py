@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
@@ -85,8 +86,36 @@ def check_output_path(path: Path, what: str = "output") -> Path:
         )
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
+        if parent.exists() or parent.is_symlink():
+            raise InputError(f"{what} '{path}': '{parent}' is not a folder")
         raise InputError(f"{what} '{path}': folder '{parent}' does not exist")
+    check_writable_folder(parent, f"{what} '{path}'")
+    if path.is_dir():
+        raise InputError(f"{what} '{path}' is a folder")
     return path
+
+
+def check_writable_folder(folder: Path, what: str) -> None:
+    """Raises InputError (naming `what`, the folder and the reason) unless a file can be
+    created in `folder`. It tries one, under a staging name that a later write sweeps
+    should this process die in between: permission bits do not tell the whole story
+    (root ignores them; an immutable folder, a read-only mount, an ACL do not show)."""
+    probe = _atomic.staging_path(Path(folder) / "isobar-usd-probe")
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        # Left by this very process (pids are unique among the living): take it over.
+        fd = None
+    except OSError as e:
+        raise InputError(f"{what}: cannot write in folder '{folder}': {e.strerror or e}") from None
+    if fd is not None:
+        os.close(fd)
+    try:
+        os.unlink(probe)
+    except FileNotFoundError:
+        pass
+    except OSError as e:
+        raise InputError(f"{what}: cannot remove files in folder '{folder}': {e.strerror or e}") from None
 
 
 def _stage_metadata(stage, settings: StageSettings, start: float, end: float) -> None:

@@ -24,6 +24,7 @@ from .layers import (
     MeshLayer,
     StageSettings,
     check_output_path,
+    check_writable_folder,
     merge_schema,
     read_record,
     write_clips_root,
@@ -650,6 +651,7 @@ def write_sequence(
         InputError, FrameError, StitchError (all :class:`isobar_usd.Error`).
     """
     t0 = time.perf_counter()
+    _check_not_bootstrapping(jobs)
     settings = _settings(fps, meters_per_unit, up_axis, prim, mesh)
     output = check_output_path(Path(output))
     job = make_job(iso, extract_options, velocities, primvars, settings)
@@ -675,6 +677,7 @@ def write_sequence(
         return _write_flat(entries, total, output, job, progress, t0)
     if replace is None:
         replace = selected is None
+    _clips_folder_for_writing(output)  # before any extraction
     return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0)
 
 
@@ -733,10 +736,58 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
     return SequenceResult(output, "flat", frames, frames, None, schema, time.perf_counter() - t0, dict(sorted(warned.items())))
 
 
-def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0) -> SequenceResult:
+def _clips_folder_for_writing(output: Path) -> Path:
+    """The clips folder of `output`; raises InputError when it is there but frames cannot
+    be written in it (before any extraction)."""
     folder = clips_folder(output)
+    if folder.is_dir():
+        check_writable_folder(folder, f"output '{output}'")
+    elif folder.exists() or folder.is_symlink():
+        raise InputError(f"output '{output}': '{folder}' (its clips folder) is not a folder")
+    return folder
+
+
+_GUARD_HINT = (
+    "with jobs > 1 each worker process imports the main module (multiprocessing, start method "
+    "spawn), so a script must make the call under `if __name__ == \"__main__\":`"
+)
+
+
+def _check_not_bootstrapping(jobs) -> None:
+    """Raises InputError when this process is a worker still importing the caller's main
+    module: the script called write_sequence at its top level, without the guard, and a
+    pool here would fail the same way in every worker it starts."""
+    if jobs is not None and jobs != 0 and not (isinstance(jobs, (int, float)) and jobs > 1):
+        return
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise InputError(
+            f"write_sequence(jobs={jobs}) was called while a worker process imports the main module; {_GUARD_HINT}"
+        )
+
+
+def _check_workers(pool, pids: set, done: int) -> None:
+    """Raises Error when a worker of `pool` died: multiprocessing.Pool would replace it
+    and wait forever for its task (or, when workers die while starting, respawn them
+    forever)."""
+    for process in list(getattr(pool, "_pool", ())):
+        code = process.exitcode
+        if process.pid not in pids or (code is not None and code != 0):
+            how = "" if code is None else f" (exit status {code})" if code >= 0 else f" (signal {-code})"
+            if done == 0:
+                raise Error(
+                    f"a worker process ended before writing any frame{how}; see its error above. "
+                    f"If a script calls write_sequence at its top level: {_GUARD_HINT}"
+                ) from None
+            raise Error(f"a worker process ended while writing a frame{how}; killed for memory?") from None
+
+
+def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0) -> SequenceResult:
+    folder = _clips_folder_for_writing(output)
     created = not folder.exists()
-    folder.mkdir(exist_ok=True)
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as e:
+        raise InputError(f"output '{output}': cannot create the clips folder '{folder}': {e.strerror or e}") from None
     _atomic.sweep(folder)
     _atomic.sweep(output.parent if str(output.parent) else Path("."))
     staged: Dict[int, Tuple[Path, Path]] = {}
@@ -757,6 +808,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
             labels = {e.number: _label(e.item) for e in entries}
             ctx = multiprocessing.get_context("spawn")
             with ctx.Pool(processes=min(jobs, max(1, len(tasks))), initializer=_worker_init, initargs=(jobs,)) as pool:
+                pids = {p.pid for p in getattr(pool, "_pool", ())}
                 done = 0
                 results = pool.imap_unordered(_pool_task, tasks)
                 while True:
@@ -764,6 +816,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                         frame, info, err = results.next(timeout=0.25)
                     except multiprocessing.TimeoutError:
                         _check_stop()
+                        _check_workers(pool, pids, done)
                         continue
                     except StopIteration:
                         break
