@@ -139,10 +139,22 @@ def blender_name(name: str) -> str:
 
 def velocity_name(names: List[Tuple[str, int]], preferred: str = "") -> str:
     """The particle velocity array: `preferred` when present with 3 components, else the
-    first of :data:`VELOCITY_NAMES` that is; '' when there is none."""
+    first of :data:`VELOCITY_NAMES` that is; '' when there is none.
+
+    Raises:
+        ValueError: `preferred` is a name the user chose (not one of VELOCITY_NAMES, which
+            the import sets whether or not the file has a velocity) and the particles have
+            no such 3-component array: another array must not stand in for it silently.
+    """
     components = dict(names)
     if preferred and components.get(preferred) == 3:
         return preferred
+    if preferred and preferred not in VELOCITY_NAMES:
+        if preferred in components:
+            raise ValueError(f"velocity array '{preferred}' has {components[preferred]} "
+                             f"components; a velocity needs 3")
+        vectors = ", ".join(n for n, k in names if k == 3) or "none"
+        raise ValueError(f"no velocity array named '{preferred}' (3-component arrays: {vectors})")
     for candidate in VELOCITY_NAMES:
         if components.get(candidate) == 3:
             return candidate

@@ -30,7 +30,8 @@ pub enum Error {
     InvalidParameter { name: &'static str, message: String },
     /// The work would need more memory than the budget allows; refused before allocating.
     #[error(
-        "{what} would need {needed_bytes} bytes, over the memory budget of {budget_bytes} bytes"
+        "{what} would need {}, over the memory budget of {budget_bytes} bytes",
+        needed_text(*.needed_bytes)
     )]
     OverBudget {
         what: String,
@@ -86,5 +87,39 @@ impl Error {
             path: path.into(),
             source,
         }
+    }
+}
+
+/// A byte count as the budget error says it: a count that saturated (a grid of more cells
+/// than 64 bits count, from a tiny h or one stray particle far away) is not a number of
+/// bytes anyone can act on.
+fn needed_text(bytes: u64) -> String {
+    if bytes == u64::MAX {
+        "more bytes than a 64-bit count holds".into()
+    } else {
+        format!("{bytes} bytes")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Error;
+
+    #[test]
+    fn a_saturated_byte_count_is_not_printed_as_a_number() {
+        let over = |needed_bytes| Error::OverBudget {
+            what: "the grid".into(),
+            needed_bytes,
+            budget_bytes: 4096,
+        };
+        assert_eq!(
+            over(u64::MAX).to_string(),
+            "the grid would need more bytes than a 64-bit count holds, over the memory budget \
+             of 4096 bytes"
+        );
+        assert_eq!(
+            over(8192).to_string(),
+            "the grid would need 8192 bytes, over the memory budget of 4096 bytes"
+        );
     }
 }

@@ -340,6 +340,13 @@ fn output_paths_are_checked_before_the_work() {
         &["--field", "temperature"],
         &["surface.stl", "cannot write a mesh as '.stl'"],
     );
+    // No extension at all: said so (it used to read "cannot write a mesh as '.'").
+    let bare = temp("surface");
+    run(
+        bare.to_str().unwrap(),
+        &["--field", "temperature"],
+        &["no extension to name the mesh format", ".ply"],
+    );
     run(
         "/nonexistent-folder/surface.ply",
         &["--field", "temperature"],
@@ -441,6 +448,36 @@ fn a_one_frame_sequence_fills_the_pattern() {
     assert!(run.status.success(), "{err}");
     assert!(err.contains("frame 9 missing"), "{err}");
     assert!(dir.join("surface_0010.ply").exists());
+    // One file of the set with a plain output: that file alone (it used to be refused:
+    // "3 frames match"), no sequence scanned.
+    let one = dir.join("one.ply");
+    let run = isobar()
+        .args(["sph", input.to_str().unwrap()])
+        .args(["--iso", "0.5", "--h", "0.05", "--quiet", "-o"])
+        .arg(&one)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success() && one.exists(), "{err}");
+    assert!(!err.contains("missing"), "{err}");
+    // The whole set into one mesh, or its statistics into one file: each frame would
+    // overwrite the last, so both are refused before any frame is read.
+    let (set, all) = (dir.join("frame_####.csv"), dir.join("all.ply"));
+    let common = ["--iso", "0.5", "--h", "0.05", "--quiet", "-o"];
+    let mut args = vec!["sph", set.to_str().unwrap()];
+    args.extend(common);
+    args.push(all.to_str().unwrap());
+    fails_with(&args, &["3 frames match", "'#'"]);
+    let stats = dir.join("stats.json");
+    let mut args = vec!["sph", input.to_str().unwrap()];
+    args.extend(common);
+    args.extend([
+        pattern.to_str().unwrap(),
+        "--stats-json",
+        stats.to_str().unwrap(),
+    ]);
+    fails_with(&args, &["stats-json", "3 frames match"]);
+    assert!(!all.exists() && !stats.exists());
 }
 
 #[test]

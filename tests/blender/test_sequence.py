@@ -75,6 +75,25 @@ def test_smooth_shading_custom_normals_and_attributes(scene, isobar, demo_sequen
     assert obj.active_material is not None
 
 
+def test_a_velocity_array_that_does_not_exist_is_an_error_not_replaced(scene, isobar, demo_sequence):
+    """A Velocity name the user typed that the particles lack was silently replaced by
+    'velocity'; it is an error naming it, as a wrong Attributes name is. The default
+    name on a file without a velocity stays quiet (the import sets it regardless)."""
+    obj = import_sequence(demo_sequence[1])
+    scene.frame_set(2)
+    settings = obj.isobar
+    assert not settings.status_error, settings.status
+    vertices = len(obj.data.vertices)
+    settings.velocity_array = "nope"
+    assert settings.status_error, settings.status
+    assert "no velocity array named 'nope'" in settings.status and "velocity" in settings.status
+    settings.velocity_array = "id"
+    assert settings.status_error and "'id' has 1 components" in settings.status, settings.status
+    settings.velocity_array = "velocity"
+    assert not settings.status_error, settings.status
+    assert len(obj.data.vertices) == vertices and "velocity" in obj.data.attributes
+
+
 def test_parameter_change_reextracts(scene, isobar, demo_sequence):
     obj = import_sequence(demo_sequence[0])
     scene.frame_set(2)

@@ -145,7 +145,7 @@ def test_adaptive_max_error_equals_the_cli_option():
 def test_adaptive_bisection_iterations_equal_the_cli_option():
     # The halvings reach the core: 0 and 2 each give the CLI's surface with the same
     # --bisection-iterations (and differ from each other); the default is the core's,
-    # and values past 16 are clamped to what the core accepts.
+    # and values past 16 are refused (they used to be clamped to 16 without a word).
     points = {}
     for n in (0, 2):
         out = adaptive_output_equal_to_the_cli("BisectionIterations", n, "--bisection-iterations")
@@ -153,8 +153,9 @@ def test_adaptive_bisection_iterations_equal_the_cli_option():
     assert not np.array_equal(points[0], points[2]), "bisection_iterations did not reach the core"
     f = vtkIsobarSPHIsosurface()
     assert f.GetBisectionIterations() == 5
-    f.SetBisectionIterations(40)
-    assert f.GetBisectionIterations() == 16
+    f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE,
+                            BisectionIterations=40)
+    expect_error(f, "Bisection Iterations must lie in [0, 16], got 40")
 
 
 @test
@@ -652,9 +653,9 @@ def test_bad_inputs_give_error_and_empty_output():
     f = free_surface_filter(r, FieldMode=vtkIsobarSPHIsosurface.POINT_ARRAY, FieldComponent=7)
     f.SetInputArrayToProcess(0, 0, 0, vtkDataObject.FIELD_ASSOCIATION_POINTS, "velocity")
     expect_error(f, "Field Component 7")
-    # The core's own parameter checks come through too (tolerance must lie in (0, 1)).
+    # Settings outside their range are refused by the filter, naming them.
     f = free_surface_filter(r, Tolerance=0.0)
-    expect_error(f, "tolerance")
+    expect_error(f, "Tolerance must lie in (0, 1), got 0")
     # And a good run afterwards still works.
     f.SetTolerance(1e-6)
     f.Update()
@@ -766,7 +767,10 @@ def test_fixed_lattice_matches_cli_lattice():
     assert n != d.GetOutput().GetNumberOfCells()
     # A bad cell size is an error, not a hang or a crash.
     bad = free_surface_filter(reader(h.FRAME_26), FixedLattice=1, GridFactor=0.0)
-    expect_error(bad, "cell size")
+    expect_error(bad, "Grid Factor must be > 0, got 0")
+    # A cell size the core cannot use (overflowing the lattice) comes through as its error.
+    bad = free_surface_filter(reader(h.FRAME_26), FixedLattice=1, LatticeCellSize=1e-300)
+    expect_error(bad, "lattice")
 
 
 @test

@@ -87,19 +87,7 @@ pub fn run(
         backend: common.backend,
     };
     params.validate()?;
-    let frames = io::expand_sequence(common.input)?;
-    io::warn_if_gaps(common.input, &frames);
-    let out_text = common.output.to_string_lossy().to_string();
-    if frames.len() > 1 && !out_text.contains('#') {
-        return Err(Error::InvalidParameter {
-            name: "output",
-            message: format!(
-                "{} frames match '{}'; give an output pattern with '#' for the frame number",
-                frames.len(),
-                common.input
-            ),
-        });
-    }
+    let frames = io::frames_for(common.input, common.output, common.stats_json)?;
     io::check_frame_outputs(
         &frames,
         common.output,

@@ -63,7 +63,8 @@ enum Command {
 #[command(allow_negative_numbers = true)]
 struct SphArgs {
     /// Particle file (.vtk .vtp .vtu .ply .bgeo .csv .xyz .npy .npz) or a numbered sequence
-    /// ('frame_####.vtk', or one file of it).
+    /// ('frame_####.vtk', or one file of it with an output pattern holding '#'; with a plain
+    /// output, one file is that file alone).
     input: String,
     /// Field: an array name, 'NAME:mag' for a vector's magnitude, 'NAME:K' for component K,
     /// or SumOfWeights for the free surface.
@@ -304,20 +305,7 @@ fn say_backend(args: &SphArgs) -> Result<()> {
 
 fn run_sph(args: &SphArgs) -> Result<()> {
     say_backend(args)?;
-    let frames = io::expand_sequence(&args.input)?;
-    io::warn_if_gaps(&args.input, &frames);
-    let sequence = frames.len() > 1;
-    let out_text = args.output.to_string_lossy().to_string();
-    if sequence && !out_text.contains('#') {
-        return Err(Error::InvalidParameter {
-            name: "output",
-            message: format!(
-                "{} frames match '{}'; give an output pattern with '#' for the frame number, e.g. surface_####.ply",
-                frames.len(),
-                args.input
-            ),
-        });
-    }
+    let frames = io::frames_for(&args.input, &args.output, args.stats_json.as_deref())?;
     io::check_frame_outputs(
         &frames,
         &args.output,

@@ -33,7 +33,7 @@ pub struct FeArgs {
     pub method: Method,
     /// Particle spacing s on flat parts, or the grid cell size with `--method mc`, world
     /// units (default: 1/40 of the bounding-box diagonal).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, hide_default_value = true)]
     pub spacing: f64,
     /// Curvature adaptivity ρ (0: uniform spacing).
     #[arg(long, default_value_t = 0.0)]

@@ -49,8 +49,8 @@ pub use atomic::check_writable as check_output;
 /// Crash-safe replacement of a file (temporary sibling + rename), for other modules' writers.
 pub(crate) use atomic::{open_regular, parent_dir, read_regular_file, write_atomically};
 pub use sequence::{
-    check_frame_outputs, expand_sequence, fill_frame, frame_number, frame_output, missing_frames,
-    print_warnings, warn_if_gaps,
+    check_frame_outputs, expand_sequence, fill_frame, frame_number, frame_output, frames_for,
+    missing_frames, print_warnings, warn_if_gaps,
 };
 pub(crate) use spool::Spool;
 pub use volume::{read_volume, RawLayout, RawType, VOLUME_EXTENSIONS};
@@ -131,6 +131,13 @@ fn mesh_writer(path: &Path) -> Result<MeshWriter> {
         "ply" => Ok(ply::write_mesh),
         "obj" => Ok(obj::write_mesh),
         "vtp" => Ok(vtk_xml::write_mesh),
+        "" => Err(Error::format(
+            path,
+            format!(
+                "no extension to name the mesh format; supported: {}",
+                list(MESH_EXTENSIONS)
+            ),
+        )),
         format => Err(Error::format(
             path,
             format!(

@@ -111,6 +111,35 @@ pub fn expand_sequence(pattern: &str) -> Result<Vec<PathBuf>> {
         .collect())
 }
 
+/// The frames a command reads for `input`, writing each to `output` (and its statistics to
+/// `stats`): an existing file with an output that has no '#' is that file alone (one file
+/// in, one mesh out, whatever its numbered siblings); otherwise the frames of the sequence
+/// `input` names (a pattern, or one file of a numbered set), whose outputs must then be
+/// patterns with '#' when there is more than one frame, or each would overwrite the last.
+pub fn frames_for(input: &str, output: &Path, stats: Option<&Path>) -> Result<Vec<PathBuf>> {
+    let has_frame = |p: &Path| p.to_string_lossy().contains('#');
+    if Path::new(input).is_file() && !has_frame(output) {
+        return Ok(vec![PathBuf::from(input)]);
+    }
+    let frames = expand_sequence(input)?;
+    warn_if_gaps(input, &frames);
+    if frames.len() > 1 {
+        for (name, path) in [("output", Some(output)), ("stats-json", stats)] {
+            if path.is_some_and(|p| !has_frame(p)) {
+                return Err(Error::InvalidParameter {
+                    name,
+                    message: format!(
+                        "{} frames match '{input}'; give a pattern with '#' for the frame \
+                         number (e.g. surface_####.ply, stats_####.json)",
+                        frames.len()
+                    ),
+                });
+            }
+        }
+    }
+    Ok(frames)
+}
+
 /// The frame number of a file: the digits that end its name before the extension
 /// (`frame_0042.vtk` and `frame_0042.bgeo.gz` give 42; `particles.vtk` gives `None`).
 pub fn frame_number(path: &Path) -> Option<u64> {
