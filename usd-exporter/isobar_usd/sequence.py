@@ -677,7 +677,6 @@ def write_sequence(
         return _write_flat(entries, total, output, job, progress, t0)
     if replace is None:
         replace = selected is None
-    _clips_folder_for_writing(output)  # before any extraction
     return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0)
 
 

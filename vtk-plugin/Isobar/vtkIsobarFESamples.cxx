@@ -292,10 +292,9 @@ int vtkIsobarFESamples::RequestData(
   // Warnings, not errors: the samples are what was asked for, but perhaps not what was
   // meant (an isovalue the field never crosses). One vtkWarningMacro a line. In an MPI
   // run a piece without samples is no news when another piece has some.
-  static const std::string noSurface = "no surface at isovalue ";
   for (const std::string& line : IsobarLines(warnings.c_str()))
   {
-    if (!(parallel && allSamples > 0 && line.rfind(noSurface, 0) == 0))
+    if (!(parallel && allSamples > 0 && IsobarNoSurfaceWarning(line)))
     {
       vtkWarningMacro(<< line);
     }

@@ -1129,13 +1129,11 @@ int vtkIsobarSPHIsosurface::RequestData(
 void vtkIsobarSPHIsosurface::Warn(
   const std::string& warnings, const std::vector<vtkIdType>& crossed)
 {
-  static const std::string noSurface = "no surface at isovalue ";
   for (const std::string& line : IsobarLines(warnings.c_str()))
   {
-    if (!crossed.empty() && line.rfind(noSurface, 0) == 0)
+    double iso = 0.0;
+    if (!crossed.empty() && IsobarNoSurfaceWarning(line, &iso))
     {
-      // The core writes the isovalue in its shortest exact form: strtod gives it back.
-      const double iso = std::strtod(line.c_str() + noSurface.size(), nullptr);
       const auto at = std::find(this->Isovalues.begin(), this->Isovalues.end(), iso);
       if (at != this->Isovalues.end() && crossed[at - this->Isovalues.begin()] > 0)
       {

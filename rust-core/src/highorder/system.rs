@@ -132,7 +132,7 @@ pub(crate) fn run(
 
 /// Most samples a run may make: a spacing far below the surface's scale would otherwise run
 /// for hours and fill memory (about 200 bytes a particle with its neighbour lists).
-pub(crate) const MAX_SAMPLES: usize = 1 << 24;
+const MAX_SAMPLES: usize = 1 << 24;
 
 /// The coarsest level: at least `levels` above the final spacing, more while the seeds are
 /// sparser than that level's spacing, and no coarser than a quarter of the surface's
