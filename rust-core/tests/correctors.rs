@@ -402,17 +402,41 @@ fn bad_input_gets_a_clear_error() {
     assert!(msg(&good, &vector).contains("velocity:mag"));
 
     let field = SphField::new(&good, &s).unwrap();
-    let tiny = Params {
+    // Cells far too small are the grid factor's fault, however small (1e-300 used to be
+    // reported as data too far from the lattice origin).
+    for grid_factor in [1e-9, 1e-300] {
+        let tiny = Params {
+            isovalues: vec![1.0],
+            grid_factor,
+            ..Params::default()
+        };
+        let err = correctors::extract(&field, &good, &tiny, &mut Progress::none()).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                Error::InvalidParameter {
+                    name: "grid_factor",
+                    ..
+                }
+            ) && err.to_string().contains("raise the grid factor"),
+            "{err}"
+        );
+    }
+    // A lattice whose origin lies too far from the data for integer node indices.
+    let far = Params {
         isovalues: vec![1.0],
-        grid_factor: 1e-9,
+        lattice: Some(correctors::Lattice {
+            origin: DVec3::splat(1e30),
+            cell_size: 0.05,
+        }),
         ..Params::default()
     };
-    let err = correctors::extract(&field, &good, &tiny, &mut Progress::none()).unwrap_err();
+    let err = correctors::extract(&field, &good, &far, &mut Progress::none()).unwrap_err();
     assert!(
         matches!(
             err,
             Error::InvalidParameter {
-                name: "grid_factor",
+                name: "lattice origin",
                 ..
             }
         ),
@@ -432,34 +456,32 @@ fn bad_input_gets_a_clear_error() {
     .unwrap_err();
     assert!(matches!(err, Error::OverBudget { .. }), "{err}");
     // Marching Correctors stores no grid, but a surface far too fine for the budget is
-    // refused during tracking, before any vertex is built.
-    let err = correctors::extract(
-        &field,
-        &good,
-        &Params {
-            isovalues: vec![500.0],
-            grid_factor: 0.01,
-            memory_budget: 1 << 20,
-            ..Params::default()
-        },
-        &mut Progress::none(),
-    )
-    .unwrap_err();
-    assert!(matches!(err, Error::OverBudget { .. }), "{err}");
-    // Far finer still, each pair's segment crosses thousands of cells: the seed list is
-    // refused as it passes the budget (it used to grow to gigabytes first).
-    let err = correctors::extract(
-        &field,
-        &good,
-        &Params {
-            isovalues: vec![500.0],
-            grid_factor: 1e-4,
-            memory_budget: 1 << 20,
-            ..Params::default()
-        },
-        &mut Progress::none(),
-    )
-    .unwrap_err();
+    // refused before it is tracked: counted on a coarse grid, with the grid factor that fits.
+    let fine = |grid_factor: f64| Params {
+        isovalues: vec![500.0],
+        grid_factor,
+        memory_budget: 1 << 20,
+        ..Params::default()
+    };
+    for grid_factor in [0.01, 1e-4, 1e-5] {
+        let err = correctors::extract(&field, &good, &fine(grid_factor), &mut Progress::none())
+            .unwrap_err();
+        assert!(
+            matches!(err, Error::OverBudget { needed_bytes, .. } if needed_bytes > 1 << 20)
+                && err.to_string().contains("a grid factor of at least"),
+            "{err}"
+        );
+    }
+    // Where the estimate counts low (features the coarse grid misses), the seed list and
+    // tracking refuse on their own. Far finer than the particles, each pair's segment
+    // crosses thousands of cells: the seed list is refused as it passes the budget (it
+    // used to grow to gigabytes first).
+    let seeds_of = |p: &Params| {
+        let grid = correctors::virtual_grid(&field, p)?;
+        let search = correctors::seeds::SeedSearch::new(&field, p.memory_budget)?;
+        correctors::seeds::seed_cells(&field, &grid, 500.0, &search).map(|s| (grid, s))
+    };
+    let err = seeds_of(&fine(1e-4)).unwrap_err();
     assert!(
         matches!(err, Error::OverBudget { .. }) && err.to_string().contains("seed cells"),
         "{err}"
@@ -467,15 +489,17 @@ fn bad_input_gets_a_clear_error() {
     // Between the two, the seeds fit but their eight corners each do not: the first wave
     // is refused before its bricks are allocated (it used to take gigabytes of node
     // cache before the check after the wave).
-    let err = correctors::extract(
+    let p = fine(0.008);
+    let (grid, seeds) = seeds_of(&p).unwrap();
+    let index = correctors::tracking::index_bytes(p.memory_budget);
+    let mut cache = correctors::cache::NodeCache::for_grid(&grid, index);
+    let err = correctors::tracking::track(
         &field,
-        &good,
-        &Params {
-            isovalues: vec![500.0],
-            grid_factor: 0.008,
-            memory_budget: 1 << 20,
-            ..Params::default()
-        },
+        &grid,
+        seeds,
+        500.0,
+        &p,
+        &mut cache,
         &mut Progress::none(),
     )
     .unwrap_err();
@@ -567,6 +591,59 @@ fn earlier_isovalues_surfaces_count_against_the_budget() {
     let err = grid_only(vec![0.6, 0.6], hi).unwrap_err();
     assert!(err.to_string().contains("surfaces of 1 isovalues"), "{err}");
     assert!(grid_only(vec![0.6, 0.6], hi + first).is_ok());
+}
+
+/// A grid far finer than the particles is refused before any of it is tracked, naming a
+/// grid factor that fits: the estimate, counted on a coarse grid, neither refuses a
+/// surface that fits nor asks for a factor far coarser than needed.
+#[test]
+fn a_surface_too_fine_for_the_budget_is_refused_up_front_naming_a_factor_that_fits() {
+    let data = block(DVec3::ZERO, DVec3::new(0.6, 0.4, 0.3), 0.05, 5);
+    let s = settings(Kernel::CubicSpline, 0.1, Quantity::SumOfWeights);
+    let field = SphField::new(&data, &s).unwrap();
+    let budget = 16 << 20;
+    let extract = |grid_factor: f64, memory_budget: u64, progress: &mut Progress| {
+        let p = Params {
+            isovalues: vec![0.6],
+            grid_factor,
+            memory_budget,
+            ..Params::default()
+        };
+        correctors::extract(&field, &data, &p, progress)
+    };
+    let mut phases: Vec<String> = Vec::new();
+    let mut cb = |_f: f64, phase: &str| {
+        if phases.last().map(String::as_str) != Some(phase) {
+            phases.push(phase.to_string());
+        }
+        true
+    };
+    let err = extract(0.001, budget, &mut Progress::new(&mut cb)).unwrap_err();
+    let text = err.to_string();
+    assert!(matches!(err, Error::OverBudget { .. }), "{text}");
+    assert!(
+        !phases.iter().any(|p| p == "surface tracking"),
+        "{phases:?}"
+    );
+    let suggested: f64 = text
+        .split("a grid factor of at least ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|g| g.parse().ok())
+        .unwrap_or_else(|| panic!("no grid factor in: {text}"));
+    assert!(suggested > 0.001 && suggested < 0.5, "{text}");
+    // At the named factor the whole extraction fits, with no more than a few times the
+    // memory it needs (the estimate leaves half the budget to what it does not count).
+    let needs = least_budget(|b| extract(suggested, b, &mut Progress::none()));
+    assert!(
+        needs <= budget && needs > budget / 8,
+        "{needs} of {budget}: {text}"
+    );
+    // Finer than that by half, four times the cells: refused, by the estimate or tracking.
+    assert!(matches!(
+        extract(suggested / 2.0, budget, &mut Progress::none()),
+        Err(Error::OverBudget { .. })
+    ));
 }
 
 #[test]

@@ -4,6 +4,7 @@
 //! corrected onto the SPH level set, free-surface trimming with the sum of weights.
 
 pub mod cache;
+mod estimate;
 pub mod seeds;
 pub mod surface;
 pub mod tracking;
@@ -324,6 +325,7 @@ pub fn extract(
     let search = seeds::SeedSearch::new(field, params.memory_budget)?;
     let neighbours = Neighbours::new(field, stats.backend)?;
     stats.field_evaluations += field.len() as u64;
+    estimate::check_surface_size(field, &grid, params, &neighbours, &search, progress)?;
     stats.timings.seeds += t.elapsed().as_secs_f64();
     for (k, &iso) in params.isovalues.iter().enumerate() {
         let at = |f: f64| (k as f64 + f) / n;

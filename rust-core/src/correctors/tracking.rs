@@ -36,12 +36,15 @@ enum Visit {
     Discarded,
 }
 
+/// What each active cell takes after tracking: its share of cut edges, placed vertices,
+/// triangles and the output mesh.
+pub(crate) const BYTES_PER_ACTIVE_CELL: u64 = 240;
+
 /// Bytes an extraction will need for what tracking has found: the node cache's and the
 /// visited set's bricks as allocated (a brick is allocated whole, so scattered droplets
-/// cost more per node than a smooth sheet), and per active cell its share of edges,
-/// placed vertices, triangles and the output mesh.
+/// cost more per node than a smooth sheet), and what each active cell takes.
 fn estimated_bytes(cache: &NodeCache, visited: &BrickSet, active: usize) -> u64 {
-    cache.bytes() + visited.bytes() + active as u64 * 240
+    cache.bytes() + visited.bytes() + active as u64 * BYTES_PER_ACTIVE_CELL
 }
 
 /// The most a dense brick index (of the node cache or the visited set) may take: a

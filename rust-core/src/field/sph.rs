@@ -612,6 +612,11 @@ impl SphField {
         self.h_unscaled.iter().fold(f64::INFINITY, |m, &v| m.min(v))
     }
 
+    /// The largest unscaled smoothing length.
+    pub fn max_h(&self) -> f64 {
+        self.h_unscaled.iter().fold(0.0, |m, &v| m.max(v))
+    }
+
     /// The largest support radius after scaling.
     pub fn max_support(&self) -> f64 {
         self.max_support

@@ -42,11 +42,23 @@ impl VirtualGrid {
     /// The grid of cell size `cell_size` whose cells cover the box `lo..hi`, with its
     /// first node at `lo`.
     pub fn covering(lo: DVec3, hi: DVec3, cell_size: f64) -> Result<Self> {
-        Self::on_lattice(lo, cell_size, lo, hi)
+        Self::window(lo, cell_size, lo, hi, "grid_factor")
     }
 
     /// The window of the lattice (`origin`, `cell_size`) whose cells cover `lo..hi`.
     pub fn on_lattice(origin: DVec3, cell_size: f64, lo: DVec3, hi: DVec3) -> Result<Self> {
+        Self::window(origin, cell_size, lo, hi, "lattice cell size")
+    }
+
+    /// The window of a lattice; `knob` names the setting that chose the cell size, for
+    /// the error when the cells are too small for the data.
+    fn window(
+        origin: DVec3,
+        cell_size: f64,
+        lo: DVec3,
+        hi: DVec3,
+        knob: &'static str,
+    ) -> Result<Self> {
         if !(cell_size > 0.0 && cell_size.is_finite()) {
             return Err(Error::InvalidParameter {
                 name: "grid cell size",
@@ -61,7 +73,28 @@ impl VirtualGrid {
         }
         let mut cells = [0u32; 3];
         let mut offset = [0i64; 3];
+        let too_many = |a: usize, n: f64| Error::InvalidParameter {
+            name: knob,
+            message: format!(
+                "the virtual grid would need {} cells along axis {a} (the data spans {:.6} \
+                 with cells of {cell_size:.3e}); at most {} are supported — raise the {}",
+                if n < 1e9 {
+                    format!("{n:.0}")
+                } else {
+                    format!("{n:.3e}")
+                },
+                hi[a] - lo[a],
+                MAX_NODES_PER_AXIS - 1,
+                knob.replace('_', " "),
+            ),
+        };
         for a in 0..3 {
+            // The span first: cells far too small for the data are the grid factor's fault,
+            // whatever the origin.
+            let span = ((hi[a] - lo[a]) / cell_size).ceil();
+            if span + 1.0 > MAX_NODES_PER_AXIS as f64 {
+                return Err(too_many(a, span));
+            }
             let first = ((lo[a] - origin[a]) / cell_size).floor();
             let last = ((hi[a] - origin[a]) / cell_size).ceil();
             if !(first.abs() < 1e15 && last.abs() < 1e15) {
@@ -75,14 +108,7 @@ impl VirtualGrid {
             offset[a] = first as i64;
             let n = (last - first).max(1.0);
             if n + 1.0 > MAX_NODES_PER_AXIS as f64 {
-                return Err(Error::InvalidParameter {
-                    name: "grid_factor",
-                    message: format!(
-                        "the virtual grid would need {n:.0} cells along axis {a} (the data spans {:.6} with cells of {cell_size:.3e}); at most {} are supported — raise the grid factor",
-                        hi[a] - lo[a],
-                        MAX_NODES_PER_AXIS - 1
-                    ),
-                });
+                return Err(too_many(a, n));
             }
             cells[a] = n as u32;
         }
