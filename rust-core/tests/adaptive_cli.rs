@@ -68,6 +68,68 @@ fn adaptive_command_writes_a_closed_surface_and_stats() {
     let _ = std::fs::remove_file(&json_path);
 }
 
+/// `isobar adaptive --help` lists only what the adaptive surface takes: none of Marching
+/// Correctors' own options, all of the shared SPH ones.
+#[test]
+fn adaptive_help_lists_only_its_own_options() {
+    // The options a command's help lists (descriptions may mention others).
+    let options = |command: &str| {
+        let out = isobar().args([command, "--help"]).output().unwrap();
+        let help = String::from_utf8_lossy(&out.stdout).into_owned();
+        let listed: Vec<String> = help
+            .lines()
+            .filter_map(|l| {
+                // "  --name <V>" or "  -o, --name <V>"; description lines start otherwise.
+                let mut words = l.split_whitespace();
+                match words.next()? {
+                    w if w.starts_with("--") => Some(w.to_string()),
+                    w if w.starts_with('-') => words.next().map(str::to_string),
+                    _ => None,
+                }
+            })
+            .collect();
+        (listed, help)
+    };
+    let (listed, help) = options("adaptive");
+    for own in [
+        "--preview",
+        "--tolerance",
+        "--trim",
+        "--lattice",
+        "--clip",
+        "--full-grid",
+        "--attributes",
+    ] {
+        assert!(!listed.iter().any(|o| o == own), "{own} listed:\n{help}");
+    }
+    for shared in [
+        "--field",
+        "--kernel",
+        "--h-array",
+        "--grid-factor",
+        "--backend",
+        "--output",
+    ] {
+        assert!(
+            listed.iter().any(|o| o == shared),
+            "{shared} missing:\n{help}"
+        );
+    }
+    let (listed, help) = options("sph");
+    for option in [
+        "--preview",
+        "--trim",
+        "--lattice",
+        "--field",
+        "--grid-factor",
+    ] {
+        assert!(
+            listed.iter().any(|o| o == option),
+            "{option} missing from sph:\n{help}"
+        );
+    }
+}
+
 #[test]
 fn adaptive_command_refuses_bad_options() {
     let mesh_path = temp("never.ply");
@@ -78,18 +140,25 @@ fn adaptive_command_refuses_bad_options() {
             "bisection_iterations",
         ),
         // Marching Correctors' own options are refused, not silently ignored.
-        (vec!["--iso", "0.6", "--preview"], "--preview applies to"),
+        (
+            vec!["--iso", "0.6", "--preview"],
+            "unexpected argument '--preview'",
+        ),
         (
             vec!["--iso", "0.6", "--attributes", "velocity"],
-            "--attributes applies to",
+            "unexpected argument '--attributes'",
         ),
         (
             vec!["--iso", "0.6", "--full-grid"],
-            "--full-grid applies to",
+            "unexpected argument '--full-grid'",
         ),
         (
             vec!["--iso", "0.6", "--trim", "0.1,0.5"],
-            "--trim applies to",
+            "unexpected argument '--trim'",
+        ),
+        (
+            vec!["--iso", "0.6", "--tolerance", "1e-3"],
+            "unexpected argument '--tolerance'",
         ),
     ] {
         let out = isobar()

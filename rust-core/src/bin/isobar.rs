@@ -34,7 +34,7 @@ enum Command {
     /// Adaptive crack-free surface on a 3-level grid (one isovalue; the SPH options as for `sph`).
     Adaptive {
         #[command(flatten)]
-        sph: Box<SphArgs>,
+        common: Box<FieldArgs>,
         #[command(flatten)]
         adaptive: isobar::adaptive::cli::AdaptiveArgs,
     },
@@ -59,9 +59,10 @@ enum Command {
     Slide(isobar::slider::cli::SlideArgs),
 }
 
+/// The options `sph` and `adaptive` share: the particles, their SPH field, the output.
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
-struct SphArgs {
+struct FieldArgs {
     /// Particle file (.vtk .vtp .vtu .ply .bgeo .csv .xyz .npy .npz) or a numbered sequence
     /// ('frame_####.vtk', or one file of it with an output pattern holding '#'; with a plain
     /// output, one file is that file alone).
@@ -93,19 +94,6 @@ struct SphArgs {
     /// Virtual cell size in units of the smallest h.
     #[arg(long, default_value_t = 0.5)]
     grid_factor: f64,
-    /// Preview: linear interpolation, no correction, face normals.
-    #[arg(long)]
-    preview: bool,
-    /// Relative tolerance of the correction.
-    #[arg(long, default_value_t = 1e-6)]
-    tolerance: f64,
-    /// Trimming thresholds on the sum of weights: NODE,VERTEX (default 0.1,0.5; off for
-    /// the SumOfWeights field).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-    trim: Option<Vec<f64>>,
-    /// No trimming at free surfaces.
-    #[arg(long, conflicts_with = "trim")]
-    no_trim: bool,
     /// Per-particle volume array (m/ρ).
     #[arg(long)]
     volume_array: Option<String>,
@@ -121,23 +109,9 @@ struct SphArgs {
     /// Normalise the field by the sum of weights (Shepard).
     #[arg(long)]
     shepard: bool,
-    /// Particle arrays to interpolate onto the surface, comma separated.
-    #[arg(long, value_delimiter = ',')]
-    attributes: Vec<String>,
     /// No vertex normals.
     #[arg(long)]
     no_normals: bool,
-    /// Put the virtual grid on a fixed lattice X,Y,Z,CELL (nodes at origin + integer
-    /// multiples of CELL; replaces --grid-factor), so separately extracted pieces line up.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-    lattice: Option<Vec<f64>>,
-    /// Keep only the surface in cells whose lowest corner lies in [X0,Y0,Z0, X1,Y1,Z1);
-    /// particles outside still shape the field (a halo).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-    clip: Option<Vec<f64>>,
-    /// Resample onto the full grid and run plain marching cubes (the baseline).
-    #[arg(long)]
-    full_grid: bool,
     /// Memory budget in GiB for extent-sized structures.
     #[arg(long, default_value_t = (DEFAULT_MEMORY_BUDGET >> 30) as f64)]
     memory_budget: f64,
@@ -159,12 +133,54 @@ struct SphArgs {
     output: PathBuf,
 }
 
+/// Marching Correctors' own options (`adaptive` has none of them: its help lists only
+/// what it takes).
+#[derive(Args)]
+#[command(allow_negative_numbers = true)]
+struct CorrectorsArgs {
+    /// Preview: linear interpolation, no correction, face normals.
+    #[arg(long)]
+    preview: bool,
+    /// Relative tolerance of the correction.
+    #[arg(long, default_value_t = 1e-6)]
+    tolerance: f64,
+    /// Trimming thresholds on the sum of weights: NODE,VERTEX (default 0.1,0.5; off for
+    /// the SumOfWeights field).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    trim: Option<Vec<f64>>,
+    /// No trimming at free surfaces.
+    #[arg(long, conflicts_with = "trim")]
+    no_trim: bool,
+    /// Particle arrays to interpolate onto the surface, comma separated.
+    #[arg(long, value_delimiter = ',')]
+    attributes: Vec<String>,
+    /// Put the virtual grid on a fixed lattice X,Y,Z,CELL (nodes at origin + integer
+    /// multiples of CELL; replaces --grid-factor), so separately extracted pieces line up.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    lattice: Option<Vec<f64>>,
+    /// Keep only the surface in cells whose lowest corner lies in [X0,Y0,Z0, X1,Y1,Z1);
+    /// particles outside still shape the field (a halo).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    clip: Option<Vec<f64>>,
+    /// Resample onto the full grid and run plain marching cubes (the baseline).
+    #[arg(long)]
+    full_grid: bool,
+}
+
+#[derive(Args)]
+struct SphArgs {
+    #[command(flatten)]
+    common: FieldArgs,
+    #[command(flatten)]
+    correctors: CorrectorsArgs,
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     terminal::catch_interrupts();
     let result = match cli.command {
         Command::Sph(args) => run_sph(&args),
-        Command::Adaptive { sph, adaptive } => run_adaptive(&sph, &adaptive),
+        Command::Adaptive { common, adaptive } => run_adaptive(&common, &adaptive),
         Command::Demo { output, quiet } => run_demo(&output, quiet),
         Command::Info { input } => run_info(&input),
         Command::SlideBuild(args) => isobar::slider::cli::run_build(&args),
@@ -184,7 +200,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn settings_from(args: &SphArgs, data: &ParticleData) -> Result<SphSettings> {
+fn settings_from(args: &FieldArgs, data: &ParticleData) -> Result<SphSettings> {
     let smoothing_length = match (args.h, &args.h_array) {
         (Some(h), None) => SmoothingLength::Constant(h),
         (None, Some(name)) => SmoothingLength::Array(name.clone()),
@@ -256,12 +272,13 @@ fn exactly(values: &Option<Vec<f64>>, n: usize, name: &'static str, form: &str) 
 }
 
 fn params_from(args: &SphArgs, quantity: &Quantity) -> Result<Params> {
-    exactly(&args.trim, 2, "trim", "NODE,VERTEX")?;
-    exactly(&args.lattice, 4, "lattice", "X,Y,Z,CELL")?;
-    exactly(&args.clip, 6, "clip", "X0,Y0,Z0,X1,Y1,Z1")?;
-    let trim = if args.no_trim {
+    let (common, own) = (&args.common, &args.correctors);
+    exactly(&own.trim, 2, "trim", "NODE,VERTEX")?;
+    exactly(&own.lattice, 4, "lattice", "X,Y,Z,CELL")?;
+    exactly(&own.clip, 6, "clip", "X0,Y0,Z0,X1,Y1,Z1")?;
+    let trim = if own.no_trim {
         None
-    } else if let Some(t) = &args.trim {
+    } else if let Some(t) = &own.trim {
         Some(Trim {
             node: t[0],
             vertex: t[1],
@@ -273,28 +290,28 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Result<Params> {
         Some(Trim::default())
     };
     Ok(Params {
-        memory_budget: (args.memory_budget * (1u64 << 30) as f64) as u64,
-        isovalues: args.iso.clone(),
-        grid_factor: args.grid_factor,
-        correct: !args.preview,
-        tolerance: args.tolerance,
+        memory_budget: (common.memory_budget * (1u64 << 30) as f64) as u64,
+        isovalues: common.iso.clone(),
+        grid_factor: common.grid_factor,
+        correct: !own.preview,
+        tolerance: own.tolerance,
         trim,
-        normals: !args.no_normals,
-        attributes: args.attributes.clone(),
-        lattice: args.lattice.as_ref().map(|l| Lattice {
+        normals: !common.no_normals,
+        attributes: own.attributes.clone(),
+        lattice: own.lattice.as_ref().map(|l| Lattice {
             origin: DVec3::new(l[0], l[1], l[2]),
             cell_size: l[3],
         }),
-        clip: args
+        clip: own
             .clip
             .as_ref()
             .map(|c| (DVec3::new(c[0], c[1], c[2]), DVec3::new(c[3], c[4], c[5]))),
-        backend: Backend::parse(&args.backend)?,
+        backend: Backend::parse(&common.backend)?,
     })
 }
 
 /// When `--backend auto` will run on the CPU, a line saying why (unless quiet).
-fn say_backend(args: &SphArgs) -> Result<()> {
+fn say_backend(args: &FieldArgs) -> Result<()> {
     if Backend::parse(&args.backend)? == Backend::Auto && !args.quiet {
         if let Some(why) = isobar::gpu::auto_fallback_reason() {
             eprintln!("backend auto: running on the CPU ({why})");
@@ -304,30 +321,32 @@ fn say_backend(args: &SphArgs) -> Result<()> {
 }
 
 fn run_sph(args: &SphArgs) -> Result<()> {
-    say_backend(args)?;
-    let frames = io::frames_for(&args.input, &args.output, args.stats_json.as_deref())?;
+    let common = &args.common;
+    say_backend(common)?;
+    let frames = io::frames_for(&common.input, &common.output, common.stats_json.as_deref())?;
     io::check_frame_outputs(
         &frames,
-        &args.output,
-        args.stats_json.as_deref(),
+        &common.output,
+        common.stats_json.as_deref(),
         io::check_mesh_output,
     )?;
     for path in &frames {
-        let output = io::frame_output(&args.output, path);
+        let output = io::frame_output(&common.output, path);
         let t = Instant::now();
         let data = io::read_particles(path)?;
         let read_s = t.elapsed().as_secs_f64();
-        let settings = settings_from(args, &data).map_err(|e| e.in_file(path))?;
+        let settings = settings_from(common, &data).map_err(|e| e.in_file(path))?;
         let params = params_from(args, &settings.quantity)?;
-        let (extraction, build_s) = extract(&data, &settings, &params, args.full_grid, args.quiet)
+        let full_grid = args.correctors.full_grid;
+        let (extraction, build_s) = extract(&data, &settings, &params, full_grid, common.quiet)
             .map_err(|e| e.in_file(path))?;
         io::write_mesh(&output, &extraction.mesh)?;
         io::print_warnings(path, &extraction.stats.warnings);
-        if !args.quiet {
+        if !common.quiet {
             print_stats(path, &data, &extraction.stats, read_s, build_s);
             println!("surface written to {}", output.display());
         }
-        if let Some(json) = &args.stats_json {
+        if let Some(json) = &common.stats_json {
             let json = io::frame_output(json, path);
             write_stats_json(&json, &data, &extraction.stats, read_s, build_s)?;
         }
@@ -335,25 +354,7 @@ fn run_sph(args: &SphArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_adaptive(sph: &SphArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -> Result<()> {
-    // The shared SPH options include Marching Correctors' own; silently ignoring one would
-    // give a surface other than the one asked for (the hosts refuse them the same way).
-    let correctors_only = [
-        ("--preview", sph.preview),
-        ("--trim", sph.trim.is_some()),
-        ("--attributes", !sph.attributes.is_empty()),
-        ("--lattice", sph.lattice.is_some()),
-        ("--clip", sph.clip.is_some()),
-        ("--full-grid", sph.full_grid),
-    ];
-    if let Some((name, _)) = correctors_only.iter().find(|(_, given)| *given) {
-        return Err(Error::InvalidParameter {
-            name: "adaptive",
-            message: format!(
-                "{name} applies to `isobar sph` (Marching Correctors), not to the adaptive surface"
-            ),
-        });
-    }
+fn run_adaptive(sph: &FieldArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -> Result<()> {
     let common = isobar::adaptive::cli::Common {
         input: &sph.input,
         output: &sph.output,
