@@ -430,6 +430,37 @@ def test_volume_slider_without_scalars_reports_an_error():
 
 
 @test
+def test_an_error_in_one_block_of_a_multi_block_input_names_the_block():
+    """VTK's composite pipeline runs the filter once per block; an error in one block of
+    many (a NaN coordinate here) must say which, and leave the other blocks' surfaces."""
+    from vtkmodules.vtkCommonDataModel import vtkMultiBlockDataSet, vtkUnstructuredGrid
+
+    good = reader(h.FRAME_26).GetOutput()
+    bad = vtkUnstructuredGrid()
+    bad.DeepCopy(good)
+    bad.GetPoints().SetPoint(7, math.nan, 0.0, 0.0)
+    blocks = vtkMultiBlockDataSet()
+    for i, block in enumerate((good, bad, good)):
+        blocks.SetBlock(i, block)
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputData(blocks)
+    f.SetSmoothingLength(h.H)
+    f.SetGridFactor(h.GRID_FACTOR)
+    f.SetIsovalue(0, h.ISO)
+    errors = Errors(f)
+    f.Update()
+    assert len(errors.messages) == 1, errors.messages
+    assert "block 2 of 3: " in errors.messages[0] and "NaN" in errors.messages[0], errors.messages
+    out = f.GetOutputDataObject(0)
+    cells = [out.GetBlock(i).GetNumberOfCells() for i in range(3)]
+    assert cells[0] == cells[2] > 1000 and cells[1] == 0, cells
+    # The same filter on the bad block alone: no block to name.
+    f.SetInputData(bad)
+    f.Update()
+    assert "NaN" in f.GetErrorMessage() and "block" not in f.GetErrorMessage(), f.GetErrorMessage()
+
+
+@test
 def test_settings_out_of_range_are_refused_naming_them_not_clamped():
     """VTK's clamping setters turned a negative Max Error into 0 (the error criterion off)
     and a negative Smoothing Length beside an h array into 0 (the array used), running

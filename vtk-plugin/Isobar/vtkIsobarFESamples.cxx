@@ -18,6 +18,7 @@
 #include "vtkUnsignedCharArray.h"
 #include "vtkUnstructuredGrid.h"
 
+#include "IsobarBlock.h"
 #include "IsobarLines.h"
 #include "IsobarRanks.h"
 #include "IsobarSettings.h"
@@ -180,8 +181,8 @@ int vtkIsobarFESamples::FillInputPortInformation(int, vtkInformation* info)
 //------------------------------------------------------------------------------
 void vtkIsobarFESamples::Fail(const std::string& message)
 {
-  this->ErrorMessage = message;
-  vtkErrorMacro(<< message);
+  this->ErrorMessage = IsobarBlockPrefix(this) + message;
+  vtkErrorMacro(<< this->ErrorMessage);
 }
 
 //------------------------------------------------------------------------------

@@ -23,6 +23,7 @@
 #include "vtkStringArray.h"
 #include "vtkUnsignedCharArray.h"
 
+#include "IsobarBlock.h"
 #include "IsobarLines.h"
 #include "IsobarRanks.h"
 #include "IsobarSettings.h"
@@ -742,8 +743,8 @@ int vtkIsobarSPHIsosurface::FillInputPortInformation(int, vtkInformation* info)
 //------------------------------------------------------------------------------
 void vtkIsobarSPHIsosurface::Fail(const std::string& message)
 {
-  this->ErrorMessage = message;
-  vtkErrorMacro(<< message);
+  this->ErrorMessage = IsobarBlockPrefix(this) + message;
+  vtkErrorMacro(<< this->ErrorMessage);
 }
 
 //------------------------------------------------------------------------------

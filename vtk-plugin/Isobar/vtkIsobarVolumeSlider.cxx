@@ -13,6 +13,7 @@
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
 
+#include "IsobarBlock.h"
 #include "IsobarSettings.h"
 #include "isobar.h"
 
@@ -95,8 +96,8 @@ int vtkIsobarVolumeSlider::FillInputPortInformation(int, vtkInformation* info)
 //------------------------------------------------------------------------------
 void vtkIsobarVolumeSlider::Fail(const std::string& message)
 {
-  this->ErrorMessage = message;
-  vtkErrorMacro(<< message);
+  this->ErrorMessage = IsobarBlockPrefix(this) + message;
+  vtkErrorMacro(<< this->ErrorMessage);
 }
 
 //------------------------------------------------------------------------------
