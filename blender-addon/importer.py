@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import threading
 import traceback
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
@@ -342,11 +343,90 @@ def _resolved_cache_folder(settings, name: str) -> str:
     return os.path.normcase(os.path.normpath(os.path.join(bpy.path.abspath(base), name)))
 
 
+class OverLiveLimit(ValueError):
+    """A live extraction would read more particles than the object's Live Particle Limit."""
+
+
+def live_limit(settings) -> int:
+    """The most particles a live extraction of `settings`' object may read (0: no limit).
+    The limit keeps an interactive session responsive: a frame change cannot be
+    cancelled, a bake can. A render needs its frame whatever the size, and in background
+    mode (scripts, farms, exporters stepping frames) nothing freezes, so neither is
+    limited; a stale mesh there would be a wrong result."""
+    if _rendering or not _interactive():
+        return 0
+    return max(0, int(settings.live_particle_limit))
+
+
+def _interactive() -> bool:
+    """True in Blender with a UI (a window manager that shows progress and could freeze)."""
+    return not bpy.app.background
+
+
+def _check_live_limit(count: int, limit: int) -> None:
+    """Raises OverLiveLimit when `count` particles are more than `limit` (0: no limit)."""
+    if limit and count > limit:
+        raise OverLiveLimit(
+            f"{count:,} particles, over the live limit of {limit:,}: "
+            "bake the range (Esc cancels) or raise Live Particle Limit"
+        )
+
+
+class _CursorProgress:
+    """An extraction's progress callback shown as the window manager's cursor progress.
+    It begins at the first report, so a frame read from the bake or already shown (no
+    extraction) shows none."""
+
+    def __init__(self, wm):
+        self.wm = wm
+        self.begun = False
+
+    def __call__(self, fraction: float, _phase: str = "") -> None:
+        if not self.begun:
+            self.wm.progress_begin(0.0, 1.0)
+            self.begun = True
+        self.wm.progress_update(min(max(float(fraction), 0.0), 1.0))
+
+    def end(self) -> None:
+        if self.begun:
+            self.begun = False
+            self.wm.progress_end()
+
+
+def _progress_window_manager():
+    """The window manager to show a live extraction's progress, or None: none in
+    background mode, and none during a render or off the main thread (frame handlers of
+    a render run on its thread, where the UI must not be touched)."""
+    if _rendering or not _interactive() or threading.current_thread() is not threading.main_thread():
+        return None
+    return getattr(bpy.context, "window_manager", None)
+
+
+@contextlib.contextmanager
+def live_progress() -> Iterator:
+    """A progress callback for a live extraction (None where no UI shows it); the cursor
+    progress always ends on leaving, on error too, or the cursor would stay busy."""
+    wm = _progress_window_manager()
+    if wm is None:
+        yield None
+        return
+    progress = _CursorProgress(wm)
+    try:
+        yield progress
+    finally:
+        progress.end()
+
+
 def extract_live(
-    obj, scene, depsgraph, frame: int, params: Optional[Params] = None, progress=None
+    obj, scene, depsgraph, frame: int, params: Optional[Params] = None, progress=None, limit: int = 0
 ) -> Tuple[Optional[FrameMesh], str]:
     """Extracts `frame` from the particles: (mesh, or None for a frame without particles;
-    where they came from)."""
+    where they came from).
+
+    Raises:
+        OverLiveLimit: the frame has more than `limit` particles (0: no limit); they are
+            counted after reading and before the (far longer) extraction.
+    """
     settings = obj.isobar
     params = params or Params.from_settings(settings)
     if settings.source_type == "OBJECT":
@@ -363,6 +443,7 @@ def extract_live(
     if particles is None:
         return None, origin + ", no particles"
     try:
+        _check_live_limit(len(particles), limit)
         _arrays[object_key(obj)] = extraction.array_infos(particles)
         frame_mesh = extraction.extract(particles, params, progress=progress)
     finally:
@@ -388,10 +469,11 @@ def _live_key(settings, frame: int, current: str) -> Optional[Tuple]:
     return ("file", path, stat.st_mtime_ns, stat.st_size, current)
 
 
-def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progress=None):
+def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progress=None, limit: int = 0):
     """The surface of `obj` at `frame`: (mesh, origin text, memo key); mesh None when the
     object shows that very surface already. A baked frame is used when baking is on and
-    its fingerprint matches the current settings; else the particles are extracted."""
+    its fingerprint matches the current settings; else the particles are extracted (at
+    most `limit` of them, see :func:`extract_live`)."""
     settings = obj.isobar
     params = Params.from_settings(settings)
     note = missing = ""
@@ -419,7 +501,7 @@ def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progre
     key = _live_key(settings, frame, fingerprint(settings, params) + missing)
     if _is_shown(obj, key):
         return None, "unchanged", key
-    mesh, origin = extract_live(obj, scene, depsgraph, frame, params, progress)
+    mesh, origin = extract_live(obj, scene, depsgraph, frame, params, progress, limit)
     mesh = mesh if mesh is not None else empty_mesh()
     if missing:
         mesh.warnings = [missing] + list(mesh.warnings)
@@ -443,6 +525,8 @@ def update_object(
     the extraction's warnings into ``obj.isobar.status_warnings`` (and, for a surface
     extracted now, the console). On failure the mesh keeps what it showed (the last good
     frame) for interactive work; during a render it is emptied (see :func:`_fail_render_frame`).
+    A frame over the object's Live Particle Limit (see :func:`live_limit`) is such a
+    failure: it is not extracted. An extraction shows its progress in the cursor.
     """
     try:
         settings = obj.isobar
@@ -450,7 +534,9 @@ def update_object(
         frame = scene.frame_current if frame is None else int(frame)
         if force:
             _shown.pop(object_key(obj), None)
-        mesh, origin, key = frame_mesh(obj, scene, depsgraph, frame)
+        with live_progress() as progress:
+            limit = live_limit(settings)
+            mesh, origin, key = frame_mesh(obj, scene, depsgraph, frame, progress=progress, limit=limit)
         if mesh is None:  # the mesh shows this surface already
             _, n, m, origin, warnings = _shown[object_key(obj)]
             message = f"Frame {frame}: {n} vertices, {m} triangles ({origin})"
@@ -550,8 +636,9 @@ def update_all(scene, depsgraph=None) -> None:
 # -- property updates and UI helpers ----------------------------------------------------
 
 
-def on_settings_changed(settings, context) -> None:
-    """A property of `settings` changed: re-extract the current frame."""
+def on_settings_changed(settings, context, force: bool = True) -> None:
+    """A property of `settings` changed: re-extract the current frame (`force` False:
+    only when the mesh does not show it already)."""
     if _suspended:
         return
     try:
@@ -559,7 +646,7 @@ def on_settings_changed(settings, context) -> None:
         if not is_fluid(obj) or not settings.live_update or is_baking(obj):
             return
         scene = getattr(context, "scene", None) or bpy.context.scene
-        update_object(obj, scene, force=True)
+        update_object(obj, scene, force=force)
     except Exception:  # noqa: BLE001 - never raise out of a property update
         traceback.print_exc()
 
@@ -585,6 +672,7 @@ def array_suggestions(settings, text: str) -> List[str]:
 
 
 __all__ = [
+    "OverLiveLimit",
     "bake_fingerprint",
     "baking",
     "cache_folder",
@@ -595,6 +683,8 @@ __all__ = [
     "frame_mesh",
     "frame_warnings",
     "is_fluid",
+    "live_limit",
+    "live_progress",
     "scene_arrays",
     "sequence_path",
     "set_rendering",

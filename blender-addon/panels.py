@@ -139,6 +139,7 @@ class ISOBAR_PT_cache(_FluidPart, bpy.types.Panel):
         layout.use_property_split = True
         layout.prop(settings, "cache_directory")
         layout.prop(settings, "use_cache")
+        layout.prop(settings, "live_particle_limit")
         if settings.baked_end >= settings.baked_start:
             layout.label(text=f"Baked frames {settings.baked_start} to {settings.baked_end}", icon="INFO")
         row = layout.row(align=True)

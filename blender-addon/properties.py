@@ -25,6 +25,14 @@ def _changed(self, context):
     importer.on_settings_changed(self, context)
 
 
+def _limit_changed(self, context):
+    """Live Particle Limit changed: a frame it held back is extracted now; a frame the
+    mesh shows already is not extracted again."""
+    from . import importer
+
+    importer.on_settings_changed(self, context, force=False)
+
+
 def _field_search(self, context, edit_text):
     from . import importer
 
@@ -304,6 +312,16 @@ class IsobarSettings(bpy.types.PropertyGroup):
         description="Play baked frames back (a frame baked with other parameters is extracted again)",
         default=False,
         update=_changed,
+    )
+    live_particle_limit: IntProperty(
+        name="Live Particle Limit",
+        description="A frame change or setting change that would extract more particles than this keeps "
+        "the mesh shown and says so, as it cannot be cancelled: bake the range instead (Esc cancels). "
+        "Baking and rendering are never limited (0: no limit)",
+        default=500_000,
+        min=0,
+        soft_max=10_000_000,
+        update=_limit_changed,
     )
     baked_start: IntProperty(name="Baked From", default=0)
     baked_end: IntProperty(name="Baked To", default=-1)

@@ -54,7 +54,7 @@ def test_panels_without_and_with_a_fluid_surface(scene, demo_sequence):
     log = draw_all(bpy.context)
     props = {name for kind, name in log if kind == "prop"}
     assert {"field", "iso", "kernel", "h", "h_scale", "grid_factor", "method", "backend", "correct", "trim"} <= props
-    assert {"directory", "pattern", "frame_offset", "cache_directory", "use_cache"} <= props
+    assert {"directory", "pattern", "frame_offset", "cache_directory", "use_cache", "live_particle_limit"} <= props
     assert ("operator", "isobar.bake") in log and ("operator", "isobar.free_bake") in log
     assert any(kind == "label" and text.startswith("Frame 1:") for kind, text in log)  # the status
     settings = bpy.context.active_object.isobar
