@@ -64,8 +64,8 @@ pub(super) fn check_surface_size(
     let fitting_cell = grid.cell_size * (2.0 * needed / budget as f64).sqrt();
     let remedy = match params.lattice {
         None => format!(
-            "a grid factor of at least {:.3}",
-            fitting_cell / field.min_h()
+            "a grid factor of at least {}",
+            three_digits(fitting_cell / field.min_h())
         ),
         Some(_) => format!("a cell size of at least {fitting_cell:.3e}"),
     };
@@ -82,4 +82,25 @@ pub(super) fn check_surface_size(
         },
         budget_bytes: budget,
     })
+}
+
+/// `x` (positive, finite) to three significant digits in plain notation: a factor such
+/// as 0.000412 must not print as 0.000.
+fn three_digits(x: f64) -> String {
+    let decimals = (2 - x.log10().floor() as i64).max(0) as usize;
+    format!("{x:.decimals$}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::three_digits;
+
+    #[test]
+    fn factors_keep_three_significant_digits() {
+        assert_eq!(three_digits(0.0349), "0.0349");
+        assert_eq!(three_digits(0.000412), "0.000412");
+        assert_eq!(three_digits(0.5), "0.500");
+        assert_eq!(three_digits(12.34), "12.3");
+        assert_eq!(three_digits(1234.0), "1234");
+    }
 }
