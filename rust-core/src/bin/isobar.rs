@@ -354,20 +354,20 @@ fn run_sph(args: &SphArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_adaptive(sph: &FieldArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -> Result<()> {
+fn run_adaptive(field: &FieldArgs, adaptive: &isobar::adaptive::cli::AdaptiveArgs) -> Result<()> {
     let common = isobar::adaptive::cli::Common {
-        input: &sph.input,
-        output: &sph.output,
-        iso: &sph.iso,
-        grid_factor: sph.grid_factor,
-        normals: !sph.no_normals,
-        memory_budget: (sph.memory_budget * (1u64 << 30) as f64) as u64,
-        quiet: sph.quiet,
-        stats_json: sph.stats_json.as_deref(),
-        backend: Backend::parse(&sph.backend)?,
+        input: &field.input,
+        output: &field.output,
+        iso: &field.iso,
+        grid_factor: field.grid_factor,
+        normals: !field.no_normals,
+        memory_budget: (field.memory_budget * (1u64 << 30) as f64) as u64,
+        quiet: field.quiet,
+        stats_json: field.stats_json.as_deref(),
+        backend: Backend::parse(&field.backend)?,
     };
-    say_backend(sph)?;
-    isobar::adaptive::cli::run(adaptive, &common, &|data| settings_from(sph, data))
+    say_backend(field)?;
+    isobar::adaptive::cli::run(adaptive, &common, &|data| settings_from(field, data))
 }
 
 fn run_demo(output: &Path, quiet: bool) -> Result<()> {

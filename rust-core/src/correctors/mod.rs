@@ -223,7 +223,7 @@ pub fn virtual_grid(field: &SphField, params: &Params) -> Result<VirtualGrid> {
         None => {
             let cell = params.grid_factor * field.min_h();
             let pad = field.max_support() + cell;
-            VirtualGrid::covering(lo - pad, hi + pad, cell)
+            VirtualGrid::covering(lo - pad, hi + pad, cell, "grid_factor")
         }
         Some(l) => {
             let pad = field.max_support() + l.cell_size;

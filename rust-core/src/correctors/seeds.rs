@@ -316,7 +316,8 @@ mod tests {
 
     #[test]
     fn segment_cells_are_connected_and_cover_both_ends() {
-        let grid = VirtualGrid::covering(DVec3::ZERO, DVec3::splat(10.0), 1.0).unwrap();
+        let grid =
+            VirtualGrid::covering(DVec3::ZERO, DVec3::splat(10.0), 1.0, "grid_factor").unwrap();
         let mut unit = crate::test_rng::unit(7);
         let mut rnd = || unit() * 10.0;
         for _ in 0..500 {

@@ -110,17 +110,7 @@ pub fn extract(
     } else {
         (hi - lo).length() / 40.0
     };
-    // The grid's cell size is this method's spacing, not an SPH grid factor.
-    let grid = VirtualGrid::covering(lo, hi, spacing).map_err(|e| match e {
-        Error::InvalidParameter {
-            name: "grid_factor",
-            message,
-        } => Error::InvalidParameter {
-            name: "spacing",
-            message: message.replace("raise the grid factor", "raise the spacing"),
-        },
-        e => e,
-    })?;
+    let grid = VirtualGrid::covering(lo, hi, spacing, "spacing")?;
     let dims = grid.cells.map(|c| c as usize + 1);
     let count = dims.iter().map(|&n| n as u128).product::<u128>();
     let needed = count * std::mem::size_of::<Node>() as u128;
@@ -483,7 +473,8 @@ mod tests {
                         name: "spacing",
                         ..
                     }
-                ) && !e.to_string().contains("grid factor"),
+                ) && !e.to_string().contains("grid factor")
+                    && (spacing < 0.0 || e.to_string().contains("raise the spacing")),
                 "{e}"
             );
         }

@@ -40,9 +40,11 @@ pub struct VirtualGrid {
 
 impl VirtualGrid {
     /// The grid of cell size `cell_size` whose cells cover the box `lo..hi`, with its
-    /// first node at `lo`.
-    pub fn covering(lo: DVec3, hi: DVec3, cell_size: f64) -> Result<Self> {
-        Self::window(lo, cell_size, lo, hi, "grid_factor")
+    /// first node at `lo`. `knob` names the user's setting that chose the cell size
+    /// (`grid_factor`, `spacing`): an error for cells too small for the data tells the
+    /// user to raise it.
+    pub fn covering(lo: DVec3, hi: DVec3, cell_size: f64, knob: &'static str) -> Result<Self> {
+        Self::window(lo, cell_size, lo, hi, knob)
     }
 
     /// The window of the lattice (`origin`, `cell_size`) whose cells cover `lo..hi`.

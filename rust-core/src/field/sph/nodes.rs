@@ -302,7 +302,9 @@ mod tests {
             // A cell size that leaves partly filled tiles on every axis.
             let grid = [0.041, 0.043, 0.047, 0.053, 0.059]
                 .iter()
-                .map(|&c| VirtualGrid::covering(lo - DVec3::splat(0.2), hi, c).unwrap())
+                .map(|&c| {
+                    VirtualGrid::covering(lo - DVec3::splat(0.2), hi, c, "grid_factor").unwrap()
+                })
                 .find(|g| {
                     g.cells
                         .iter()
