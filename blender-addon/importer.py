@@ -347,13 +347,26 @@ class OverLiveLimit(ValueError):
     """A live extraction would read more particles than the object's Live Particle Limit."""
 
 
-def live_limit(settings) -> int:
+# What asks for a live extraction (see :func:`live_limit`).
+SETTING = "setting"  # a setting of the object changed (or it was imported)
+FRAME = "frame"  # the scene's frame changed
+REFRESH = "refresh"  # the user asked for this frame (Refresh)
+
+
+def live_limit(settings, cause: str = SETTING) -> int:
     """The most particles a live extraction of `settings`' object may read (0: no limit).
-    The limit keeps an interactive session responsive: a frame change cannot be
-    cancelled, a bake can. A render needs its frame whatever the size, and in background
-    mode (scripts, farms, exporters stepping frames) nothing freezes, so neither is
-    limited; a stale mesh there would be a wrong result."""
-    if _rendering or not _interactive():
+
+    The limit keeps an interactive session responsive: a live extraction cannot be
+    cancelled, a bake can. It holds back a setting change, and a frame change while the
+    timeline plays or is scrubbed (see :func:`timeline_moving`; the frame shown when it
+    stops is extracted then). It does not hold back a frame set any other way: a frame
+    step, a script, or an exporter stepping through the frames (Blender's Alembic and
+    USD export) needs that frame's surface, and the last one shown would be a wrong
+    result. Nor does it hold back Refresh (the user asked for this frame), a render, or
+    background mode (no UI to freeze)."""
+    if _rendering or not _interactive() or cause == REFRESH:
+        return 0
+    if cause == FRAME and not timeline_moving():
         return 0
     return max(0, int(settings.live_particle_limit))
 
@@ -363,12 +376,54 @@ def _interactive() -> bool:
     return not bpy.app.background
 
 
-def _check_live_limit(count: int, limit: int) -> None:
+def timeline_moving() -> bool:
+    """True while a window plays the animation or the user scrubs the timeline: frames
+    then come faster than a large frame extracts. False off the main thread (a job's
+    frame steps), where the UI must not be read."""
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in getattr(wm, "windows", ()):
+        screen = window.screen
+        if screen is not None and (screen.is_animation_playing or screen.is_scrubbing):
+            return True
+    return False
+
+
+# Seconds between looks at whether the timeline still moves, while frames are held back.
+_SETTLE_INTERVAL = 0.25
+
+
+def _hold_back_until_the_timeline_stops() -> None:
+    """A frame change was held back while the timeline moved: once it stops, the frame
+    it stopped on is extracted (a timer: no event says that scrubbing ended)."""
+    timers = getattr(bpy.app, "timers", None)
+    if timers is not None and not timers.is_registered(extract_held_back_frames):
+        timers.register(extract_held_back_frames, first_interval=_SETTLE_INTERVAL)
+
+
+def extract_held_back_frames() -> Optional[float]:
+    """The timer of :func:`_hold_back_until_the_timeline_stops`: while the timeline
+    moves, looks again later; then updates every fluid surface of the scene to the frame
+    shown, no longer limited (the timeline stopped)."""
+    try:
+        if timeline_moving():
+            return _SETTLE_INTERVAL
+        scene = getattr(bpy.context, "scene", None)
+        if scene is not None:
+            update_all(scene)
+    except Exception:  # noqa: BLE001 - a timer must never raise into Blender
+        traceback.print_exc()
+    return None
+
+
+def _check_live_limit(count: int, limit: int, cause: str) -> None:
     """Raises OverLiveLimit when `count` particles are more than `limit` (0: no limit)."""
     if limit and count > limit:
+        when = "extracted when the timeline stops; " if cause == FRAME else ""
         raise OverLiveLimit(
-            f"{count:,} particles, over the live limit of {limit:,}: "
-            "bake the range (Esc cancels) or raise Live Particle Limit"
+            f"{count:,} particles, over the live limit of {limit:,}: {when}"
+            "bake the range (Esc cancels), Refresh, or raise Live Particle Limit"
         )
 
 
@@ -418,14 +473,22 @@ def live_progress() -> Iterator:
 
 
 def extract_live(
-    obj, scene, depsgraph, frame: int, params: Optional[Params] = None, progress=None, limit: int = 0
+    obj,
+    scene,
+    depsgraph,
+    frame: int,
+    params: Optional[Params] = None,
+    progress=None,
+    limit: int = 0,
+    cause: str = SETTING,
 ) -> Tuple[Optional[FrameMesh], str]:
     """Extracts `frame` from the particles: (mesh, or None for a frame without particles;
     where they came from).
 
     Raises:
         OverLiveLimit: the frame has more than `limit` particles (0: no limit); they are
-            counted after reading and before the (far longer) extraction.
+            counted after reading and before the (far longer) extraction. `cause` (see
+            :func:`live_limit`) words the message.
     """
     settings = obj.isobar
     params = params or Params.from_settings(settings)
@@ -443,7 +506,7 @@ def extract_live(
     if particles is None:
         return None, origin + ", no particles"
     try:
-        _check_live_limit(len(particles), limit)
+        _check_live_limit(len(particles), limit, cause)
         _arrays[object_key(obj)] = extraction.array_infos(particles)
         frame_mesh = extraction.extract(particles, params, progress=progress)
     finally:
@@ -469,7 +532,9 @@ def _live_key(settings, frame: int, current: str) -> Optional[Tuple]:
     return ("file", path, stat.st_mtime_ns, stat.st_size, current)
 
 
-def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progress=None, limit: int = 0):
+def frame_mesh(
+    obj, scene, depsgraph, frame: int, use_cache: bool = True, progress=None, limit: int = 0, cause: str = SETTING
+):
     """The surface of `obj` at `frame`: (mesh, origin text, memo key); mesh None when the
     object shows that very surface already. A baked frame is used when baking is on and
     its fingerprint matches the current settings; else the particles are extracted (at
@@ -501,7 +566,7 @@ def frame_mesh(obj, scene, depsgraph, frame: int, use_cache: bool = True, progre
     key = _live_key(settings, frame, fingerprint(settings, params) + missing)
     if _is_shown(obj, key):
         return None, "unchanged", key
-    mesh, origin = extract_live(obj, scene, depsgraph, frame, params, progress, limit)
+    mesh, origin = extract_live(obj, scene, depsgraph, frame, params, progress, limit, cause)
     mesh = mesh if mesh is not None else empty_mesh()
     if missing:
         mesh.warnings = [missing] + list(mesh.warnings)
@@ -517,7 +582,7 @@ def _is_shown(obj, key) -> bool:
 
 
 def update_object(
-    obj, scene=None, depsgraph=None, frame: Optional[int] = None, force: bool = False
+    obj, scene=None, depsgraph=None, frame: Optional[int] = None, force: bool = False, cause: str = SETTING
 ) -> Tuple[bool, str]:
     """Shows the surface of `frame` (default: the scene's current frame) in `obj`'s mesh.
 
@@ -525,8 +590,10 @@ def update_object(
     the extraction's warnings into ``obj.isobar.status_warnings`` (and, for a surface
     extracted now, the console). On failure the mesh keeps what it showed (the last good
     frame) for interactive work; during a render it is emptied (see :func:`_fail_render_frame`).
-    A frame over the object's Live Particle Limit (see :func:`live_limit`) is such a
-    failure: it is not extracted. An extraction shows its progress in the cursor.
+    A frame over the object's Live Particle Limit (see :func:`live_limit`; `cause` says
+    what asks for the update) is such a failure: it is not extracted, and a frame change
+    held back while the timeline moves is extracted once it stops. An extraction shows
+    its progress in the cursor.
     """
     try:
         settings = obj.isobar
@@ -535,8 +602,8 @@ def update_object(
         if force:
             _shown.pop(object_key(obj), None)
         with live_progress() as progress:
-            limit = live_limit(settings)
-            mesh, origin, key = frame_mesh(obj, scene, depsgraph, frame, progress=progress, limit=limit)
+            limit = live_limit(settings, cause)
+            mesh, origin, key = frame_mesh(obj, scene, depsgraph, frame, progress=progress, limit=limit, cause=cause)
         if mesh is None:  # the mesh shows this surface already
             _, n, m, origin, warnings = _shown[object_key(obj)]
             message = f"Frame {frame}: {n} vertices, {m} triangles ({origin})"
@@ -561,6 +628,8 @@ def update_object(
         message = describe_error(error)
         if not _is_expected(error):
             traceback.print_exc()
+        if isinstance(error, OverLiveLimit) and cause == FRAME:
+            _hold_back_until_the_timeline_stops()
         try:
             frame_text = f"Frame {frame}: " if isinstance(frame, int) else ""
             message = frame_text + message
@@ -630,7 +699,7 @@ def update_all(scene, depsgraph=None) -> None:
     """Updates every fluid surface of `scene` to its current frame (the handler's work)."""
     for obj in list(scene.objects):
         if is_fluid(obj) and not is_baking(obj):
-            update_object(obj, scene, depsgraph)
+            update_object(obj, scene, depsgraph, cause=FRAME)
 
 
 # -- property updates and UI helpers ----------------------------------------------------
@@ -672,12 +741,16 @@ def array_suggestions(settings, text: str) -> List[str]:
 
 
 __all__ = [
+    "FRAME",
+    "REFRESH",
+    "SETTING",
     "OverLiveLimit",
     "bake_fingerprint",
     "baking",
     "cache_folder",
     "cache_sharers",
     "clear_runtime",
+    "extract_held_back_frames",
     "extract_live",
     "fingerprint",
     "frame_mesh",
@@ -689,6 +762,7 @@ __all__ = [
     "sequence_path",
     "set_rendering",
     "suspend_updates",
+    "timeline_moving",
     "update_all",
     "update_object",
 ]

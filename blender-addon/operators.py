@@ -344,7 +344,7 @@ class ISOBAR_OT_surface_from_object(bpy.types.Operator, _SurfaceParameters):
 
 
 class ISOBAR_OT_refresh(bpy.types.Operator):
-    """Extract the current frame of the fluid surface again"""
+    """Extract the current frame of the fluid surface again, whatever its particle count"""
 
     bl_idname = "isobar.refresh"
     bl_label = "Refresh Surface"
@@ -359,7 +359,7 @@ class ISOBAR_OT_refresh(bpy.types.Operator):
         if obj is None:
             self.report({"ERROR"}, "select an isobar fluid surface")
             return {"CANCELLED"}
-        ok, message = importer.update_object(obj, context.scene, force=True)
+        ok, message = importer.update_object(obj, context.scene, force=True, cause=importer.REFRESH)
         if not ok:
             self.report({"ERROR"}, message)
             return {"CANCELLED"}

@@ -315,9 +315,10 @@ class IsobarSettings(bpy.types.PropertyGroup):
     )
     live_particle_limit: IntProperty(
         name="Live Particle Limit",
-        description="A frame change or setting change that would extract more particles than this keeps "
-        "the mesh shown and says so, as it cannot be cancelled: bake the range instead (Esc cancels). "
-        "Baking and rendering are never limited (0: no limit)",
+        description="A setting change, or a frame change while the timeline plays or is scrubbed, that "
+        "would extract more particles than this keeps the mesh shown and says so, as it cannot be "
+        "cancelled (a frame held back is extracted when the timeline stops). Frame steps, exporters, "
+        "Refresh, baking and rendering are never limited (0: no limit)",
         default=500_000,
         min=0,
         soft_max=10_000_000,

@@ -1,7 +1,10 @@
 """Live extraction (frame change, setting change) in an interactive session: the cursor
 progress shows it, and a frame over the object's Live Particle Limit is not extracted (it
-cannot be cancelled; a bake can). Background bpy has no UI, so the tests stand in for an
-interactive session where the add-on asks whether it is one."""
+cannot be cancelled; a bake can) on a setting change or while the timeline plays or is
+scrubbed; it is once the timeline stops, and a frame set any other way (a frame step, an
+exporter stepping frames) or Refresh is always extracted. Background bpy has no UI, so the
+tests stand in for an interactive session where the add-on asks whether it is one and
+whether the timeline moves."""
 
 import threading
 
@@ -20,10 +23,11 @@ def import_sequence(path, **kwargs):
     return bpy.context.active_object
 
 
-def over_limit(frame, limit=LIMIT):
+def over_limit(frame, limit=LIMIT, frame_change=False):
+    when = "extracted when the timeline stops; " if frame_change else ""
     return (
-        f"Frame {frame}: {PARTICLES:,} particles, over the live limit of {limit:,}: "
-        "bake the range (Esc cancels) or raise Live Particle Limit"
+        f"Frame {frame}: {PARTICLES:,} particles, over the live limit of {limit:,}: {when}"
+        "bake the range (Esc cancels), Refresh, or raise Live Particle Limit"
     )
 
 
@@ -31,6 +35,22 @@ def over_limit(frame, limit=LIMIT):
 def interactive(addon, monkeypatch):
     """The add-on sees a Blender with a UI (background bpy is not one)."""
     monkeypatch.setattr(addon.importer, "_interactive", lambda: True)
+
+
+@pytest.fixture
+def timeline(addon, monkeypatch):
+    """Whether the add-on sees the timeline playing or scrubbed (`timeline.moving`); the
+    timer that extracts held-back frames is unregistered afterwards (background bpy never
+    runs timers: the tests call it)."""
+
+    class Timeline:
+        moving = True
+
+    state = Timeline()
+    monkeypatch.setattr(addon.importer, "timeline_moving", lambda: state.moving)
+    yield state
+    if bpy.app.timers.is_registered(addon.importer.extract_held_back_frames):
+        bpy.app.timers.unregister(addon.importer.extract_held_back_frames)
 
 
 @pytest.fixture
@@ -67,7 +87,9 @@ def test_the_default_limit_is_half_a_million(scene, demo_sequence):
     assert import_sequence(demo_sequence[0]).isobar.live_particle_limit == 500_000
 
 
-def test_a_frame_over_the_limit_keeps_the_mesh_and_says_why(scene, isobar, demo_sequence, interactive, extractions):
+def test_a_frame_over_the_limit_keeps_the_mesh_and_says_why(
+    scene, isobar, demo_sequence, interactive, timeline, extractions
+):
     assert len(isobar.Particles.read(str(FRAME_26))) == PARTICLES
     obj = import_sequence(demo_sequence[0])
     settings = obj.isobar
@@ -77,8 +99,8 @@ def test_a_frame_over_the_limit_keeps_the_mesh_and_says_why(scene, isobar, demo_
 
     settings.live_particle_limit = LIMIT  # frame 1 is shown already: not read again
     assert not settings.status_error, settings.status
-    scene.frame_set(2)
-    assert settings.status_error and settings.status == over_limit(2)
+    scene.frame_set(2)  # while the timeline plays
+    assert settings.status_error and settings.status == over_limit(2, frame_change=True)
     assert not settings.status_warnings
     assert extractions == []  # counted, not extracted
     assert_mesh_equals(obj, first)  # the mesh shown is kept
@@ -174,3 +196,68 @@ def test_cursor_progress_only_with_a_ui_on_the_main_thread(addon, monkeypatch):
         assert importer._progress_window_manager() is None
     finally:
         importer.set_rendering(False)
+
+
+def test_a_frame_held_back_while_the_timeline_moves_is_extracted_when_it_stops(
+    scene, addon, isobar, demo_sequence, interactive, timeline, extractions
+):
+    importer = addon.importer
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    settings.live_particle_limit = LIMIT
+    first = reference(isobar, demo_sequence[0])
+    extractions.clear()
+    scene.frame_set(2)
+    scene.frame_set(3)  # playback goes on: still held back
+    assert settings.status == over_limit(3, frame_change=True) and extractions == []
+    assert_mesh_equals(obj, first)
+    assert bpy.app.timers.is_registered(importer.extract_held_back_frames)
+    assert importer.extract_held_back_frames() == importer._SETTLE_INTERVAL  # still moving: look again later
+    assert extractions == []
+
+    timeline.moving = False  # playback stopped on frame 3: its surface is extracted
+    assert importer.extract_held_back_frames() is None
+    assert not settings.status_error, settings.status
+    assert len(extractions) == 1
+    assert_mesh_equals(obj, reference(isobar, demo_sequence[2]))
+
+
+def test_frame_steps_and_exporters_stepping_frames_are_not_limited(
+    scene, addon, isobar, demo_sequence, interactive, timeline, extractions
+):
+    """An exporter (Blender's Alembic or USD export) sets each frame and writes what the
+    mesh shows: a frame held back would be exported as the previous frame's surface."""
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    settings.live_particle_limit = LIMIT
+    timeline.moving = False
+    assert addon.importer.live_limit(settings, addon.importer.FRAME) == 0
+    assert addon.importer.live_limit(settings, addon.importer.SETTING) == LIMIT
+    for frame in (2, 3, 1):
+        scene.frame_set(frame)
+        assert not settings.status_error, settings.status
+        assert_mesh_equals(obj, reference(isobar, demo_sequence[frame - 1]))
+    assert not bpy.app.timers.is_registered(addon.importer.extract_held_back_frames)
+
+
+def test_refresh_extracts_a_frame_over_the_limit(scene, isobar, demo_sequence, interactive, timeline, extractions):
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    settings.live_particle_limit = LIMIT
+    extractions.clear()
+    settings.iso = 0.55  # held back
+    assert settings.status == over_limit(1) and extractions == []
+    assert bpy.ops.isobar.refresh() == {"FINISHED"}  # the user asks for this frame
+    assert not settings.status_error, settings.status
+    assert len(extractions) == 1
+    assert_mesh_equals(obj, reference(isobar, demo_sequence[0], iso=0.55))
+
+
+def test_the_timeline_is_read_only_on_the_main_thread(addon):
+    importer = addon.importer
+    assert importer.timeline_moving() is False  # background bpy: no window plays
+    off_main = []
+    thread = threading.Thread(target=lambda: off_main.append(importer.timeline_moving()))
+    thread.start()
+    thread.join()
+    assert off_main == [False]
