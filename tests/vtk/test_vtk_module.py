@@ -454,6 +454,20 @@ def test_an_error_in_one_block_of_a_multi_block_input_names_the_block():
     out = f.GetOutputDataObject(0)
     cells = [out.GetBlock(i).GetNumberOfCells() for i in range(3)]
     assert cells[0] == cells[2] > 1000 and cells[1] == 0, cells
+    # GetErrorMessage keeps the failing block's error although the last block succeeded
+    # (each block's run cleared it before), and lists every failing block, a line each.
+    message = f.GetErrorMessage()
+    assert message.startswith("block 2 of 3: ") and "NaN" in message and "\n" not in message, message
+    for i, block in enumerate((bad, good, bad)):
+        blocks.SetBlock(i, block)
+    blocks.Modified()
+    f.Update()
+    lines = f.GetErrorMessage().splitlines()
+    assert [line[:14] for line in lines] == ["block 1 of 3: ", "block 3 of 3: "], lines
+    assert all("NaN" in line for line in lines), lines
+    f.SetInputData(good)
+    f.Update()
+    assert f.GetErrorMessage() == "" and f.GetOutput().GetNumberOfCells() > 1000
     # The same filter on the bad block alone: no block to name.
     f.SetInputData(bad)
     f.Update()

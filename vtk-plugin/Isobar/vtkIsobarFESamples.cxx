@@ -181,8 +181,8 @@ int vtkIsobarFESamples::FillInputPortInformation(int, vtkInformation* info)
 //------------------------------------------------------------------------------
 void vtkIsobarFESamples::Fail(const std::string& message)
 {
-  this->ErrorMessage = IsobarBlockPrefix(this) + message;
-  vtkErrorMacro(<< this->ErrorMessage);
+  const std::string line = IsobarAddError(this, this->ErrorMessage, message);
+  vtkErrorMacro(<< line);
 }
 
 //------------------------------------------------------------------------------
@@ -203,7 +203,7 @@ int vtkIsobarFESamples::RequestData(
 {
   vtkUnstructuredGrid* input = vtkUnstructuredGrid::GetData(inputVector[0], 0);
   vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
-  this->ErrorMessage.clear();
+  IsobarBeginErrors(this, this->ErrorMessage);
   this->LastProgress = -1.0;
   output->Initialize();
 

@@ -84,7 +84,8 @@ public:
   vtkGetMacro(LastEvaluations, double);
   /// Largest |F - C| over the last samples.
   vtkGetMacro(LastMaxResidual, double);
-  /// The last error ("" when the last update succeeded).
+  /// The last update's errors, a line each (of each failing block of a multi-block input;
+  /// "" when the update succeeded).
   const char* GetErrorMessage() const { return this->ErrorMessage.c_str(); }
 
   ///@{

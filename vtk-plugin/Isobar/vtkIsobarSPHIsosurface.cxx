@@ -743,8 +743,8 @@ int vtkIsobarSPHIsosurface::FillInputPortInformation(int, vtkInformation* info)
 //------------------------------------------------------------------------------
 void vtkIsobarSPHIsosurface::Fail(const std::string& message)
 {
-  this->ErrorMessage = IsobarBlockPrefix(this) + message;
-  vtkErrorMacro(<< this->ErrorMessage);
+  const std::string line = IsobarAddError(this, this->ErrorMessage, message);
+  vtkErrorMacro(<< line);
 }
 
 //------------------------------------------------------------------------------
@@ -793,7 +793,7 @@ int vtkIsobarSPHIsosurface::RequestData(
   vtkPointSet* input = vtkPointSet::GetData(inputVector[0], 0);
   vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
   output->Initialize();
-  this->ErrorMessage.clear();
+  IsobarBeginErrors(this, this->ErrorMessage);
   this->LastProgress = -1.0;
   this->PieceAxis = -1;
   this->PieceBounds[0] = this->PieceBounds[1] = 0.0;

@@ -275,7 +275,8 @@ public:
   vtkGetObjectMacro(Controller, vtkMultiProcessController);
   ///@}
 
-  /// The message of the last failed execution ("" after a success).
+  /// The last update's errors, a line each (of each failing block of a multi-block input;
+  /// "" when the update succeeded).
   const char* GetErrorMessage() { return this->ErrorMessage.c_str(); }
 
   /// The field string handed to the core for the current settings, given the number of

@@ -96,8 +96,8 @@ int vtkIsobarVolumeSlider::FillInputPortInformation(int, vtkInformation* info)
 //------------------------------------------------------------------------------
 void vtkIsobarVolumeSlider::Fail(const std::string& message)
 {
-  this->ErrorMessage = IsobarBlockPrefix(this) + message;
-  vtkErrorMacro(<< this->ErrorMessage);
+  const std::string line = IsobarAddError(this, this->ErrorMessage, message);
+  vtkErrorMacro(<< line);
 }
 
 //------------------------------------------------------------------------------
@@ -106,7 +106,7 @@ int vtkIsobarVolumeSlider::RequestData(
 {
   vtkImageData* input = vtkImageData::GetData(inputVector[0], 0);
   vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
-  this->ErrorMessage.clear();
+  IsobarBeginErrors(this, this->ErrorMessage);
   output->Initialize();
 
   vtkDataArray* values = this->GetInputArrayToProcess(0, inputVector);

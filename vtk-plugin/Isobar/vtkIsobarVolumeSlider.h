@@ -75,7 +75,8 @@ public:
   vtkGetMacro(NumberOfUpdates, int);
   /// Core time of the last isovalue change, in seconds.
   vtkGetMacro(LastUpdateSeconds, double);
-  /// The last error ("" when the last update succeeded).
+  /// The last update's errors, a line each (of each failing block of a multi-block input;
+  /// "" when the update succeeded).
   const char* GetErrorMessage() const { return this->ErrorMessage.c_str(); }
 
 protected:
