@@ -269,9 +269,13 @@ def _extract_correctors(particles, params: Params, progress: Optional[ProgressFn
             arrays.append("speed")
     surface = isobar.extract(particles, progress=progress, attributes=arrays, **_isobar_kwargs(params))
     try:
-        return frame_mesh_from_surface(surface, velocity if params.motion_blur else "", params.velocity_scale)
+        mesh = frame_mesh_from_surface(surface, velocity if params.motion_blur else "", params.velocity_scale)
     finally:
         surface.release()
+    if (params.attributes or "").strip().lower() == "none":
+        # The core gives every vertex its sum of weights; "none" asks for no sph_* array.
+        mesh.attributes.pop(blender_name("SumOfWeights"), None)
+    return mesh
 
 
 def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn]) -> FrameMesh:

@@ -39,6 +39,8 @@ _suspended = 0
 #: A render is running (set by the render handlers): a frame that fails shows nothing
 #: rather than the last good frame, which would be a wrong picture.
 _rendering = False
+#: Names of linked fluid surfaces the console was told about (once each, not every frame).
+_linked_noted = set()
 
 
 def clear_runtime() -> None:
@@ -47,6 +49,7 @@ def clear_runtime() -> None:
     _shown.clear()
     _arrays.clear()
     _baking.clear()
+    _linked_noted.clear()
     _rendering = False
 
 
@@ -87,6 +90,17 @@ def is_fluid(obj) -> bool:
         return obj is not None and obj.type == "MESH" and obj.isobar.enabled
     except (AttributeError, ReferenceError):
         return False
+
+
+def linked_from(obj) -> str:
+    """The library file `obj` or its mesh is linked from, '' when both are this file's
+    own: a linked mesh cannot be written (writing it crashes Blender) nor the object's
+    settings, so a linked surface keeps the mesh its library saved."""
+    for block in (obj, getattr(obj, "data", None)):
+        library = getattr(block, "library", None)
+        if library is not None:
+            return library.filepath
+    return ""
 
 
 def is_baking(obj) -> bool:
@@ -505,6 +519,9 @@ def extract_live(
         origin = os.path.basename(path)
     if particles is None:
         return None, origin + ", no particles"
+    if len(particles) == 0:  # an emitter before its first particle: an empty surface
+        particles.close()
+        return None, origin + ", 0 particles"
     try:
         _check_live_limit(len(particles), limit, cause)
         _arrays[object_key(obj)] = extraction.array_infos(particles)
@@ -596,6 +613,8 @@ def update_object(
     its progress in the cursor.
     """
     try:
+        if linked_from(obj):
+            return False, _linked_message(obj)
         settings = obj.isobar
         scene = scene or bpy.context.scene
         frame = scene.frame_current if frame is None else int(frame)
@@ -698,8 +717,21 @@ def _set_backend_note(settings) -> None:
 def update_all(scene, depsgraph=None) -> None:
     """Updates every fluid surface of `scene` to its current frame (the handler's work)."""
     for obj in list(scene.objects):
-        if is_fluid(obj) and not is_baking(obj):
-            update_object(obj, scene, depsgraph, cause=FRAME)
+        if not is_fluid(obj) or is_baking(obj):
+            continue
+        if linked_from(obj):
+            if obj.name_full not in _linked_noted:  # once, not on every frame
+                _linked_noted.add(obj.name_full)
+                print(f"isobar: {_linked_message(obj)}")
+            continue
+        update_object(obj, scene, depsgraph, cause=FRAME)
+
+
+def _linked_message(obj) -> str:
+    return (
+        f"'{obj.name}' is linked from {linked_from(obj)}: it shows the mesh saved there; "
+        "bake it in that file, or make it local (Object > Relations > Make Local) to extract it here"
+    )
 
 
 # -- property updates and UI helpers ----------------------------------------------------
@@ -756,6 +788,7 @@ __all__ = [
     "frame_mesh",
     "frame_warnings",
     "is_fluid",
+    "linked_from",
     "live_limit",
     "live_progress",
     "scene_arrays",

@@ -526,6 +526,35 @@ fn bad_input_gets_a_clear_error() {
             .to_string()
             .contains("vorticity")
     );
+    // A NaN in an array carried onto the surface is refused naming the array and the
+    // particle (it reached the vertices near that particle without a word); the same
+    // array left uncarried does not stop the extraction.
+    let mut nan_velocity = good.clone();
+    let n = nan_velocity.len();
+    nan_velocity.attributes.push(Attribute {
+        name: "flow".into(),
+        components: 3,
+        data: (0..3 * n)
+            .map(|k| if k == 3 * 9 + 1 { f64::NAN } else { 1.0 })
+            .collect(),
+    });
+    let carried = Params {
+        isovalues: vec![1.0],
+        attributes: vec!["flow".into()],
+        ..Params::default()
+    };
+    let err = correctors::extract(&field, &nan_velocity, &carried, &mut Progress::none())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("array 'flow'") && err.contains("particle 9") && err.contains("NaN"),
+        "{err}"
+    );
+    let uncarried = Params {
+        attributes: vec![],
+        ..carried
+    };
+    correctors::extract(&field, &nan_velocity, &uncarried, &mut Progress::none()).unwrap();
 }
 
 /// The least budget in 0..2^30 bytes with which `run` is not refused as over budget, by

@@ -37,6 +37,16 @@ impl AttributeSource {
                 });
             }
             let a = data.require(name)?;
+            // A NaN carried onto the surface would reach every vertex near its particle
+            // (and a renderer's motion blur) without a word: refused, naming the particle.
+            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+                return Err(Error::InvalidInput(format!(
+                    "array '{name}' holds a non-finite value ({}) at particle {}: it cannot \
+                     be carried onto the surface",
+                    a.data[i],
+                    i / a.components
+                )));
+            }
             arrays.push((
                 a.name.clone(),
                 a.components,
