@@ -312,7 +312,10 @@ def test_parallel_write_from_an_unguarded_script_fails_clearly(tmp_path, dam_fra
     assert code != 0, (stdout, stderr)
     assert 'if __name__ == "__main__":' in stderr, stderr
     assert "bootstrapping phase" not in stderr, stderr
-    assert stderr.count("Traceback") <= 4, stderr  # the script's and one per started worker at most
+    # The script's, one per started worker, and those of the workers the pool started in
+    # their place before the parent's next look (every 0.25 s; on a loaded machine a
+    # replacement can die before it, and CI once counted 5): a few, not a stream.
+    assert stderr.count("Traceback") <= 8, stderr
     assert "wrote" not in stdout
     assert not out.exists() and not isobar_usd.clips_folder(out).exists()
 

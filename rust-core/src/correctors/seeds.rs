@@ -56,7 +56,7 @@ impl SeedSearch {
         let max_radius = (0..field.len())
             .map(|i| side_radius(field, i))
             .fold(0.0, f64::max);
-        let pairs = NeighbourGrid::build(&positions, max_radius, memory_budget)?;
+        let pairs = NeighbourGrid::build(&positions, max_radius, 1, memory_budget)?;
         let smoothed = positions
             .par_iter()
             .map(|&x| field.value_and_weight(x).0)

@@ -2,6 +2,13 @@
 //! point's neighbours within `reach` cells lie in the (2·reach+1)³ block around it. Cells
 //! are ordered x fastest, so each row of a query block is one contiguous slice of the
 //! sorted particles: (2·reach+1)² range look-ups per query.
+//!
+//! The grid is dense over the particles' bounding box, so one stray particle far from the
+//! fluid would make it huge (splashsurf's `free_particles_1000` frame needed 96 GB). Where
+//! the box holds far more cells than particles, each axis is squeezed instead: every run
+//! of slabs farther than `reach` cells from any particle becomes a single slab
+//! ([`AxisMap`]). Distances up to `reach` cells between a query and a particle are kept,
+//! so the candidates are the same; the cells follow the particles, not the box.
 
 use crate::error::{Error, Result};
 use glam::DVec3;
@@ -13,7 +20,12 @@ use std::ops::Range;
 pub struct NeighbourGrid {
     origin: DVec3,
     inv_cell: f64,
+    /// Cells per axis (after squeezing).
     dims: [usize; 3],
+    /// Per axis, from a cell index along the box to the grid's: None when not squeezed.
+    squeeze: Option<Box<[AxisMap; 3]>>,
+    /// The largest `reach` the squeeze keeps exact.
+    reach: i64,
     /// `offsets[c]..offsets[c+1]` are the sorted slots of cell c.
     offsets: Vec<u32>,
     /// Original particle index of each sorted slot; within a cell, ascending.
@@ -21,9 +33,15 @@ pub struct NeighbourGrid {
 }
 
 impl NeighbourGrid {
-    /// Buckets `positions` into cells of edge `cell_size`. Refuses, before allocating, a
-    /// grid whose offset table would exceed `memory_budget` bytes.
-    pub fn build(positions: &[DVec3], cell_size: f64, memory_budget: u64) -> Result<Self> {
+    /// Buckets `positions` into cells of edge `cell_size`, for queries that look at most
+    /// `reach` cells out. Refuses, before allocating, a grid whose offset table would
+    /// exceed `memory_budget` bytes.
+    pub fn build(
+        positions: &[DVec3],
+        cell_size: f64,
+        reach: i64,
+        memory_budget: u64,
+    ) -> Result<Self> {
         if !(cell_size > 0.0 && cell_size.is_finite()) {
             return Err(Error::InvalidParameter {
                 name: "neighbour cell size",
@@ -37,41 +55,59 @@ impl NeighbourGrid {
             )));
         }
         let (lo, hi) = bounds(positions);
-        let mut dims = [0usize; 3];
-        let mut ncells: u128 = 1;
+        let mut box_dims = [0usize; 3];
         for a in 0..3 {
             let n = ((hi[a] - lo[a]) / cell_size).floor() + 1.0;
-            dims[a] = n.min(1e15) as usize;
-            ncells *= dims[a] as u128;
+            box_dims[a] = n.min(1e15) as usize;
         }
+        let mut grid = NeighbourGrid {
+            origin: lo,
+            inv_cell: 1.0 / cell_size,
+            dims: box_dims,
+            squeeze: None,
+            reach,
+            offsets: Vec::new(),
+            order: Vec::new(),
+        };
+        // Clamped: (hi - lo) / cell can round below the product used here, and a particle
+        // on the upper bound would land one cell past the row's end, i.e. in the next row,
+        // where no query near it looks.
+        let inv_cell = grid.inv_cell;
+        let box_cell = move |p: DVec3| -> [i64; 3] {
+            let c = box_coords(lo, inv_cell, p);
+            std::array::from_fn(|a| c[a].clamp(0, box_dims[a] as i64 - 1))
+        };
+        let cells = |dims: &[usize; 3]| dims.iter().map(|&d| d as u128).product::<u128>();
+        // More cells than a few per particle: the box is mostly empty space.
+        if cells(&box_dims) > 8 * positions.len() as u128 + (1 << 20) {
+            let raw: Vec<[i64; 3]> = positions.par_iter().map(|&p| box_cell(p)).collect();
+            let maps: [AxisMap; 3] = std::array::from_fn(|a| {
+                let mut occupied: Vec<i64> = raw.iter().map(|c| c[a]).collect();
+                occupied.par_sort_unstable();
+                occupied.dedup();
+                AxisMap::new(&occupied, reach)
+            });
+            grid.dims = std::array::from_fn(|a| maps[a].len as usize);
+            grid.squeeze = Some(Box::new(maps));
+        }
+        let dims = grid.dims;
+        let ncells = cells(&dims);
         let needed = (ncells + 1) * 4 + positions.len() as u128 * 8;
         if needed > memory_budget as u128 || ncells >= u32::MAX as u128 {
             return Err(Error::OverBudget {
                 what: format!(
-                    "a neighbour grid of {}×{}×{} cells (particles spread over {:?}..{:?} with support {cell_size})",
+                    "a neighbour grid of {}×{}×{} cells of {cell_size} (particles spread over {:?}..{:?})",
                     dims[0], dims[1], dims[2], lo.to_array(), hi.to_array()
                 ),
                 needed_bytes: needed.min(u64::MAX as u128) as u64,
                 budget_bytes: memory_budget,
             });
         }
-        let mut grid = NeighbourGrid {
-            origin: lo,
-            inv_cell: 1.0 / cell_size,
-            dims,
-            offsets: Vec::new(),
-            order: Vec::new(),
-        };
         let cell_of: Vec<u32> = positions
             .par_iter()
             .map(|&p| {
-                // Clamped: (hi - lo) / cell can round below the product used here, and a
-                // particle on the upper bound would land one cell past the row's end,
-                // i.e. in the next row, where no query near it looks.
-                let c = grid.cell_coords(p);
-                let c: [usize; 3] =
-                    std::array::from_fn(|a| c[a].clamp(0, dims[a] as i64 - 1) as usize);
-                grid.linear(c[0], c[1], c[2]) as u32
+                let c = grid.squeezed(box_cell(p));
+                grid.linear(c[0] as usize, c[1] as usize, c[2] as usize) as u32
             })
             .collect();
         // Counting sort; the scatter runs in particle order so each cell lists its
@@ -101,25 +137,41 @@ impl NeighbourGrid {
 
     /// (origin, 1 / cell size, cells per axis, slot offsets per cell plus one): the
     /// layout a GPU kernel needs to repeat [`NeighbourGrid::for_each_candidate_range`].
-    pub fn layout(&self) -> (DVec3, f64, [usize; 3], &[u32]) {
-        (self.origin, self.inv_cell, self.dims, &self.offsets)
+    /// None for a squeezed grid, whose cells are not where that arithmetic puts them.
+    pub fn layout(&self) -> Option<(DVec3, f64, [usize; 3], &[u32])> {
+        self.squeeze
+            .is_none()
+            .then_some((self.origin, self.inv_cell, self.dims, &self.offsets[..]))
     }
 
     fn linear(&self, x: usize, y: usize, z: usize) -> usize {
         x + self.dims[0] * (y + self.dims[1] * z)
     }
 
-    /// Integer cell coordinates of `p` (may lie outside the grid for query points).
+    /// Box cell coordinates to the grid's.
+    #[inline]
+    fn squeezed(&self, c: [i64; 3]) -> [i64; 3] {
+        match &self.squeeze {
+            None => c,
+            Some(maps) => std::array::from_fn(|a| maps[a].map(c[a])),
+        }
+    }
+
+    /// Integer cell coordinates of `p` in the grid (may lie outside it for query points).
     #[inline]
     fn cell_coords(&self, p: DVec3) -> [i64; 3] {
-        let c = (p - self.origin) * self.inv_cell;
-        [floor_i64(c.x), floor_i64(c.y), floor_i64(c.z)]
+        self.squeezed(box_coords(self.origin, self.inv_cell, p))
     }
 
     /// Each sorted-slot range that may hold a particle within `reach` cell sizes of `p`:
     /// at most (2·reach+1)² contiguous ranges, z-row by y-row.
     #[inline]
     pub fn candidate_ranges(&self, p: DVec3, reach: i64) -> CandidateRanges<'_> {
+        debug_assert!(
+            reach <= self.reach,
+            "the grid was built for reach {}",
+            self.reach
+        );
         let c = self.cell_coords(p);
         self.cell_block(c.map(|c| c - reach), c.map(|c| c + reach))
     }
@@ -162,6 +214,69 @@ impl NeighbourGrid {
     #[inline]
     pub fn for_each_candidate_range(&self, p: DVec3, reach: i64, f: impl FnMut(Range<usize>)) {
         self.candidate_ranges(p, reach).for_each(f);
+    }
+}
+
+/// One axis of a squeezed grid: runs of slabs (cell indices along the axis) farther than
+/// `reach` from every occupied slab each become one slab; the other slabs keep their
+/// spacing. A query slab within `reach` of an occupied one lies in the same kept run, so
+/// their distance is kept; a query in a squeezed run is `reach` + 1 from the nearest
+/// occupied slab, as far as it needs to be to find nothing there, as in the box.
+#[derive(Clone, Debug)]
+struct AxisMap {
+    /// (first box slab, grid slab it maps to, whether the run is kept) of each run, in
+    /// order; the first run is kept and begins at slab 0 (the lowest particle's).
+    runs: Vec<(i64, i64, bool)>,
+    /// Slabs along the axis after squeezing.
+    len: i64,
+}
+
+impl AxisMap {
+    /// The map for the `occupied` slabs (sorted, unique, from 0).
+    fn new(occupied: &[i64], reach: i64) -> Self {
+        let mut runs = Vec::new();
+        let mut len = 0i64;
+        let mut kept: Option<(i64, i64)> = None;
+        let close = |(a, b): (i64, i64), runs: &mut Vec<(i64, i64, bool)>, len: &mut i64| {
+            if let Some(&(start, at, _)) = runs.last() {
+                let end = start + (*len - at); // one past the last run's last slab
+                if a > end {
+                    runs.push((end, *len, false));
+                    *len += 1;
+                }
+            }
+            runs.push((a, *len, true));
+            *len += b - a + 1;
+        };
+        for &o in occupied {
+            let (a, b) = ((o - reach).max(0), o + reach);
+            kept = match kept {
+                Some((ka, kb)) if a <= kb + 1 => Some((ka, kb.max(b))),
+                Some(run) => {
+                    close(run, &mut runs, &mut len);
+                    Some((a, b))
+                }
+                None => Some((a, b)),
+            };
+        }
+        if let Some(run) = kept {
+            // The last run ends at the last occupied slab, the box's last.
+            let last = *occupied.last().expect("occupied slabs");
+            close((run.0, run.1.min(last)), &mut runs, &mut len);
+        }
+        AxisMap { runs, len }
+    }
+
+    /// The grid slab of box slab `i` (beyond either end, continued with unit steps).
+    #[inline]
+    fn map(&self, i: i64) -> i64 {
+        let k = self.runs.partition_point(|r| r.0 <= i).max(1) - 1;
+        let (start, at, kept) = self.runs[k];
+        if kept {
+            at + (i - start)
+        } else {
+            at
+        }
     }
 }
 
@@ -225,6 +340,14 @@ impl Iterator for CandidateRanges<'_> {
     }
 }
 
+/// Integer cell coordinates of `p` in the unsqueezed cells of edge 1 / `inv_cell` from
+/// `origin` (may lie outside the box for query points).
+#[inline]
+fn box_coords(origin: DVec3, inv_cell: f64, p: DVec3) -> [i64; 3] {
+    let c = (p - origin) * inv_cell;
+    [floor_i64(c.x), floor_i64(c.y), floor_i64(c.z)]
+}
+
 /// `v.floor() as i64` without the library call `floor` is on baseline x86-64 (no
 /// SSE4.1 `roundsd`): truncate, then step down for negative non-integers. Equal to it for
 /// every finite `v` within ±2⁶³; NaN gives 0 as `as` does.
@@ -254,7 +377,7 @@ mod tests {
             .collect();
         let r = 0.13;
         for (cell, reach) in [(r, 1), (r / 2.0, 2), (r / 3.0, 3)] {
-            let grid = NeighbourGrid::build(&pts, cell, 1 << 30).unwrap();
+            let grid = NeighbourGrid::build(&pts, cell, reach, 1 << 30).unwrap();
             for q in 0..200 {
                 let p = DVec3::new(rnd() * 1.2 - 0.1, rnd() * 0.7 - 0.1, rnd() * 2.2 - 0.1);
                 let mut found = Vec::new();
@@ -298,8 +421,94 @@ mod tests {
 
     #[test]
     fn absurd_extent_is_refused_before_allocating() {
-        let pts = vec![DVec3::ZERO, DVec3::splat(1e9)];
-        let err = NeighbourGrid::build(&pts, 1e-3, 1 << 30).unwrap_err();
+        // Spread evenly, the particles fill the box: nothing to squeeze.
+        let pts: Vec<DVec3> = (0..1000)
+            .map(|i| DVec3::new(i as f64, (i * 7 % 1000) as f64, (i * 13 % 1000) as f64) * 1e6)
+            .collect();
+        let err = NeighbourGrid::build(&pts, 1e-3, 1, 1 << 30).unwrap_err();
         assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+    }
+
+    #[test]
+    fn an_axis_squeezes_runs_farther_than_reach_from_every_particle_to_one_slab() {
+        // Occupied 0, 1, 10, 30 with reach 2: kept 0..=3, squeezed 4..=7, kept 8..=12,
+        // squeezed 13..=27, kept 28..=30.
+        let m = AxisMap::new(&[0, 1, 10, 30], 2);
+        assert_eq!(m.len, 4 + 1 + 5 + 1 + 3);
+        let expect = [
+            (-1, -1),
+            (0, 0),
+            (3, 3),
+            (4, 4),
+            (7, 4),
+            (8, 5),
+            (10, 7),
+            (12, 9),
+            (13, 10),
+            (27, 10),
+            (28, 11),
+            (30, 13),
+            (31, 14),
+        ];
+        for (i, c) in expect {
+            assert_eq!(m.map(i), c, "slab {i}");
+        }
+        // From a squeezed slab the nearest particle's slab is reach + 1 away.
+        assert_eq!(m.map(10) - m.map(7), 3);
+        assert_eq!(m.map(30) - m.map(27), 3);
+    }
+
+    #[test]
+    fn stray_particles_far_from_the_fluid_cost_cells_near_them_not_the_box() {
+        // A block of fluid, one particle far off on every axis, one along x alone, and a
+        // particle just past `reach` cells from the block's edge (a squeezed run of one).
+        let mut rnd = crate::test_rng::unit(777);
+        let mut pts: Vec<DVec3> = (0..4000).map(|_| DVec3::new(rnd(), rnd(), rnd())).collect();
+        pts.push(DVec3::splat(1e4));
+        pts.push(DVec3::new(-5e3, 0.5, 0.5));
+        pts.push(DVec3::new(1.0 + 0.1 * 3.5, 0.5, 0.5));
+        let r = 0.1;
+        for (cell, reach) in [(r, 1), (r / 2.0, 2)] {
+            let grid = NeighbourGrid::build(&pts, cell, reach, 1 << 30).unwrap();
+            assert!(grid.squeeze.is_some() && grid.layout().is_none());
+            let cells: usize = grid.dims.iter().product();
+            assert!(cells < 100_000, "{:?}", grid.dims); // the box: 1.5e5 cells an axis
+            let mut queries: Vec<DVec3> = (0..300)
+                .map(|_| DVec3::new(rnd() * 1.6 - 0.3, rnd() * 1.6 - 0.3, rnd() * 1.6 - 0.3))
+                .collect();
+            for &stray in &pts[4000..] {
+                queries
+                    .extend((0..50).map(|_| stray + DVec3::new(rnd(), rnd(), rnd()) * 0.3 - 0.15));
+            }
+            queries.push(DVec3::splat(5e3)); // deep in the squeezed space
+            queries.push(DVec3::splat(-1e5)); // outside the box
+            for (q, &p) in queries.iter().enumerate() {
+                let mut found = Vec::new();
+                grid.for_each_candidate_range(p, reach, |range| {
+                    for slot in range {
+                        let i = grid.order()[slot] as usize;
+                        if pts[i].distance(p) < r {
+                            found.push(i);
+                        }
+                    }
+                });
+                found.sort_unstable();
+                let brute: Vec<usize> =
+                    (0..pts.len()).filter(|&i| pts[i].distance(p) < r).collect();
+                assert_eq!(found, brute, "query {q} at {p}");
+                // A box query holds every particle in the box.
+                let (lo, hi) = (p - DVec3::splat(r), p + DVec3::splat(r));
+                let mut boxed = Vec::new();
+                for range in grid.ranges_in_box(lo, hi) {
+                    boxed.extend(range.map(|slot| grid.order()[slot] as usize));
+                }
+                let inside =
+                    (0..pts.len()).filter(|&i| pts[i].cmpge(lo).all() && pts[i].cmple(hi).all());
+                assert!(inside.into_iter().all(|i| boxed.contains(&i)), "box {q}");
+            }
+        }
+        // Where the box is not mostly empty, nothing is squeezed (queries stay as fast).
+        let dense = NeighbourGrid::build(&pts[..4000], r, 1, 1 << 30).unwrap();
+        assert!(dense.squeeze.is_none() && dense.layout().is_some());
     }
 }

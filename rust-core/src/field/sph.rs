@@ -259,8 +259,12 @@ impl SphField {
             h.iter().fold(0.0f64, |m, &v| m.max(v)) * settings.h_scale * support_factor;
         // Cells of half the support, searched two cells out: the candidate block is
         // (5/2)³ ≈ 15.6 support volumes instead of 27 with support-sized cells.
-        let grid =
-            NeighbourGrid::build(&data.positions, 0.5 * max_support, settings.memory_budget)?;
+        let grid = NeighbourGrid::build(
+            &data.positions,
+            0.5 * max_support,
+            REACH,
+            settings.memory_budget,
+        )?;
         let order = grid.order();
         let sigma = kernel.sigma();
         let h_unscaled: Vec<f64> = order.iter().map(|&i| h[i as usize]).collect();

@@ -67,7 +67,15 @@ impl GpuField {
                 field.packed(i).4
             )));
         }
-        let (ng_origin, inv_cell, dims, offsets) = field.neighbour_grid().layout();
+        let (ng_origin, inv_cell, dims, offsets) =
+            field.neighbour_grid().layout().ok_or_else(|| {
+                Error::InvalidInput(
+                    "the particles lie far apart (a grid over their bounding box would be \
+                     mostly empty): the GPU's neighbour grid cannot skip the empty space; \
+                     use the CPU back end (--backend cpu)"
+                        .into(),
+                )
+            })?;
         let uniform = FieldUniform {
             origin: (ng_origin - origin).as_vec3().to_array(),
             inv_cell: inv_cell as f32,
