@@ -93,10 +93,14 @@ def test_export_frames_1_to_3_match_the_core(scene, isobar, pxr, demo_sequence, 
     assert stage.GetTimeCodesPerSecond() == scene.render.fps / scene.render.fps_base
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/frame_surface/Surface"))
     assert mesh
-    # Topology changes every frame: counts and indices are time-sampled like the points.
+    # Topology changes every frame: counts and indices are time-sampled like the points,
+    # and each frame's values hold until just before the next (its point count differs).
+    from isobar_usd.layers import HOLD_BEFORE
+
+    samples = [1.0, 2.0 - HOLD_BEFORE, 2.0, 3.0 - HOLD_BEFORE, 3.0]
     for attr in (mesh.GetPointsAttr(), mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()):
-        assert list(attr.GetTimeSamples()) == [1.0, 2.0, 3.0], attr.GetName()
-    assert list(mesh.GetNormalsAttr().GetTimeSamples()) == [1.0, 2.0, 3.0]
+        assert list(attr.GetTimeSamples()) == samples, attr.GetName()
+    assert list(mesh.GetNormalsAttr().GetTimeSamples()) == samples
     references = [reference(isobar, p, attributes=["velocity"]) for p in demo_sequence]
     assert references[0].n_points != references[1].n_points  # the topology does change
     for frame, surface in zip((1, 2, 3), references):

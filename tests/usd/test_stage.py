@@ -29,6 +29,7 @@ def test_the_command_is_installed(cli):
 
 
 def test_stage_metadata(written):
+    from isobar_usd.layers import HOLD_BEFORE
     from pxr import UsdGeom
 
     stage = open_stage(written)
@@ -45,7 +46,8 @@ def test_stage_metadata(written):
     assert mesh.GetNormalsInterpolation() == "vertex"
     for attr in (mesh.GetPointsAttr(), mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr(),
                  mesh.GetNormalsAttr(), mesh.GetExtentAttr(), mesh.GetVelocitiesAttr()):
-        assert attr.GetTimeSamples() == [1.0, 26.0], attr.GetName()
+        # Frame 1's values again just before frame 26 (other point counts: held, extent too).
+        assert attr.GetTimeSamples() == [1.0, 26.0 - HOLD_BEFORE, 26.0], attr.GetName()
 
 
 def test_samples_equal_the_cores_mesh(written, dam_frames, reference):
@@ -80,6 +82,42 @@ def test_extents(written):
         bound = UsdGeom.BBoxCache(frame, [UsdGeom.Tokens.default_]).ComputeWorldBound(stage.GetPrimAtPath("/Fluid"))
         box = bound.ComputeAlignedRange()
         np.testing.assert_allclose([box.GetMin(), box.GetMax()], got["extent"], rtol=1e-6)
+
+
+def _points_outside_the_extent(stage, time):
+    got = mesh_at(stage, time)
+    pts, (lo, hi) = got["points"], np.asarray(got["extent"])
+    return int(np.count_nonzero((pts < lo).any(1) | (pts > hi).any(1)))
+
+
+@pytest.mark.parametrize("layout", ["clips", "flat"])
+def test_between_frames_of_other_point_counts_the_extent_holds_with_the_points(tmp_path, layout):
+    """Between frames whose point counts differ USD holds the points but interpolated the
+    extent: halfway, points lay outside it (a renderer's motion-blur sample there culls
+    them), and next to an empty frame (an isovalue not crossed) the extent's corners were
+    near ±FLT_MAX/2, around no point at all."""
+    import isobar_usd
+
+    def tetra(offset, scale):
+        points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32) * scale + offset
+        return points, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32)
+
+    def two_tetras(offset):
+        (p, t), (q, u) = tetra(offset, 1.0), tetra(offset + 3.0, 0.5)
+        return np.vstack([p, q]), np.vstack([t, u + 4])
+
+    empty = (np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
+    frames = {1: two_tetras(0.0), 5: tetra(10.0, 2.0), 8: empty, 10: two_tetras(-4.0)}
+    out = tmp_path / f"{layout}.usda"
+    isobar_usd.write_sequence(frames, out, layout=layout)
+    stage = open_stage(out)
+    assert [len(mesh_at(stage, t)["points"]) for t in (1, 5, 8, 10)] == [8, 4, 0, 8]
+    for time in (1, 1.5, 3, 4.99, 5, 5.5, 7.99, 8, 9, 9.999, 10):
+        assert _points_outside_the_extent(stage, time) == 0, time
+        if len(mesh_at(stage, time)["points"]):  # the extent is the held points' own
+            got = mesh_at(stage, time)
+            np.testing.assert_array_equal(got["extent"], np.stack([got["points"].min(0), got["points"].max(0)]))
+    assert validation_errors(stage) == []
 
 
 def test_orientation_matches_the_winding(written):

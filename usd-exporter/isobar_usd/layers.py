@@ -20,6 +20,11 @@ from .mesh import FrameMesh, SchemaEntry, schema_of
 #: Key of the writer's record in each layer's customLayerData.
 INFO_KEY = "isobarUsd"
 
+#: How long before a frame whose point count differs from the previous frame's the
+#: previous frame's extent is authored again, in time codes (frames): 1/1024, exact in
+#: binary, far shorter than any shutter interval.
+HOLD_BEFORE = 1.0 / 1024.0
+
 #: File extensions the writer produces (the file format follows the extension; ``.usd``
 #: is binary crate).
 OUTPUT_EXTENSIONS = (".usd", ".usda", ".usdc")
@@ -222,6 +227,8 @@ class MeshLayer:
         self.frames: List[int] = []
         self.points = 0
         self.triangles = 0
+        #: (frame, points, extent) of each frame, for the extent's held samples.
+        self._extents: List[Tuple[int, int, np.ndarray]] = []
 
     def add(self, mesh: FrameMesh, frame: int) -> List[SchemaEntry]:
         """Authors `mesh` as the time samples at time code `frame`."""
@@ -234,13 +241,27 @@ class MeshLayer:
             attr.Set(_array(values[entry[0]], entry[1]), float(frame))
         self.frames.append(int(frame))
         self.points, self.triangles = mesh.n_points, mesh.n_triangles
+        self._extents.append((int(frame), mesh.n_points, np.asarray(mesh.extent)))
         return entries
+
+    def _hold_extents(self) -> None:
+        """Between two frames whose point counts differ, USD cannot interpolate the points
+        and holds the earlier frame's, but it interpolates the extent (always two
+        corners): at frame 1.5 half the points could lie outside it, and a renderer
+        sampling motion blur there would cull them. The earlier extent is authored again
+        just before the later frame (HOLD_BEFORE), so the extent is held with the points."""
+        frames = sorted(self._extents, key=lambda e: e[0])
+        attr = self.mesh.GetExtentAttr()
+        for (frame, n, extent), (later, m, _) in zip(frames, frames[1:]):
+            if n != m and later - frame > 2 * HOLD_BEFORE:
+                attr.Set(_array(extent, "float3[]"), float(later) - HOLD_BEFORE)
 
     def export(self, path: Path, atomic: bool = True) -> None:
         """Writes the layer to `path`: through a staging file renamed into place, or (with
         `atomic` False, for a path that is itself a staging file) directly."""
         if not self.frames:
             raise InputError("no frame to write")
+        self._hold_extents()
         start, end = min(self.frames), max(self.frames)
         _stage_metadata(self.stage, self.settings, start, end)
         record = dict(self.info)
@@ -312,6 +333,17 @@ def write_manifest(path: Path, settings: StageSettings, schema: Sequence[SchemaE
             raise OSError(f"USD could not write {staged}")
 
 
+def _clip_times(frames: Sequence[int], holds) -> List[Tuple[float, float]]:
+    """(stage time, clip time) pairs: f to f, and just before the next frame to f again
+    for each frame f in `holds`."""
+    times: List[Tuple[float, float]] = []
+    for frame, later in zip(frames, list(frames[1:]) + [None]):
+        times.append((float(frame), float(frame)))
+        if later is not None and frame in holds and later - frame > 2 * HOLD_BEFORE:
+            times.append((float(later) - HOLD_BEFORE, float(frame)))
+    return times
+
+
 def write_clips_root(
     path: Path,
     settings: StageSettings,
@@ -319,9 +351,14 @@ def write_clips_root(
     clips: Sequence[Tuple[int, str]],
     manifest_asset: str,
     info: Optional[Mapping] = None,
+    holds: Iterable[int] = (),
 ) -> None:
     """The root layer of a sequence: stage metadata, the prims with every attribute
     declared (types, interpolation), and value clips mapping time code f to clip f.
+    After each frame in `holds` (whose point count differs from the next frame's) the
+    clip's time also maps to the time just before the next frame (HOLD_BEFORE), so every
+    attribute holds that frame's values until then: USD interpolates across clips, and
+    would interpolate the extent around points it holds (see MeshLayer._hold_extents).
 
     Authored with the Sdf API alone: a Usd stage holding clip metadata composes the clips
     and opens every frame layer (an anonymous one resolves them against the current
@@ -359,7 +396,7 @@ def write_clips_root(
                 "assetPaths": Sdf.AssetPathArray([Sdf.AssetPath(asset) for _, asset in clips]),
                 "primPath": settings.root_path,
                 "active": Vt.Vec2dArray([(float(f), float(i)) for i, f in enumerate(frames)]),
-                "times": Vt.Vec2dArray([(float(f), float(f)) for f in frames]),
+                "times": Vt.Vec2dArray(_clip_times(frames, set(holds))),
                 "manifestAssetPath": Sdf.AssetPath(manifest_asset),
             }
         },

@@ -914,9 +914,12 @@ def _stitch_locked(
     where: Dict[str, str] = {}
     chosen = settings
     chosen_from = "this run" if settings is not None else None
+    # Point counts, for the holds between frames that differ (-1: not recorded, held).
+    counts: Dict[int, int] = {}
     for frame in sorted(clips):
         path = clips[frame]
         record = read_record(path)
+        counts[frame] = int(record.info.get("points", -1))
         if record.frames != [frame]:
             raise StitchError(f"{path} holds frame(s) {record.frames}, not frame {frame} (renamed by hand?)")
         merge_schema(schema, record.schema, f"frame {frame}", where)
@@ -957,6 +960,7 @@ def _stitch_locked(
         [(f, f"{rel}/{clips[f].name}") for f in sorted(clips)],
         f"{rel}/{MANIFEST}",
         info,
+        holds=[f for f, later in zip(sorted(clips), sorted(clips)[1:]) if counts[f] != counts[later] or counts[f] < 0],
     )
     frames = sorted(clips)
     return SequenceResult(output, "clips", [], frames, folder, entries)
