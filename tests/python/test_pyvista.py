@@ -122,3 +122,18 @@ def test_offscreen_screenshot_is_not_blank(tmp_path):
     assert pixels.std() > 20
     # Shaded, not flat: the surface shows several distinct intensities.
     assert len(np.unique(pixels[~background].mean(axis=-1).round())) > 20
+
+
+def test_warnings_of_the_pyvista_helpers_name_the_callers_line():
+    """A warning names the line that called the helper, not a line inside isobar: Python
+    shows a warning once per place, so a loop over frames saw only the first frame's."""
+    import warnings
+
+    cloud = pv.PolyData(lattice(3))
+    for _ in range(2):  # the same line twice: both reported under "always"
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            mesh = ipv.surface_from_polydata(cloud, 50.0, h=0.1)  # far above any value
+        assert mesh.n_points == 0
+        assert [w.filename for w in caught] == [__file__], [(w.filename, w.lineno) for w in caught]
+        assert "no surface at isovalue 50" in str(caught[0].message)

@@ -15,6 +15,7 @@ from typing import Iterable, Optional
 
 import numpy as np
 
+from .errors import issue, quiet_warnings
 from .fe import FeMesh, Samples, sample_fe
 from .particles import Particles
 from .sph import DEFAULT_H_ARRAYS, extract, is_sum_of_weights
@@ -112,9 +113,11 @@ def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[f
         needed.update(DEFAULT_H_ARRAYS)
     particles = particles_from_dataset(cloud, arrays=needed)
     try:
-        surface = extract(particles, iso, field=field, h=h, **kw)
+        with quiet_warnings():  # issued below, from the caller's line
+            surface = extract(particles, iso, field=field, h=h, **kw)
     finally:
         particles.close()
+    issue(surface.warnings, stacklevel=2)  # the line that called surface_from_polydata()
     surface.release()
     return to_pyvista(surface)
 
@@ -163,7 +166,9 @@ def samples_from_unstructured_grid(grid, field: str, iso: float, **kw):
     """Samples the isosurface ``field == iso`` of a Lagrange ``pv.UnstructuredGrid`` and
     returns the points as ``pv.PolyData`` (see :func:`samples_to_pyvista`); `kw` are the
     options of :func:`isobar.sample_fe` (spacing, rho, tolerance, levels, seed, progress)."""
-    samples = sample_fe(fe_mesh_from_dataset(grid, arrays=[field]), field, iso, **kw)
+    with quiet_warnings():  # issued below, from the caller's line
+        samples = sample_fe(fe_mesh_from_dataset(grid, arrays=[field]), field, iso, **kw)
+    issue(samples.warnings, stacklevel=2)  # the line that called samples_from_unstructured_grid()
     samples.release()
     return samples_to_pyvista(samples)
 
