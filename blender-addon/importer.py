@@ -629,7 +629,7 @@ def update_object(
             _set_status(settings, message, False, warnings)
             _set_backend_note(settings)
             return True, message
-        mesh_io.write(obj.data, mesh)
+        mesh_io.write_object(obj, mesh)
         if key is not None:
             _shown[object_key(obj)] = (key, mesh.n_points, mesh.n_triangles, origin, mesh.warnings)
         else:
@@ -665,7 +665,7 @@ def _fail_render_frame(obj, message: str) -> str:
     """A frame failed during a render: the last good frame would render as this one
     and the render would look right, so the mesh is emptied instead (a handler cannot
     stop the render); returns the message saying so."""
-    mesh_io.write(obj.data, empty_mesh())
+    mesh_io.write_object(obj, empty_mesh())
     _shown.pop(object_key(obj), None)
     return message + " (rendering: the surface of this frame is left empty)"
 

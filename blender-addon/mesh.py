@@ -12,6 +12,16 @@ from .extraction import FrameMesh
 _TYPES = {1: ("FLOAT", "value"), 2: ("FLOAT2", "vector"), 3: ("FLOAT_VECTOR", "vector"), 4: ("FLOAT_COLOR", "color")}
 
 
+def write_object(obj, frame: FrameMesh) -> None:
+    """Writes `frame` into `obj`'s mesh, first giving `obj` a mesh of its own when another
+    object shares it (a linked duplicate, Alt+D): each object shows the surface of its own
+    settings, and a shared mesh would show whichever was written last in both."""
+    data = obj.data
+    if data.users > 1 + int(data.use_fake_user) and any(o != obj and o.data == data for o in bpy.data.objects):
+        obj.data = data.copy()
+    write(obj.data, frame)
+
+
 def write(mesh: "bpy.types.Mesh", frame: FrameMesh) -> None:
     """Replaces the geometry of `mesh` with `frame`: vertices, triangles (smooth shaded),
     the SPH normals as custom normals and the point attributes. Materials stay."""

@@ -143,7 +143,7 @@ def show(obj, store: str, isovalue: float, lod_error_bound: float = 0.0) -> Show
         triangles=np.ascontiguousarray(triangles, dtype=np.int32),
         normals=np.ascontiguousarray(normals, dtype=np.float32),
     )
-    mesh_io.write(obj.data, frame)
+    mesh_io.write_object(obj, frame)
     return Shown(
         triangles=int(frame.triangles.shape[0]),
         seconds=float(update.seconds) if update is not None else 0.0,

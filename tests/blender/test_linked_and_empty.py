@@ -72,3 +72,18 @@ def test_attributes_none_writes_no_sph_arrays(scene, demo_sequence):
     names = set(obj.data.attributes.keys())
     assert not {n for n in names if n.startswith("sph_")} and "velocity" not in names, names
     assert len(obj.data.vertices) > 1000
+
+
+def test_a_linked_duplicate_gets_a_mesh_of_its_own(scene, isobar, demo_sequence):
+    """Alt+D shares the mesh: the duplicate's surface (other settings) was written into the
+    original's mesh too, under the original's status."""
+    obj = import_sequence(demo_sequence[0])  # shows frame 1
+    dup = obj.copy()  # what Alt+D makes: a new object, the same mesh, the same settings
+    scene.collection.objects.link(dup)
+    assert dup.data == obj.data
+    dup.isobar.iso = 0.3
+    assert not dup.isobar.status_error, dup.isobar.status
+    assert dup.data != obj.data
+    assert_mesh_equals(dup, reference(isobar, demo_sequence[0], iso=0.3))
+    assert_mesh_equals(obj, reference(isobar, demo_sequence[0]))
+    assert f"{len(obj.data.vertices)} vertices" in obj.isobar.status
