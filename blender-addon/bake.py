@@ -39,6 +39,7 @@ class BakeJob:
         self.folder = importer.cache_folder(obj, obj.isobar, assign_name=True)
         self.fingerprint = importer.fingerprint(obj.isobar, self.settings_params, self.folder)
         os.makedirs(self.folder, exist_ok=True)
+        self.owner = importer.blend_identity()
         self.original_frame = scene.frame_current
         self.baked: List[int] = []
         #: (frame, text) for what the extractions warned about, for the operator's report.
@@ -81,7 +82,7 @@ class BakeJob:
         if mesh is None:
             mesh = importer.empty_mesh()
         self.warnings.extend((frame, text) for text in mesh.warnings)
-        cache.write(cache.frame_path(self.folder, frame), mesh, self.fingerprint)
+        cache.write(cache.frame_path(self.folder, frame), mesh, self.fingerprint, self.owner)
         self.baked.append(frame)
         self.index += 1
         return frame

@@ -35,15 +35,19 @@ def frame_path(folder: str, frame: int) -> str:
     return os.path.join(folder, f"frame_{sign}{abs(frame):06d}.npz")
 
 
-def write(path: str, mesh: FrameMesh, fingerprint: str) -> None:
+def write(path: str, mesh: FrameMesh, fingerprint: str, owner: str = "") -> None:
     """Writes one frame (to a temporary name first, then renamed: a reader never sees a
-    half-written file)."""
+    half-written file). `owner` names the .blend file baking it (see :func:`owner`): another
+    .blend file with an object of the same name and the same cache folder (two shots side
+    by side) then bakes into a folder of its own instead of over these frames, and frees
+    only its own."""
     folder = os.path.dirname(path) or "."
     os.makedirs(folder, exist_ok=True)
     arrays = {
         "points": np.ascontiguousarray(mesh.points, dtype=np.float32),
         "triangles": np.ascontiguousarray(mesh.triangles, dtype=np.int32),
         "fingerprint": np.array(fingerprint),
+        "owner": np.array(owner),
         "info": np.array(json.dumps(mesh.info)),
     }
     if mesh.warnings:  # shown again when the baked frame plays
@@ -110,6 +114,18 @@ def frames(folder: str) -> List[int]:
     return sorted(out)
 
 
+def owner(folder: str) -> Optional[str]:
+    """The .blend file (its name; '' for an unsaved one) that baked the frames in `folder`,
+    as the first frame records it; None when there is none, or it records no owner."""
+    for frame in frames(folder):
+        try:
+            with np.load(frame_path(folder, frame), allow_pickle=False) as data:
+                return str(data["owner"][()]) if "owner" in data.files else None
+        except (OSError, ValueError):
+            continue
+    return None
+
+
 def clear(folder: str) -> int:
     """Deletes the cached frames in `folder` (only files named like cache frames, and the
     folder itself when that leaves it empty); returns how many were deleted."""
@@ -127,4 +143,4 @@ def clear(folder: str) -> int:
     return removed
 
 
-__all__ = ["clear", "frame_path", "frames", "read", "read_fingerprint", "write"]
+__all__ = ["clear", "frame_path", "frames", "owner", "read", "read_fingerprint", "write"]

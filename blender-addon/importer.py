@@ -339,10 +339,11 @@ def _unused_cache_name(obj, name: str) -> str:
 
 def cache_sharers(obj, name: Optional[str] = None) -> List[str]:
     """Names of the other fluid surfaces whose bake folder is `obj`'s (with cache name
-    `name`, default its own)."""
+    `name`, default its own), and the other .blend file that baked into it, if one did
+    (two shots in one folder, each with an object of the same name)."""
     settings = obj.isobar
     mine = _resolved_cache_folder(settings, name if name is not None else settings.cache_name or _cache_name_of(obj))
-    return [
+    sharers = [
         other.name
         for other in bpy.data.objects
         if other != obj
@@ -350,6 +351,17 @@ def cache_sharers(obj, name: Optional[str] = None) -> List[str]:
         and other.isobar.cache_name
         and _resolved_cache_folder(other.isobar, other.isobar.cache_name) == mine
     ]
+    owner = cache.owner(mine)
+    if owner and owner != blend_identity():
+        sharers.append(owner)
+    return sharers
+
+
+def blend_identity() -> str:
+    """The open .blend file as a bake folder's owner record names it: its file name ('' when
+    unsaved, which claims nothing). The name alone, so that a project moved or copied
+    elsewhere still owns its bakes; two shots baking into one folder have different names."""
+    return os.path.basename(bpy.data.filepath)
 
 
 def _resolved_cache_folder(settings, name: str) -> str:

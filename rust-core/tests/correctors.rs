@@ -776,6 +776,24 @@ fn warnings_name_an_isovalue_never_crossed_and_a_kernel_wider_than_the_data() {
         }),
         ..crossed.clone()
     };
+    // Cells far larger than the particle block: the particles' values straddle the
+    // isovalue (seed cells), no cell's corners do. The warning names the grid; it said the
+    // field never crosses the isovalue.
+    let coarse = Params {
+        grid_factor: 20.0,
+        ..crossed.clone()
+    };
+    let blurred = run(&data, &pressure, &coarse);
+    assert!(blurred.mesh.triangles.is_empty() && blurred.stats.seed_cells > 0);
+    let [warning] = &blurred.stats.warnings[..] else {
+        panic!("{:?}", blurred.stats.warnings)
+    };
+    assert!(
+        warning.starts_with("no surface at isovalue 2000 on cells of 6.000e0:")
+            && warning.ends_with("try a lower grid factor"),
+        "{warning}"
+    );
+
     let trimmed = run(&data, &pressure, &all_trimmed);
     assert!(trimmed.mesh.triangles.is_empty() && trimmed.stats.discarded_cells > 0);
     let [cut_away] = &trimmed.stats.warnings[..] else {

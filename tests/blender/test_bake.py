@@ -1,6 +1,7 @@
 """Baking a frame range to the cache and playing it back."""
 
 import os
+from pathlib import Path
 
 import bpy
 import pytest
@@ -195,3 +196,32 @@ def test_rebaking_a_sub_range_shows_every_frame_playback_uses(scene, demo_sequen
     settings.iso = 0.5  # frames 1 and 3 no longer match
     assert bpy.ops.isobar.bake(use_scene_range=False, frame_start=2, frame_end=2) == {"FINISHED"}
     assert (settings.baked_start, settings.baked_end) == (2, 2)
+
+
+def test_two_blend_files_in_one_folder_keep_their_bakes_apart(scene, addon, demo_sequence, tmp_path):
+    """Two shots side by side, each with its own 'frame_surface' and the default
+    //isobar_cache/: the second shot's bake overwrote the first's frames, and its Free
+    deleted them."""
+    shots = {}
+    for shot in ("shot_010", "shot_020"):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        obj = import_sequence(demo_sequence[0])
+        assert obj.name == "frame_surface"
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / f"{shot}.blend"))
+        assert bpy.ops.isobar.bake() == {"FINISHED"}
+        folder = Path(addon.importer.cache_folder(obj))
+        shots[shot] = (folder, {p.name: p.stat().st_mtime_ns for p in folder.glob("frame_*.npz")})
+        bpy.ops.wm.save_mainfile()
+    (first, first_files), (second, second_files) = shots["shot_010"], shots["shot_020"]
+    assert first == tmp_path / "isobar_cache" / "frame_surface"
+    assert second == tmp_path / "isobar_cache" / "frame_surface_2"
+    assert {p.name: p.stat().st_mtime_ns for p in first.glob("frame_*.npz")} == first_files
+    assert len(second_files) == 3
+
+    assert bpy.ops.isobar.free_bake() == {"FINISHED"}  # shot 020's own folder only
+    assert not second.exists()
+    assert {p.name: p.stat().st_mtime_ns for p in first.glob("frame_*.npz")} == first_files
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "shot_010.blend"))
+    obj = bpy.data.objects["frame_surface"]
+    bpy.context.scene.frame_set(2)
+    assert "bake" in obj.isobar.status and not obj.isobar.status_error, obj.isobar.status

@@ -332,7 +332,8 @@ pub fn extract(
         progress.phase("seed cells", at(0.0), at(0.1))?;
         let t = Instant::now();
         let seeds = neighbours.seed_cells(field, &grid, iso, &search)?;
-        stats.seed_cells += seeds.len() as u64;
+        let seeded = seeds.len();
+        stats.seed_cells += seeded as u64;
         stats.timings.seeds += t.elapsed().as_secs_f64();
 
         progress.phase("surface tracking", at(0.1), at(0.5))?;
@@ -401,7 +402,17 @@ pub fn extract(
             span,
             &mut stats,
         )?;
-        surface::append_surface(&mut mesh, part, iso, crossed, params, &mut stats.warnings);
+        // Seed cells come from particle pairs on either side of the isovalue.
+        let between = (seeded > 0).then_some(grid.cell_size);
+        surface::append_surface(
+            &mut mesh,
+            part,
+            iso,
+            crossed,
+            between,
+            params,
+            &mut stats.warnings,
+        );
     }
     stats.field_evaluations += stats.node_evaluations;
     stats.vertices = mesh.vertex_count() as u64;

@@ -63,21 +63,23 @@ impl AttributeSource {
 
 /// Appends one isovalue's surface to the extraction's mesh, tagging its vertices with an
 /// `Isovalue` array when there are several; an empty one is a warning, which says whether
-/// the field never crosses the isovalue or crosses it in `crossed` cells that trimming and
-/// clipping all removed.
+/// the field never crosses the isovalue, crosses it between particles (`between`: the
+/// grid's cell size, when a particle pair straddles it) but not between grid nodes, or
+/// crosses it in `crossed` cells that trimming and clipping all removed.
 pub fn append_surface(
     mesh: &mut Mesh,
     mut part: Mesh,
     iso: f64,
     crossed: u64,
+    between: Option<f64>,
     params: &Params,
     warnings: &mut Vec<String>,
 ) {
     if part.triangles.is_empty() {
-        warnings.push(if crossed == 0 {
-            crate::mesh::no_surface(iso)
-        } else {
-            crate::mesh::surface_cut_away(iso, crossed)
+        warnings.push(match (crossed, between) {
+            (0, Some(cell)) => crate::mesh::no_surface_on_grid(iso, cell),
+            (0, None) => crate::mesh::no_surface(iso),
+            _ => crate::mesh::surface_cut_away(iso, crossed),
         });
     }
     if params.isovalues.len() > 1 {

@@ -191,6 +191,17 @@ pub(crate) fn no_surface(iso: f64) -> String {
     format!("no surface at isovalue {iso}: the field never crosses it")
 }
 
+/// The warning for an isovalue that the particles' values straddle (seed cells were found)
+/// although no grid cell's corners do: most often features thinner than the cells of edge
+/// `cell`. "Never crosses" would send the user to the isovalue instead of the grid.
+pub(crate) fn no_surface_on_grid(iso: f64, cell: f64) -> String {
+    format!(
+        "no surface at isovalue {iso} on cells of {cell:.3e}: the particles' values lie on \
+         both sides of it, but no cell's corners do; its features may be thinner than the \
+         cells: try a lower grid factor"
+    )
+}
+
 /// The warning for an isovalue whose surface was all cut away although the field crosses
 /// it in `cells` cells: blaming the field would send the user to the wrong setting.
 pub(crate) fn surface_cut_away(iso: f64, cells: u64) -> String {
