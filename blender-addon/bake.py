@@ -6,6 +6,7 @@ all at once (``execute``, for scripts and background mode). No UI here.
 
 from __future__ import annotations
 
+import math
 import os
 from typing import List, Optional, Tuple
 
@@ -97,21 +98,26 @@ class BakeJob:
         if self.baked:
             with importer.suspend_updates():
                 settings.use_cache = True
-                settings.baked_start, settings.baked_end = self._playable_range()
+                settings.baked_start, settings.baked_end, settings.baked_step = self._playable_range()
         if self.is_object_source and self.scene.frame_current != self.original_frame:
             self.scene.frame_set(self.original_frame)  # the handler updates the surface
         importer.update_object(obj, self.scene, force=True)
 
 
-    def _playable_range(self) -> Tuple[int, int]:
-        """First and last frame in the folder that playback uses: this bake's and those an
-        earlier bake with the same settings left (re-baking a sub-range keeps them)."""
+    def _playable_range(self) -> Tuple[int, int, int]:
+        """First and last frame in the folder that playback uses (this bake's and those an
+        earlier bake with the same settings left: re-baking a sub-range keeps them), and
+        their step (2 for a bake of every other frame, Frame Step 2): the frames between
+        were not baked, rather than missing."""
         playable = [
             frame
             for frame in cache.frames(self.folder)
             if cache.read_fingerprint(cache.frame_path(self.folder, frame)) == self.fingerprint
         ] or self.baked
-        return min(playable), max(playable)
+        step = 0
+        for a, b in zip(playable, playable[1:]):
+            step = math.gcd(step, b - a)
+        return min(playable), max(playable), max(1, step)
 
 
 def scene_frames(scene, start: Optional[int] = None, end: Optional[int] = None) -> List[int]:
@@ -135,7 +141,7 @@ def free(obj) -> Tuple[int, List[str]]:
     removed = cache.clear(folder) if folder and not sharers else 0
     with importer.suspend_updates():
         settings.use_cache = False
-        settings.baked_start, settings.baked_end = 0, -1
+        settings.baked_start, settings.baked_end, settings.baked_step = 0, -1, 1
         if sharers:
             settings.cache_name = ""  # the next bake picks a folder of its own
     importer.update_object(obj, force=True)

@@ -587,7 +587,7 @@ def frame_mesh(
                 mesh, _ = cache.read(path)
                 return mesh, "bake", key
             note = ", baked frame made with other settings"
-        elif settings.baked_start <= frame <= settings.baked_end:
+        elif settings.baked_start <= frame <= settings.baked_end and (frame - settings.baked_start) % max(1, settings.baked_step) == 0:
             # Baked, but not where the bake folder points now: say so, or the user
             # would never learn why playback is slow (or why the particles are read).
             missing = f"the baked frame {frame} is missing ({path or settings.cache_directory}): extracted again"

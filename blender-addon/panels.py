@@ -141,7 +141,8 @@ class ISOBAR_PT_cache(_FluidPart, bpy.types.Panel):
         layout.prop(settings, "use_cache")
         layout.prop(settings, "live_particle_limit")
         if settings.baked_end >= settings.baked_start:
-            layout.label(text=f"Baked frames {settings.baked_start} to {settings.baked_end}", icon="INFO")
+            every = f", every {settings.baked_step}" if settings.baked_step > 1 else ""
+            layout.label(text=f"Baked frames {settings.baked_start} to {settings.baked_end}{every}", icon="INFO")
         row = layout.row(align=True)
         row.operator("isobar.bake", text="Bake", icon="REC")
         row.operator("isobar.free_bake", text="Free", icon="TRASH")

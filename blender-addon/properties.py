@@ -326,6 +326,7 @@ class IsobarSettings(bpy.types.PropertyGroup):
     )
     baked_start: IntProperty(name="Baked From", default=0)
     baked_end: IntProperty(name="Baked To", default=-1)
+    baked_step: IntProperty(name="Baked Every", default=1, min=1)
 
     # -- runtime feedback (saved, harmless) -----------------------------------------
     live_update: BoolProperty(

@@ -225,3 +225,22 @@ def test_two_blend_files_in_one_folder_keep_their_bakes_apart(scene, addon, demo
     obj = bpy.data.objects["frame_surface"]
     bpy.context.scene.frame_set(2)
     assert "bake" in obj.isobar.status and not obj.isobar.status_error, obj.isobar.status
+
+
+def test_a_bake_of_every_other_frame_does_not_call_the_frames_between_missing(scene, isobar, demo_sequence, tmp_path):
+    """Frame Step 2 bakes frames 1 and 3; frame 2 was never meant to be baked, and playing
+    it warned 'the baked frame 2 is missing'. A baked frame that did go missing still warns."""
+    obj = import_sequence(demo_sequence[0])
+    settings = obj.isobar
+    settings.cache_directory = str(tmp_path / "cache")
+    scene.frame_step = 2
+    assert bpy.ops.isobar.bake() == {"FINISHED"}
+    folder = tmp_path / "cache" / settings.cache_name
+    assert sorted(p.name for p in folder.iterdir()) == ["frame_000001.npz", "frame_000003.npz"]
+    assert (settings.baked_start, settings.baked_end, settings.baked_step) == (1, 3, 2)
+    scene.frame_set(2)  # extracted, without a warning
+    assert not settings.status_error and not settings.status_warnings, (settings.status, settings.status_warnings)
+    assert_mesh_equals(obj, reference(isobar, demo_sequence[1], attributes=["velocity"]))
+    (folder / "frame_000003.npz").unlink()
+    scene.frame_set(3)
+    assert "the baked frame 3 is missing" in settings.status_warnings, settings.status_warnings
