@@ -134,7 +134,15 @@ pub fn extract(
             span,
             &mut stats,
         )?;
-        surface::append_surface(&mut mesh, part, iso, crossed, None, params, &mut stats.warnings);
+        surface::append_surface(
+            &mut mesh,
+            part,
+            iso,
+            crossed,
+            None,
+            params,
+            &mut stats.warnings,
+        );
     }
     stats.vertices = mesh.vertex_count() as u64;
     stats.triangles = mesh.triangles.len() as u64;

@@ -2,6 +2,7 @@
 
 import os
 import signal
+import warnings
 
 import numpy as np
 import pytest
@@ -434,3 +435,22 @@ def test_a_long_jump_reports_progress_and_a_cancel_keeps_the_surface(tmp_path):
         direct = fresh.set_isovalue(far)
         assert np.array_equal(jumped.points, direct.points)
         assert len(jumped.triangles) == len(direct.triangles)
+
+
+def test_float64_values_that_float32_cannot_resolve_warn_and_values_beyond_it_are_refused(tmp_path):
+    """The slider keeps float32 values: a pressure of 101325 ± 0.02 Pa became a few
+    hundred float32 steps without a word (the surfaces were those of the rounded values),
+    and a finite 1e40 turned infinite and was blamed on the data."""
+    z, y, x = np.mgrid[0:16, 0:16, 0:16].astype(np.float64)
+    pressure = 101325.0 + 0.02 * np.sin(x / 3.0) * np.cos(y / 4.0) * np.cos(z / 5.0)
+    with pytest.warns(isobar.IsobarWarning, match=r"stored as float32, in steps of 0\.0078125") as caught:
+        isobar.Slider.build_array(pressure, tmp_path / "p.isoslider")
+    assert caught[0].filename == __file__  # the caller's line
+    offset = pressure - pressure.mean()  # what the warning advises: no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        isobar.Slider.build_array(offset, tmp_path / "q.isoslider")
+    huge = offset.copy()
+    huge[3, 2, 1] = 1e40
+    with pytest.raises(isobar.InvalidArgumentError, match=r"\[z, y, x\] = \[3, 2, 1\] \(1e\+40\) is beyond float32's range"):
+        isobar.Slider.build_array(huge, tmp_path / "r.isoslider")

@@ -23,7 +23,7 @@ from typing import Optional
 import numpy as np
 
 from ._lib import PROGRESS_FN, SliderChange, SliderHandle, check, encode, lib
-from .errors import InvalidArgumentError
+from .errors import InvalidArgumentError, issue
 from .sph import ProgressCallback, _call
 from .surface import _copy
 
@@ -55,6 +55,34 @@ def _one_at_a_time(method):
             return method(self, *args, **kwargs)
 
     return locked
+
+
+def _check_float32_precision(values: np.ndarray) -> None:
+    """The slider keeps float32 values. Refuses finite values beyond float32's range (they
+    would turn infinite and be blamed on the data), and warns when float32 resolves the
+    value range in fewer than 10,000 steps (a field offset far from zero, as a pressure
+    of 101325 ± 0.02 Pa): the surfaces would be those of the rounded values."""
+    finite = np.isfinite(values)
+    big = finite & (np.abs(values) > np.finfo(np.float32).max)
+    if big.any():
+        index = tuple(int(i) for i in np.argwhere(big)[0])
+        raise InvalidArgumentError(
+            f"value at [z, y, x] = {list(index)} ({values[index]:g}) is beyond float32's range, "
+            "which the slider stores; scale the values first"
+        )
+    if not finite.any():
+        return
+    lo, hi = float(values[finite].min()), float(values[finite].max())
+    step = float(np.spacing(np.float32(max(abs(lo), abs(hi)))))
+    if hi > lo and step > 1e-4 * (hi - lo):
+        issue(
+            [
+                f"the float64 values are stored as float32, in steps of {step:g} near {max(abs(lo), abs(hi)):g}: "
+                f"{100 * step / (hi - lo):.2g} % of the value range {lo:g}..{hi:g}; subtract an offset "
+                "(e.g. the mean) before building to keep the surfaces of the exact values"
+            ],
+            stacklevel=3,
+        )
 
 
 class SliderUpdate:
@@ -183,6 +211,8 @@ class Slider:
         values = np.asarray(values)
         if values.ndim != 3:
             raise InvalidArgumentError(f"values must be a 3-D array [z, y, x], got shape {values.shape}")
+        if values.dtype.kind == "f" and values.dtype.itemsize > 4:
+            _check_float32_precision(values)
         data = np.ascontiguousarray(values, dtype=np.float32)
         nz, ny, nx = data.shape
         dims = (c_size_t * 3)(nx, ny, nz)

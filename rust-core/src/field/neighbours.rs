@@ -26,8 +26,8 @@ pub struct NeighbourGrid {
     squeeze: Option<Box<[AxisMap; 3]>>,
     /// The largest `reach` the squeeze keeps exact.
     reach: i64,
-    /// `offsets[c]..offsets[c+1]` are the sorted slots of cell c.
-    offsets: Vec<u32>,
+    /// Where each cell's particles lie among the sorted slots.
+    cells: Cells,
     /// Original particle index of each sorted slot; within a cell, ascending.
     order: Vec<u32>,
 }
@@ -66,7 +66,7 @@ impl NeighbourGrid {
             dims: box_dims,
             squeeze: None,
             reach,
-            offsets: Vec::new(),
+            cells: Cells::Dense(Vec::new()),
             order: Vec::new(),
         };
         // Clamped: (hi - lo) / cell can round below the product used here, and a particle
@@ -92,8 +92,16 @@ impl NeighbourGrid {
         }
         let dims = grid.dims;
         let ncells = cells(&dims);
-        let needed = (ncells + 1) * 4 + positions.len() as u128 * 8;
-        if needed > memory_budget as u128 || ncells >= u32::MAX as u128 {
+        let n = positions.len() as u128;
+        // Still far more cells than particles (particles scattered over the box on every
+        // axis, as spray is): only the occupied cells are listed.
+        let sparse = ncells > 8 * n + (1 << 20);
+        let needed = if sparse {
+            n * (16 + 4 + 16 + 4 + 8)
+        } else {
+            (ncells + 1) * 4 + n * 8
+        };
+        if needed > memory_budget as u128 || (!sparse && ncells >= u32::MAX as u128) {
             return Err(Error::OverBudget {
                 what: format!(
                     "a neighbour grid of {}×{}×{} cells of {cell_size} (particles spread over {:?}..{:?})",
@@ -102,6 +110,27 @@ impl NeighbourGrid {
                 needed_bytes: needed.min(u64::MAX as u128) as u64,
                 budget_bytes: memory_budget,
             });
+        }
+        if sparse {
+            let mut keyed: Vec<(u128, u32)> = positions
+                .par_iter()
+                .enumerate()
+                .map(|(i, &p)| (grid.key(grid.squeezed(box_cell(p))), i as u32))
+                .collect();
+            // By cell, then by particle: each cell lists its particles ascending.
+            keyed.par_sort_unstable();
+            let mut keys = Vec::new();
+            let mut starts = Vec::new();
+            for (slot, &(key, _)) in keyed.iter().enumerate() {
+                if keys.last() != Some(&key) {
+                    keys.push(key);
+                    starts.push(slot as u32);
+                }
+            }
+            starts.push(keyed.len() as u32);
+            grid.order = keyed.into_iter().map(|(_, i)| i).collect();
+            grid.cells = Cells::Sparse { keys, starts };
+            return Ok(grid);
         }
         let cell_of: Vec<u32> = positions
             .par_iter()
@@ -125,7 +154,7 @@ impl NeighbourGrid {
             order[cursor[c as usize] as usize] = i as u32;
             cursor[c as usize] += 1;
         }
-        grid.offsets = offsets;
+        grid.cells = Cells::Dense(offsets);
         grid.order = order;
         Ok(grid)
     }
@@ -139,13 +168,23 @@ impl NeighbourGrid {
     /// layout a GPU kernel needs to repeat [`NeighbourGrid::for_each_candidate_range`].
     /// None for a squeezed grid, whose cells are not where that arithmetic puts them.
     pub fn layout(&self) -> Option<(DVec3, f64, [usize; 3], &[u32])> {
-        self.squeeze
-            .is_none()
-            .then_some((self.origin, self.inv_cell, self.dims, &self.offsets[..]))
+        match (&self.squeeze, &self.cells) {
+            (None, Cells::Dense(offsets)) => {
+                Some((self.origin, self.inv_cell, self.dims, &offsets[..]))
+            }
+            _ => None,
+        }
     }
 
     fn linear(&self, x: usize, y: usize, z: usize) -> usize {
         x + self.dims[0] * (y + self.dims[1] * z)
+    }
+
+    /// [`NeighbourGrid::linear`] in 128 bits, for a sparse grid's cell keys (its cell
+    /// count may pass 2^64).
+    fn key(&self, c: [i64; 3]) -> u128 {
+        let [x, y, z] = c.map(|c| c as u128);
+        x + self.dims[0] as u128 * (y + self.dims[1] as u128 * z)
     }
 
     /// Box cell coordinates to the grid's.
@@ -192,21 +231,39 @@ impl NeighbourGrid {
             let d = self.dims[a] as i64;
             let (l, h) = (first[a].max(0), last[a].min(d - 1));
             if l > h {
-                return CandidateRanges::empty(self);
+                return CandidateRanges::Empty;
             }
             lo[a] = l as usize;
             n[a] = (h - l) as usize + 1;
         }
-        let y_step = self.dims[0];
-        CandidateRanges {
-            offsets: &self.offsets,
-            row: self.linear(lo[0], lo[1], lo[2]),
+        let rows = Rows {
             width: n[0],
             rows_per_slice: n[1],
             left_in_slice: n[1],
             left: n[1] * n[2],
-            y_step,
-            z_step: y_step * self.dims[1] - y_step * (n[1] - 1),
+        };
+        match &self.cells {
+            Cells::Dense(offsets) => {
+                let y_step = self.dims[0];
+                CandidateRanges::Dense {
+                    offsets,
+                    rows,
+                    row: self.linear(lo[0], lo[1], lo[2]),
+                    y_step,
+                    z_step: y_step * self.dims[1] - y_step * (n[1] - 1),
+                }
+            }
+            Cells::Sparse { keys, starts } => {
+                let y_step = self.dims[0] as u128;
+                CandidateRanges::Sparse {
+                    keys,
+                    starts,
+                    rows,
+                    row: self.key(lo.map(|c| c as i64)),
+                    y_step,
+                    z_step: y_step * self.dims[1] as u128 - y_step * (n[1] as u128 - 1),
+                }
+            }
         }
     }
 
@@ -280,13 +337,22 @@ impl AxisMap {
     }
 }
 
-/// The slot ranges of one neighbour query (see [`NeighbourGrid::candidate_ranges`]): the
-/// block's rows one after the other, each found by adding a stride to the last, so a row
-/// costs two offset loads, not two cell indices computed from coordinates.
-pub struct CandidateRanges<'a> {
-    offsets: &'a [u32],
-    /// Linear index of the next row's first cell.
-    row: usize,
+/// Where each cell's particles lie among the sorted slots.
+#[derive(Clone, Debug)]
+enum Cells {
+    /// `offsets[c]..offsets[c+1]` are the slots of cell c, for every cell of the grid.
+    Dense(Vec<u32>),
+    /// The occupied cells' keys ([`NeighbourGrid::key`]), ascending, and
+    /// `starts[k]..starts[k+1]` the slots of cell `keys[k]`: for particles so scattered
+    /// that even the squeezed grid holds far more cells than particles (splashsurf's
+    /// `free_particles_1000` frame: 2·10⁹ cells for 1,000 particles).
+    Sparse { keys: Vec<u128>, starts: Vec<u32> },
+}
+
+/// The walk over a query block's rows of cells (along x): z-slice by z-slice, y-row by
+/// y-row.
+#[derive(Clone, Copy)]
+pub struct Rows {
     /// Cells in a row.
     width: usize,
     /// Rows in a z-slice of the block, and rows left in the current slice.
@@ -294,25 +360,48 @@ pub struct CandidateRanges<'a> {
     left_in_slice: usize,
     /// Rows left in the block.
     left: usize,
-    /// From a row to the next in its slice, and from a slice's last row to the next
-    /// slice's first.
-    y_step: usize,
-    z_step: usize,
 }
 
-impl<'a> CandidateRanges<'a> {
-    fn empty(grid: &'a NeighbourGrid) -> Self {
-        CandidateRanges {
-            offsets: &grid.offsets,
-            row: 0,
-            width: 0,
-            rows_per_slice: 0,
-            left_in_slice: 0,
-            left: 0,
-            y_step: 0,
-            z_step: 0,
+impl Rows {
+    /// Counts off a row; true when it ends a z-slice (the next row is a slice's stride
+    /// away, not a row's).
+    #[inline]
+    fn step(&mut self) -> bool {
+        self.left -= 1;
+        self.left_in_slice -= 1;
+        if self.left_in_slice == 0 {
+            self.left_in_slice = self.rows_per_slice;
+            true
+        } else {
+            false
         }
     }
+}
+
+/// The slot ranges of one neighbour query (see [`NeighbourGrid::candidate_ranges`]): the
+/// block's rows one after the other, each found by adding a stride to the last, so a row
+/// of a dense grid costs two offset loads, not two cell indices computed from coordinates
+/// (a sparse grid's, a search among its occupied cells).
+pub enum CandidateRanges<'a> {
+    Empty,
+    Dense {
+        offsets: &'a [u32],
+        rows: Rows,
+        /// Linear index of the next row's first cell.
+        row: usize,
+        /// From a row to the next in its slice, and from a slice's last row to the next
+        /// slice's first.
+        y_step: usize,
+        z_step: usize,
+    },
+    Sparse {
+        keys: &'a [u128],
+        starts: &'a [u32],
+        rows: Rows,
+        row: u128,
+        y_step: u128,
+        z_step: u128,
+    },
 }
 
 impl Iterator for CandidateRanges<'_> {
@@ -320,23 +409,47 @@ impl Iterator for CandidateRanges<'_> {
 
     #[inline]
     fn next(&mut self) -> Option<Range<usize>> {
-        while self.left > 0 {
-            self.left -= 1;
-            let row = self.row;
-            self.left_in_slice -= 1;
-            if self.left_in_slice == 0 {
-                self.left_in_slice = self.rows_per_slice;
-                self.row += self.z_step;
-            } else {
-                self.row += self.y_step;
+        match self {
+            CandidateRanges::Empty => None,
+            CandidateRanges::Dense {
+                offsets,
+                rows,
+                row,
+                y_step,
+                z_step,
+            } => {
+                while rows.left > 0 {
+                    let first = *row;
+                    *row += if rows.step() { *z_step } else { *y_step };
+                    let start = offsets[first] as usize;
+                    let end = offsets[first + rows.width] as usize;
+                    if start < end {
+                        return Some(start..end);
+                    }
+                }
+                None
             }
-            let start = self.offsets[row] as usize;
-            let end = self.offsets[row + self.width] as usize;
-            if start < end {
-                return Some(start..end);
+            CandidateRanges::Sparse {
+                keys,
+                starts,
+                rows,
+                row,
+                y_step,
+                z_step,
+            } => {
+                while rows.left > 0 {
+                    let first = *row;
+                    *row += if rows.step() { *z_step } else { *y_step };
+                    let past = first + rows.width as u128;
+                    let k = keys.partition_point(|&c| c < first);
+                    let end = k + keys[k..].iter().take_while(|&&c| c < past).count();
+                    if end > k {
+                        return Some(starts[k] as usize..starts[end] as usize);
+                    }
+                }
+                None
             }
         }
-        None
     }
 }
 
@@ -420,13 +533,54 @@ mod tests {
     }
 
     #[test]
-    fn absurd_extent_is_refused_before_allocating() {
-        // Spread evenly, the particles fill the box: nothing to squeeze.
+    fn particles_scattered_over_an_absurd_box_cost_memory_by_particle() {
+        // Spread evenly over a box of 10¹² cells an axis: nothing to squeeze, so only the
+        // occupied cells are listed; a budget below that is refused before allocating.
         let pts: Vec<DVec3> = (0..1000)
             .map(|i| DVec3::new(i as f64, (i * 7 % 1000) as f64, (i * 13 % 1000) as f64) * 1e6)
             .collect();
-        let err = NeighbourGrid::build(&pts, 1e-3, 1, 1 << 30).unwrap_err();
+        let grid = NeighbourGrid::build(&pts, 1e-3, 1, 1 << 30).unwrap();
+        assert!(matches!(grid.cells, Cells::Sparse { ref keys, .. } if keys.len() == 1000));
+        assert!(grid.layout().is_none());
+        for (i, &p) in pts.iter().enumerate().step_by(37) {
+            let near: Vec<u32> = grid
+                .candidate_ranges(p + DVec3::splat(4e-4), 1)
+                .flat_map(|r| grid.order()[r].to_vec())
+                .collect();
+            assert_eq!(near, [i as u32]);
+        }
+        let err = NeighbourGrid::build(&pts, 1e-3, 1, 10_000).unwrap_err();
         assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+
+        // A cluster among them: many particles a cell, rows of several cells.
+        let mut rnd = crate::test_rng::unit(4242);
+        let centre = DVec3::splat(5e8);
+        let mut all = pts.clone();
+        all.extend((0..400).map(|_| centre + DVec3::new(rnd(), rnd(), rnd()) * 0.01));
+        let r = 2e-3;
+        let grid = NeighbourGrid::build(&all, r / 2.0, 2, 1 << 30).unwrap();
+        assert!(matches!(grid.cells, Cells::Sparse { .. }));
+        for q in 0..300 {
+            let p = centre + DVec3::new(rnd(), rnd(), rnd()) * 0.016 - DVec3::splat(0.003);
+            let mut found: Vec<usize> = grid
+                .candidate_ranges(p, 2)
+                .flat_map(|range| grid.order()[range].to_vec())
+                .map(|i| i as usize)
+                .filter(|&i| all[i].distance(p) < r)
+                .collect();
+            found.sort_unstable();
+            let brute: Vec<usize> = (0..all.len()).filter(|&i| all[i].distance(p) < r).collect();
+            assert_eq!(found, brute, "query {q}");
+            let (lo, hi) = (p - DVec3::splat(r), p + DVec3::splat(r));
+            let boxed: Vec<usize> = grid
+                .ranges_in_box(lo, hi)
+                .flat_map(|range| grid.order()[range].to_vec())
+                .map(|i| i as usize)
+                .collect();
+            let inside =
+                (0..all.len()).filter(|&i| all[i].cmpge(lo).all() && all[i].cmple(hi).all());
+            assert!(inside.into_iter().all(|i| boxed.contains(&i)), "box {q}");
+        }
     }
 
     #[test]
