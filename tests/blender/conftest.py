@@ -103,6 +103,17 @@ def make_sequence(folder: Path, sources, pattern="frame_{:04d}.vtk", start=1):
     return paths
 
 
+def import_sequence(path, **kwargs):
+    """Imports the sequence of `path` with the demo parameters (`kwargs` override them) as
+    the Import operator does; returns the new fluid surface."""
+    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
+    params.update(kwargs)
+    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
+    obj = bpy.context.active_object
+    assert obj.isobar.enabled
+    return obj
+
+
 @pytest.fixture
 def demo_sequence(tmp_path):
     """frame_0001.vtk (dam break frame 1), frame_0002.vtk (frame 26), frame_0003.vtk (frame 1)."""

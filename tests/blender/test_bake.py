@@ -5,14 +5,7 @@ from pathlib import Path
 
 import bpy
 import pytest
-from conftest import GRID_FACTOR, ISO, H, assert_mesh_equals, reference
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    return bpy.context.active_object
+from conftest import assert_mesh_equals, import_sequence, ISO, reference
 
 
 def test_bake_and_play_back_without_particle_files(scene, isobar, demo_sequence, tmp_path):

@@ -4,16 +4,9 @@ frame before the emitter's first particle (0 particles: an empty surface, not an
 that stopped bakes and USD exports), and Attributes 'none'."""
 
 import bpy
-from conftest import FRAME_26, GRID_FACTOR, ISO, H, assert_mesh_equals, make_sequence, reference
+from conftest import assert_mesh_equals, FRAME_26, import_sequence, make_sequence, reference
 
 EMPTY_VTK = "# vtk DataFile Version 3.0\nno particles yet\nASCII\nDATASET POLYDATA\nPOINTS 0 float\n"
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    return bpy.context.active_object
 
 
 def test_a_linked_fluid_surface_keeps_its_library_mesh_and_is_not_written(scene, addon, demo_sequence, tmp_path):

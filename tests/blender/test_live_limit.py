@@ -10,17 +10,10 @@ import threading
 
 import bpy
 import pytest
-from conftest import FRAME_26, GRID_FACTOR, ISO, H, assert_mesh_equals, reference
+from conftest import assert_mesh_equals, FRAME_26, import_sequence, reference
 
 PARTICLES = 4732  # in each dam break frame of the demo sequence
 LIMIT = 1000
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    return bpy.context.active_object
 
 
 def over_limit(frame, limit=LIMIT, frame_change=False):

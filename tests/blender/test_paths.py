@@ -7,16 +7,9 @@ import shutil
 from pathlib import Path
 
 import bpy
-from conftest import FRAME_01, FRAME_26, GRID_FACTOR, ISO, H, assert_mesh_equals, make_sequence, reference
+from conftest import assert_mesh_equals, FRAME_01, FRAME_26, import_sequence, make_sequence, reference
 from test_fe_samples import _cube_vtu
 from test_volume_slider import _volume
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    return bpy.context.active_object
 
 
 def resolved(value):

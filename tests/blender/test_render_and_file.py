@@ -4,15 +4,8 @@ import os
 
 import bpy
 import numpy as np
-from conftest import GRID_FACTOR, ISO, H, assert_mesh_equals, mesh_arrays, reference
+from conftest import assert_mesh_equals, GRID_FACTOR, H, import_sequence, mesh_arrays, reference
 from mathutils import Vector
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    return bpy.context.active_object
 
 
 def _attribute_emission_material():

@@ -14,20 +14,12 @@ from conftest import (
     ISO,
     H,
     assert_mesh_equals,
+    import_sequence,
     attribute,
     make_sequence,
     mesh_arrays,
     reference,
 )
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    obj = bpy.context.active_object
-    assert obj.isobar.enabled
-    return obj
 
 
 def test_import_and_step_frames(scene, isobar, demo_sequence):

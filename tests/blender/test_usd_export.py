@@ -7,14 +7,7 @@ import os
 import bpy
 import numpy as np
 import pytest
-from conftest import FRAME_01, FRAME_26, GRID_FACTOR, ISO, MODULE, H, reference
-
-
-def import_sequence(path, **kwargs):
-    params = dict(h=H, iso=ISO, grid_factor=GRID_FACTOR)
-    params.update(kwargs)
-    assert bpy.ops.isobar.import_sequence(filepath=str(path), **params) == {"FINISHED"}
-    return bpy.context.active_object
+from conftest import FRAME_01, FRAME_26, GRID_FACTOR, H, import_sequence, ISO, MODULE, reference
 
 
 def open_stage(pxr, path):

@@ -236,21 +236,17 @@ impl NeighbourGrid {
             lo[a] = l as usize;
             n[a] = (h - l) as usize + 1;
         }
-        let rows = Rows {
-            width: n[0],
-            rows_per_slice: n[1],
-            left_in_slice: n[1],
-            left: n[1] * n[2],
-        };
         match &self.cells {
             Cells::Dense(offsets) => {
                 let y_step = self.dims[0];
                 CandidateRanges::Dense {
                     offsets,
-                    rows,
-                    row: self.linear(lo[0], lo[1], lo[2]),
-                    y_step,
-                    z_step: y_step * self.dims[1] - y_step * (n[1] - 1),
+                    rows: Rows::of_block(
+                        self.linear(lo[0], lo[1], lo[2]),
+                        y_step,
+                        y_step * self.dims[1] - y_step * (n[1] - 1),
+                        n,
+                    ),
                 }
             }
             Cells::Sparse { keys, starts } => {
@@ -258,10 +254,12 @@ impl NeighbourGrid {
                 CandidateRanges::Sparse {
                     keys,
                     starts,
-                    rows,
-                    row: self.key(lo.map(|c| c as i64)),
-                    y_step,
-                    z_step: y_step * self.dims[1] as u128 - y_step * (n[1] as u128 - 1),
+                    rows: Rows::of_block(
+                        self.key(lo.map(|c| c as i64)),
+                        y_step,
+                        y_step * self.dims[1] as u128 - y_step * (n[1] as u128 - 1),
+                        n,
+                    ),
                 }
             }
         }
@@ -350,9 +348,16 @@ enum Cells {
 }
 
 /// The walk over a query block's rows of cells (along x): z-slice by z-slice, y-row by
-/// y-row.
+/// y-row, each row's first cell found by adding a stride to the last (`T`: a dense grid's
+/// linear index, or a sparse grid's 128-bit key).
 #[derive(Clone, Copy)]
-pub struct Rows {
+pub struct Rows<T> {
+    /// The next row's first cell.
+    row: T,
+    /// From a row to the next in its slice, and from a slice's last row to the next
+    /// slice's first.
+    y_step: T,
+    z_step: T,
     /// Cells in a row.
     width: usize,
     /// Rows in a z-slice of the block, and rows left in the current slice.
@@ -362,19 +367,36 @@ pub struct Rows {
     left: usize,
 }
 
-impl Rows {
-    /// Counts off a row; true when it ends a z-slice (the next row is a slice's stride
-    /// away, not a row's).
+impl<T: Copy + std::ops::AddAssign> Rows<T> {
+    /// The rows of a block of `n` cells (x, y, z) whose first row starts at `row`.
+    fn of_block(row: T, y_step: T, z_step: T, n: [usize; 3]) -> Self {
+        Rows {
+            row,
+            y_step,
+            z_step,
+            width: n[0],
+            rows_per_slice: n[1],
+            left_in_slice: n[1],
+            left: n[1] * n[2],
+        }
+    }
+
+    /// The first cell of the next row, if any.
     #[inline]
-    fn step(&mut self) -> bool {
+    fn next_row(&mut self) -> Option<T> {
+        if self.left == 0 {
+            return None;
+        }
         self.left -= 1;
         self.left_in_slice -= 1;
+        let first = self.row;
         if self.left_in_slice == 0 {
             self.left_in_slice = self.rows_per_slice;
-            true
+            self.row += self.z_step;
         } else {
-            false
+            self.row += self.y_step;
         }
+        Some(first)
     }
 }
 
@@ -386,21 +408,12 @@ pub enum CandidateRanges<'a> {
     Empty,
     Dense {
         offsets: &'a [u32],
-        rows: Rows,
-        /// Linear index of the next row's first cell.
-        row: usize,
-        /// From a row to the next in its slice, and from a slice's last row to the next
-        /// slice's first.
-        y_step: usize,
-        z_step: usize,
+        rows: Rows<usize>,
     },
     Sparse {
         keys: &'a [u128],
         starts: &'a [u32],
-        rows: Rows,
-        row: u128,
-        y_step: u128,
-        z_step: u128,
+        rows: Rows<u128>,
     },
 }
 
@@ -411,16 +424,8 @@ impl Iterator for CandidateRanges<'_> {
     fn next(&mut self) -> Option<Range<usize>> {
         match self {
             CandidateRanges::Empty => None,
-            CandidateRanges::Dense {
-                offsets,
-                rows,
-                row,
-                y_step,
-                z_step,
-            } => {
-                while rows.left > 0 {
-                    let first = *row;
-                    *row += if rows.step() { *z_step } else { *y_step };
+            CandidateRanges::Dense { offsets, rows } => {
+                while let Some(first) = rows.next_row() {
                     let start = offsets[first] as usize;
                     let end = offsets[first + rows.width] as usize;
                     if start < end {
@@ -429,17 +434,8 @@ impl Iterator for CandidateRanges<'_> {
                 }
                 None
             }
-            CandidateRanges::Sparse {
-                keys,
-                starts,
-                rows,
-                row,
-                y_step,
-                z_step,
-            } => {
-                while rows.left > 0 {
-                    let first = *row;
-                    *row += if rows.step() { *z_step } else { *y_step };
+            CandidateRanges::Sparse { keys, starts, rows } => {
+                while let Some(first) = rows.next_row() {
                     let past = first + rows.width as u128;
                     let k = keys.partition_point(|&c| c < first);
                     let end = k + keys[k..].iter().take_while(|&&c| c < past).count();
@@ -482,6 +478,34 @@ pub fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
 mod tests {
     use super::*;
 
+    /// Asserts that the candidates of a query at `p` hold exactly the points of `pts`
+    /// within `r` once filtered by distance, as a brute-force search finds them.
+    fn assert_exact_neighbours(grid: &NeighbourGrid, pts: &[DVec3], p: DVec3, reach: i64, r: f64) {
+        let mut found: Vec<usize> = grid
+            .candidate_ranges(p, reach)
+            .flat_map(|range| grid.order()[range].to_vec())
+            .map(|i| i as usize)
+            .filter(|&i| pts[i].distance(p) < r)
+            .collect();
+        found.sort_unstable();
+        let brute: Vec<usize> = (0..pts.len()).filter(|&i| pts[i].distance(p) < r).collect();
+        assert_eq!(found, brute, "query at {p}");
+    }
+
+    /// Asserts that the ranges of a box query hold every point of `pts` inside the box.
+    fn assert_box_holds(grid: &NeighbourGrid, pts: &[DVec3], lo: DVec3, hi: DVec3) {
+        let boxed: Vec<usize> = grid
+            .ranges_in_box(lo, hi)
+            .flat_map(|range| grid.order()[range].to_vec())
+            .map(|i| i as usize)
+            .collect();
+        let inside = (0..pts.len()).filter(|&i| pts[i].cmpge(lo).all() && pts[i].cmple(hi).all());
+        assert!(
+            inside.into_iter().all(|i| boxed.contains(&i)),
+            "box {lo}..{hi}"
+        );
+    }
+
     #[test]
     fn candidates_cover_every_point_within_one_cell() {
         let mut rnd = crate::test_rng::unit(12345);
@@ -491,21 +515,9 @@ mod tests {
         let r = 0.13;
         for (cell, reach) in [(r, 1), (r / 2.0, 2), (r / 3.0, 3)] {
             let grid = NeighbourGrid::build(&pts, cell, reach, 1 << 30).unwrap();
-            for q in 0..200 {
+            for _ in 0..200 {
                 let p = DVec3::new(rnd() * 1.2 - 0.1, rnd() * 0.7 - 0.1, rnd() * 2.2 - 0.1);
-                let mut found = Vec::new();
-                grid.for_each_candidate_range(p, reach, |range| {
-                    for slot in range {
-                        let i = grid.order()[slot] as usize;
-                        if pts[i].distance(p) < r {
-                            found.push(i);
-                        }
-                    }
-                });
-                found.sort_unstable();
-                let brute: Vec<usize> =
-                    (0..pts.len()).filter(|&i| pts[i].distance(p) < r).collect();
-                assert_eq!(found, brute, "query {q}");
+                assert_exact_neighbours(&grid, &pts, p, reach, r);
             }
         }
     }
@@ -560,26 +572,10 @@ mod tests {
         let r = 2e-3;
         let grid = NeighbourGrid::build(&all, r / 2.0, 2, 1 << 30).unwrap();
         assert!(matches!(grid.cells, Cells::Sparse { .. }));
-        for q in 0..300 {
+        for _ in 0..300 {
             let p = centre + DVec3::new(rnd(), rnd(), rnd()) * 0.016 - DVec3::splat(0.003);
-            let mut found: Vec<usize> = grid
-                .candidate_ranges(p, 2)
-                .flat_map(|range| grid.order()[range].to_vec())
-                .map(|i| i as usize)
-                .filter(|&i| all[i].distance(p) < r)
-                .collect();
-            found.sort_unstable();
-            let brute: Vec<usize> = (0..all.len()).filter(|&i| all[i].distance(p) < r).collect();
-            assert_eq!(found, brute, "query {q}");
-            let (lo, hi) = (p - DVec3::splat(r), p + DVec3::splat(r));
-            let boxed: Vec<usize> = grid
-                .ranges_in_box(lo, hi)
-                .flat_map(|range| grid.order()[range].to_vec())
-                .map(|i| i as usize)
-                .collect();
-            let inside =
-                (0..all.len()).filter(|&i| all[i].cmpge(lo).all() && all[i].cmple(hi).all());
-            assert!(inside.into_iter().all(|i| boxed.contains(&i)), "box {q}");
+            assert_exact_neighbours(&grid, &all, p, 2, r);
+            assert_box_holds(&grid, &all, p - DVec3::splat(r), p + DVec3::splat(r));
         }
     }
 
@@ -636,29 +632,9 @@ mod tests {
             }
             queries.push(DVec3::splat(5e3)); // deep in the squeezed space
             queries.push(DVec3::splat(-1e5)); // outside the box
-            for (q, &p) in queries.iter().enumerate() {
-                let mut found = Vec::new();
-                grid.for_each_candidate_range(p, reach, |range| {
-                    for slot in range {
-                        let i = grid.order()[slot] as usize;
-                        if pts[i].distance(p) < r {
-                            found.push(i);
-                        }
-                    }
-                });
-                found.sort_unstable();
-                let brute: Vec<usize> =
-                    (0..pts.len()).filter(|&i| pts[i].distance(p) < r).collect();
-                assert_eq!(found, brute, "query {q} at {p}");
-                // A box query holds every particle in the box.
-                let (lo, hi) = (p - DVec3::splat(r), p + DVec3::splat(r));
-                let mut boxed = Vec::new();
-                for range in grid.ranges_in_box(lo, hi) {
-                    boxed.extend(range.map(|slot| grid.order()[slot] as usize));
-                }
-                let inside =
-                    (0..pts.len()).filter(|&i| pts[i].cmpge(lo).all() && pts[i].cmple(hi).all());
-                assert!(inside.into_iter().all(|i| boxed.contains(&i)), "box {q}");
+            for &p in &queries {
+                assert_exact_neighbours(&grid, &pts, p, reach, r);
+                assert_box_holds(&grid, &pts, p - DVec3::splat(r), p + DVec3::splat(r));
             }
         }
         // Where the box is not mostly empty, nothing is squeezed (queries stay as fast).
