@@ -389,10 +389,11 @@ def live_limit(settings, cause: str = SETTING) -> int:
     step, a script, or an exporter stepping through the frames (Blender's Alembic and
     USD export) needs that frame's surface, and the last one shown would be a wrong
     result. Nor does it hold back Refresh (the user asked for this frame), a render, or
-    background mode (no UI to freeze)."""
+    background mode (no UI to freeze). While a surface bakes, the frames it sets hold the
+    other surfaces back as playback would (until the bake ends)."""
     if _rendering or not _interactive() or cause == REFRESH:
         return 0
-    if cause == FRAME and not timeline_moving():
+    if cause == FRAME and not (timeline_moving() or _baking):
         return 0
     return max(0, int(settings.live_particle_limit))
 
@@ -408,12 +409,16 @@ def timeline_moving() -> bool:
     frame steps), where the UI must not be read."""
     if threading.current_thread() is not threading.main_thread():
         return False
-    wm = getattr(bpy.context, "window_manager", None)
-    for window in getattr(wm, "windows", ()):
+    for window in _windows():
         screen = window.screen
         if screen is not None and (screen.is_animation_playing or screen.is_scrubbing):
             return True
     return False
+
+
+def _windows():
+    """The window manager's windows (none in background mode)."""
+    return getattr(getattr(bpy.context, "window_manager", None), "windows", ())
 
 
 # Seconds between looks at whether the timeline still moves, while frames are held back.
@@ -433,7 +438,7 @@ def extract_held_back_frames() -> Optional[float]:
     moves, looks again later; then updates every fluid surface of the scene to the frame
     shown, no longer limited (the timeline stopped)."""
     try:
-        if timeline_moving():
+        if timeline_moving() or _baking:
             return _SETTLE_INTERVAL
         scene = getattr(bpy.context, "scene", None)
         if scene is not None:

@@ -14,12 +14,20 @@ _TYPES = {1: ("FLOAT", "value"), 2: ("FLOAT2", "vector"), 3: ("FLOAT_VECTOR", "v
 
 def write_object(obj, frame: FrameMesh) -> None:
     """Writes `frame` into `obj`'s mesh, first giving `obj` a mesh of its own when another
-    object shares it (a linked duplicate, Alt+D): each object shows the surface of its own
-    settings, and a shared mesh would show whichever was written last in both."""
+    surface the add-on writes shares it (a linked duplicate, Alt+D): each shows the surface
+    of its own settings, and a shared mesh would show whichever was written last in both.
+    A plain object sharing the mesh on purpose (Ctrl+L, the fluid shown twice) keeps it."""
     data = obj.data
-    if data.users > 1 + int(data.use_fake_user) and any(o != obj and o.data == data for o in bpy.data.objects):
+    if data.users > 1 + int(data.use_fake_user) and any(
+        o != obj and o.data == data and _writes_its_mesh(o) for o in bpy.data.objects
+    ):
         obj.data = data.copy()
     write(obj.data, frame)
+
+
+def _writes_its_mesh(obj) -> bool:
+    """True for a fluid surface or a volume slider (objects whose mesh the add-on writes)."""
+    return any(getattr(getattr(obj, group, None), "enabled", False) for group in ("isobar", "isobar_slider"))
 
 
 def write(mesh: "bpy.types.Mesh", frame: FrameMesh) -> None:

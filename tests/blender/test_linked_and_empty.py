@@ -80,3 +80,13 @@ def test_a_linked_duplicate_gets_a_mesh_of_its_own(scene, isobar, demo_sequence)
     assert_mesh_equals(dup, reference(isobar, demo_sequence[0], iso=0.3))
     assert_mesh_equals(obj, reference(isobar, demo_sequence[0]))
     assert f"{len(obj.data.vertices)} vertices" in obj.isobar.status
+
+
+def test_a_plain_object_sharing_the_surface_mesh_on_purpose_keeps_sharing_it(scene, demo_sequence):
+    """Ctrl+L (the fluid shown twice): only another surface the add-on writes makes the
+    mesh split; a plain object kept showing the first frame after the split."""
+    obj = import_sequence(demo_sequence[0])
+    viewer = bpy.data.objects.new("viewer", obj.data)
+    scene.collection.objects.link(viewer)
+    scene.frame_set(2)
+    assert viewer.data == obj.data and len(viewer.data.vertices) == len(obj.data.vertices) > 1000

@@ -246,11 +246,41 @@ def test_refresh_extracts_a_frame_over_the_limit(scene, isobar, demo_sequence, i
     assert_mesh_equals(obj, reference(isobar, demo_sequence[0], iso=0.55))
 
 
-def test_the_timeline_is_read_only_on_the_main_thread(addon):
+def test_the_timeline_is_read_only_on_the_main_thread(addon, monkeypatch):
     importer = addon.importer
     assert importer.timeline_moving() is False  # background bpy: no window plays
+
+    class Screen:
+        is_animation_playing, is_scrubbing = True, False
+
+    class Window:
+        screen = Screen()
+
+    monkeypatch.setattr(importer, "_windows", lambda: [Window()])
+    assert importer.timeline_moving() is True
+    Screen.is_animation_playing, Screen.is_scrubbing = False, True
+    assert importer.timeline_moving() is True
     off_main = []
     thread = threading.Thread(target=lambda: off_main.append(importer.timeline_moving()))
     thread.start()
     thread.join()
     assert off_main == [False]
+
+
+def test_frames_a_bake_sets_hold_back_the_other_surfaces(scene, addon, demo_sequence, interactive, timeline):
+    """Baking a surface from a particle system sets each frame: the other surfaces in the
+    scene are held back over their limit as during playback (an export is not running),
+    and extracted once the bake ends."""
+    importer = addon.importer
+    timeline.moving = False
+    obj = import_sequence(demo_sequence[0])
+    obj.isobar.live_particle_limit = LIMIT
+    other = import_sequence(demo_sequence[0])
+    assert importer.live_limit(obj.isobar, importer.FRAME) == 0
+    with importer.baking(other):
+        assert importer.live_limit(obj.isobar, importer.FRAME) == LIMIT
+        scene.frame_set(2)
+        assert obj.isobar.status == over_limit(2, frame_change=True)
+        assert importer.extract_held_back_frames() == importer._SETTLE_INTERVAL  # not while baking
+    assert importer.extract_held_back_frames() is None
+    assert not obj.isobar.status_error, obj.isobar.status

@@ -62,17 +62,19 @@ def _check_float32_precision(values: np.ndarray) -> None:
     would turn infinite and be blamed on the data), and warns when float32 resolves the
     value range in fewer than 10,000 steps (a field offset far from zero, as a pressure
     of 101325 ± 0.02 Pa): the surfaces would be those of the rounded values."""
+    # Reductions with `where`, not masked copies: a float64 volume may be gigabytes.
     finite = np.isfinite(values)
-    big = finite & (np.abs(values) > np.finfo(np.float32).max)
-    if big.any():
-        index = tuple(int(i) for i in np.argwhere(big)[0])
+    if not finite.any():
+        return
+    lo = float(np.min(values, where=finite, initial=np.inf))
+    hi = float(np.max(values, where=finite, initial=-np.inf))
+    limit = float(np.finfo(np.float32).max)
+    if max(abs(lo), abs(hi)) > limit:
+        index = tuple(int(i) for i in np.argwhere(finite & ((values > limit) | (values < -limit)))[0])
         raise InvalidArgumentError(
             f"value at [z, y, x] = {list(index)} ({values[index]:g}) is beyond float32's range, "
             "which the slider stores; scale the values first"
         )
-    if not finite.any():
-        return
-    lo, hi = float(values[finite].min()), float(values[finite].max())
     step = float(np.spacing(np.float32(max(abs(lo), abs(hi)))))
     if hi > lo and step > 1e-4 * (hi - lo):
         issue(

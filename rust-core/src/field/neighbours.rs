@@ -15,6 +15,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::ops::Range;
 
+/// The most cells along an axis of the particles' bounding box.
+const MAX_CELLS_PER_AXIS: u64 = 1 << 40;
+
 /// Particles bucketed into a dense grid of cubic cells.
 #[derive(Clone, Debug)]
 pub struct NeighbourGrid {
@@ -58,7 +61,17 @@ impl NeighbourGrid {
         let mut box_dims = [0usize; 3];
         for a in 0..3 {
             let n = ((hi[a] - lo[a]) / cell_size).floor() + 1.0;
-            box_dims[a] = n.min(1e15) as usize;
+            // Past this a cell index loses the particle (f64 cell coordinates, and three
+            // axes' product in 128 bits): refused, not clamped onto the last cell.
+            if n.is_nan() || n > MAX_CELLS_PER_AXIS as f64 {
+                return Err(Error::InvalidInput(format!(
+                    "the particles spread over {:?}..{:?}: {n:.3e} cells of {cell_size} along \
+                     axis {a}, more than the {MAX_CELLS_PER_AXIS} a neighbour grid indexes",
+                    lo.to_array(),
+                    hi.to_array()
+                )));
+            }
+            box_dims[a] = n as usize;
         }
         let mut grid = NeighbourGrid {
             origin: lo,
@@ -87,17 +100,23 @@ impl NeighbourGrid {
                 occupied.dedup();
                 AxisMap::new(&occupied, reach)
             });
-            grid.dims = std::array::from_fn(|a| maps[a].len as usize);
-            grid.squeeze = Some(Box::new(maps));
+            // Every slab within reach of a particle on every axis: nothing to squeeze, and
+            // the grid keeps the plain layout (the GPU's).
+            if maps.iter().any(|m| m.runs.len() > 1) {
+                grid.dims = std::array::from_fn(|a| maps[a].len as usize);
+                grid.squeeze = Some(Box::new(maps));
+            }
         }
         let dims = grid.dims;
         let ncells = cells(&dims);
         let n = positions.len() as u128;
         // Still far more cells than particles (particles scattered over the box on every
-        // axis, as spray is): only the occupied cells are listed.
-        let sparse = ncells > 8 * n + (1 << 20);
+        // axis, as spray is) and an offset table a large share of the budget: only the
+        // occupied cells are listed (a search per row of a query instead of two loads).
+        let sparse = ncells > 8 * n + (1 << 20) && (ncells + 1) * 4 > memory_budget as u128 / 8;
         let needed = if sparse {
-            n * (16 + 4 + 16 + 4 + 8)
+            // (key, particle) pairs, then the keys, their starts and the order.
+            n * (32 + 16 + 4 + 4)
         } else {
             (ncells + 1) * 4 + n * 8
         };
@@ -563,6 +582,19 @@ mod tests {
         }
         let err = NeighbourGrid::build(&pts, 1e-3, 1, 10_000).unwrap_err();
         assert!(matches!(err, Error::OverBudget { .. }), "{err}");
+        // Farther apart than a cell index reaches: refused (it was clamped onto the
+        // box's last cell, where no query near the particle looked).
+        let far = [DVec3::ZERO, DVec3::new(1e13, 0.0, 0.0)];
+        let err = NeighbourGrid::build(&far, 1e-3, 1, 1 << 30).unwrap_err();
+        assert!(
+            matches!(err, Error::InvalidInput(_)) && err.to_string().contains("axis 0"),
+            "{err}"
+        );
+        // A diagonal line fills a slab of every axis all along: nothing to squeeze, and an
+        // offset table a small share of the budget stays dense, with the GPU's layout.
+        let line: Vec<DVec3> = (0..300).map(|i| DVec3::splat(i as f64 * 0.05)).collect();
+        let dense = NeighbourGrid::build(&line, 0.05, 2, 1 << 30).unwrap();
+        assert!(dense.squeeze.is_none() && dense.layout().is_some());
 
         // A cluster among them: many particles a cell, rows of several cells.
         let mut rnd = crate::test_rng::unit(4242);
