@@ -264,6 +264,11 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         for name in primvars + ([velocity] if velocity else []):
             if name not in wanted and name not in CORE_ATTRIBUTES:
                 wanted.append(name)
+        if len(particles) == 0:
+            # An emitter before its first particle, or a fluid that has drained: an
+            # empty frame, as ParaView's filter and the Blender add-on give. The core
+            # refuses empty data, so that a whole empty input is an error there.
+            return to_mesh(_empty_surface(path, infos, wanted, options), primvars=primvars, velocities=velocity)
         keep_going = lambda _f, _p: not _STOP.is_set()  # noqa: E731
         try:
             # The warnings travel in FrameMesh.warnings (the results, the progress reports,
@@ -282,6 +287,24 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         return to_mesh(surface, primvars=primvars, velocities=velocity)
     finally:
         surface.release()
+
+
+def _empty_surface(path: str, infos: Mapping[str, int], wanted: List[str], options: Mapping[str, Any]) -> Dict[str, Any]:
+    """The surface of a file with 0 particles, shaped as an extraction would give it (the
+    arrays asked for, with no rows), so the sequence's primvars stay the same per frame."""
+    missing = [name for name in wanted if name not in infos and name not in CORE_ATTRIBUTES]
+    if missing:
+        raise InputError(f"no particle array '{missing[0]}' (arrays: {', '.join(infos) or 'none'})")
+    attributes = {
+        name: np.zeros((0, infos[name]) if infos.get(name, 1) > 1 else 0, dtype=np.float32) for name in wanted
+    }
+    return {
+        "points": np.zeros((0, 3), np.float32),
+        "triangles": np.zeros((0, 3), np.int32),
+        "normals": np.zeros((0, 3), np.float32) if options.get("normals", True) else None,
+        "attributes": attributes,
+        "warnings": [f"{os.path.basename(path)} holds 0 particles: an empty surface"],
+    }
 
 
 def _extract_adaptive(particles, job: Job, options: Dict[str, Any], wanted, velocity, progress):
