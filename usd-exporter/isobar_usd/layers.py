@@ -249,12 +249,12 @@ class MeshLayer:
         and holds the earlier frame's, but it interpolates the extent (always two
         corners): at frame 1.5 half the points could lie outside it, and a renderer
         sampling motion blur there would cull them. The earlier extent is authored again
-        just before the later frame (HOLD_BEFORE), so the extent is held with the points."""
-        frames = sorted(self._extents, key=lambda e: e[0])
+        just before the later frame (see :func:`hold_times`), so the extent is held with
+        the points."""
+        extents = {frame: extent for frame, _, extent in self._extents}
         attr = self.mesh.GetExtentAttr()
-        for (frame, n, extent), (later, m, _) in zip(frames, frames[1:]):
-            if n != m and later - frame > 2 * HOLD_BEFORE:
-                attr.Set(_array(extent, "float3[]"), float(later) - HOLD_BEFORE)
+        for frame, time in hold_times({frame: n for frame, n, _ in self._extents}).items():
+            attr.Set(_array(extents[frame], "float3[]"), time)
 
     def export(self, path: Path, atomic: bool = True) -> None:
         """Writes the layer to `path`: through a staging file renamed into place, or (with
@@ -333,14 +333,27 @@ def write_manifest(path: Path, settings: StageSettings, schema: Sequence[SchemaE
             raise OSError(f"USD could not write {staged}")
 
 
-def _clip_times(frames: Sequence[int], holds) -> List[Tuple[float, float]]:
-    """(stage time, clip time) pairs: f to f, and just before the next frame to f again
-    for each frame f in `holds`."""
+def hold_times(point_counts: Mapping[int, int]) -> Dict[int, float]:
+    """frame -> the time just before the next frame (HOLD_BEFORE), for each frame whose
+    point count differs from the next frame's (a negative count: not known, so held).
+    Between such frames USD holds the points, which it cannot interpolate; whatever the
+    writer authors again at these times is held with them."""
+    frames = sorted(point_counts)
+    return {
+        frame: float(later) - HOLD_BEFORE
+        for frame, later in zip(frames, frames[1:])
+        if (point_counts[frame] != point_counts[later] or point_counts[frame] < 0) and later - frame > 2 * HOLD_BEFORE
+    }
+
+
+def _clip_times(frames: Sequence[int], holds: Mapping[int, float]) -> List[Tuple[float, float]]:
+    """(stage time, clip time) pairs: f to f, and each hold's time (see
+    :func:`hold_times`) to f again."""
     times: List[Tuple[float, float]] = []
-    for frame, later in zip(frames, list(frames[1:]) + [None]):
+    for frame in frames:
         times.append((float(frame), float(frame)))
-        if later is not None and frame in holds and later - frame > 2 * HOLD_BEFORE:
-            times.append((float(later) - HOLD_BEFORE, float(frame)))
+        if frame in holds:
+            times.append((holds[frame], float(frame)))
     return times
 
 
@@ -351,14 +364,15 @@ def write_clips_root(
     clips: Sequence[Tuple[int, str]],
     manifest_asset: str,
     info: Optional[Mapping] = None,
-    holds: Iterable[int] = (),
+    point_counts: Optional[Mapping[int, int]] = None,
 ) -> None:
     """The root layer of a sequence: stage metadata, the prims with every attribute
     declared (types, interpolation), and value clips mapping time code f to clip f.
-    After each frame in `holds` (whose point count differs from the next frame's) the
-    clip's time also maps to the time just before the next frame (HOLD_BEFORE), so every
-    attribute holds that frame's values until then: USD interpolates across clips, and
-    would interpolate the extent around points it holds (see MeshLayer._hold_extents).
+    After each frame whose point count (`point_counts`, every frame's, or None: no
+    holds) differs from the next frame's, the clip's time also maps to the time just
+    before the next frame (:func:`hold_times`), so every attribute holds that frame's
+    values until then: USD interpolates across clips, and would interpolate the extent
+    around points it holds (see MeshLayer._hold_extents).
 
     Authored with the Sdf API alone: a Usd stage holding clip metadata composes the clips
     and opens every frame layer (an anonymous one resolves them against the current
@@ -396,7 +410,7 @@ def write_clips_root(
                 "assetPaths": Sdf.AssetPathArray([Sdf.AssetPath(asset) for _, asset in clips]),
                 "primPath": settings.root_path,
                 "active": Vt.Vec2dArray([(float(f), float(i)) for i, f in enumerate(frames)]),
-                "times": Vt.Vec2dArray(_clip_times(frames, set(holds))),
+                "times": Vt.Vec2dArray(_clip_times(frames, hold_times(point_counts or {}))),
                 "manifestAssetPath": Sdf.AssetPath(manifest_asset),
             }
         },

@@ -983,7 +983,7 @@ def _stitch_locked(
         [(f, f"{rel}/{clips[f].name}") for f in sorted(clips)],
         f"{rel}/{MANIFEST}",
         info,
-        holds=[f for f, later in zip(sorted(clips), sorted(clips)[1:]) if counts[f] != counts[later] or counts[f] < 0],
+        point_counts=counts,
     )
     frames = sorted(clips)
     return SequenceResult(output, "clips", [], frames, folder, entries)

@@ -93,9 +93,11 @@ impl NeighbourGrid {
         let cells = |dims: &[usize; 3]| dims.iter().map(|&d| d as u128).product::<u128>();
         // More cells than a few per particle: the box is mostly empty space.
         if cells(&box_dims) > 8 * positions.len() as u128 + (1 << 20) {
-            let raw: Vec<[i64; 3]> = positions.par_iter().map(|&p| box_cell(p)).collect();
+            // One axis at a time: 8 bytes a particle at most, below what either grid
+            // below keeps (and the budget counts).
             let maps: [AxisMap; 3] = std::array::from_fn(|a| {
-                let mut occupied: Vec<i64> = raw.iter().map(|c| c[a]).collect();
+                let mut occupied: Vec<i64> =
+                    positions.par_iter().map(|&p| box_cell(p)[a]).collect();
                 occupied.par_sort_unstable();
                 occupied.dedup();
                 AxisMap::new(&occupied, reach)
