@@ -214,7 +214,7 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         stem = os.path.splitext(os.path.basename(path))[0] or "volume"
         obj = None
         try:
-            store = volume_slider.ensure_store(path, self.memory_budget)
+            store, said = volume_slider.ensure_store(path, self.memory_budget)
             obj = _new_surface_object(context, f"{stem}_isosurface")
             # The object's own slider: opening a store checks it whole, so open it once.
             lo, hi = volume_slider.slider_for(obj, store).value_range
@@ -230,6 +230,8 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         settings.lod_error_bound = self.lod_error_bound  # not enabled yet: no slide
         settings.enabled = True
         settings.isovalue = 0.5 * (lo + hi)  # slides: the mesh appears
+        for text in said:
+            self.report({"WARNING"}, text)
         if settings.status_error:
             self.report({"ERROR"}, settings.status)
         return {"FINISHED"}

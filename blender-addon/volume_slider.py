@@ -14,8 +14,9 @@ and does not slide.
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -48,19 +49,25 @@ def store_path_for(path: str) -> str:
     return path if path.endswith(STORE_EXTENSION) else path + STORE_EXTENSION
 
 
-def ensure_store(path: str, memory_budget_gib: float = 0.0) -> str:
+def ensure_store(path: str, memory_budget_gib: float = 0.0) -> Tuple[str, List[str]]:
     """Builds the store of the volume at `path` unless an up-to-date one exists; returns
-    its path. `memory_budget_gib` bounds what the build holds besides the volume (0: the
-    core's default; past about 29 bytes a node it sorts on disk, beside the store). Raises
-    isobar.Error (naming the file) when the volume cannot be read or the budget is too
-    small."""
+    its path and what the build warned about (float64 values the store holds coarsely as
+    float32), for the caller to show. `memory_budget_gib` bounds what the build holds
+    besides the volume (0: the core's default; past about 29 bytes a node it sorts on
+    disk, beside the store). Raises isobar.Error (naming the file) when the volume cannot
+    be read or the budget is too small."""
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no such volume file: {path}")
     store = store_path_for(path)
+    said: List[str] = []
     if store != path and not _store_is_current(store, path):
         budget = int(min(max(memory_budget_gib, 0.0), 1.0e9) * 2**30)
-        isobar_module().Slider.build(path, store, memory_budget=budget)
-    return store
+        isobar = isobar_module()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", isobar.IsobarWarning)
+            isobar.Slider.build(path, store, memory_budget=budget)
+        said = [f"{os.path.basename(path)}: {w.message}" for w in caught if issubclass(w.category, isobar.IsobarWarning)]
+    return store, said
 
 
 def _store_is_current(store: str, volume: str) -> bool:
@@ -87,7 +94,8 @@ def rebuild_if_stale(obj, volume: str, store: str) -> bool:
     if os.path.exists(store) and os.path.getmtime(store) >= os.path.getmtime(volume):
         return False
     close(obj)
-    ensure_store(volume)
+    for text in ensure_store(volume)[1]:
+        print(f"isobar: warning: {text}")
     return True
 
 

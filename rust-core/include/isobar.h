@@ -289,6 +289,12 @@ extern "C" {
 // the next isobar call on the same thread.
 const char *isobar_last_error_message(void);
 
+// What the last `isobar_slider_build_*` call on this thread warned about although it
+// succeeded, one warning a line ("" for none): values wider than f32 that the store holds
+// coarsely. Results that carry their own warnings (surfaces, samples) have their own
+// `*_warnings` calls. Valid until the next build call on the same thread.
+const char *isobar_last_warnings(void);
+
 // Why `ISOBAR_BACKEND_AUTO` runs on the CPU on this machine, for hosts to tell their
 // user: `*note` is set to "" when AUTO would run on the GPU (a hardware adapter), else to
 // the reason the CLI prints after "backend auto: running on the CPU (" (no adapter, a
@@ -511,6 +517,20 @@ enum IsobarStatus isobar_slider_build_file(const char *volume_path,
 // origin and spacing (3 doubles each; NULL means 0 and 1); the other parameters as
 // [`isobar_slider_build_file`]'s.
 enum IsobarStatus isobar_slider_build_f32(const float *values,
+                                          const size_t *dims,
+                                          const double *origin,
+                                          const double *spacing,
+                                          const char *store_path,
+                                          double threshold,
+                                          uint32_t max_levels,
+                                          uint64_t memory_budget,
+                                          IsobarProgressFn progress,
+                                          void *user);
+
+// [`isobar_slider_build_f32`] of f64 values, which the store holds as f32: a finite
+// value beyond f32's range is refused, and a value range f32 resolves coarsely (an
+// offset far from zero) is warned about (`isobar_last_warnings`).
+enum IsobarStatus isobar_slider_build_f64(const double *values,
                                           const size_t *dims,
                                           const double *origin,
                                           const double *spacing,

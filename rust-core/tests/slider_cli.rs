@@ -417,3 +417,31 @@ fn an_interrupt_ends_slide_while_it_waits_for_isovalues() {
     drop(stdin);
     assert_eq!(status.code(), Some(130));
 }
+
+#[test]
+fn an_isovalue_outside_the_values_is_named_on_stderr() {
+    // The values span 0..3000+; 1e9 and -5 have no surface, which the user is told (the
+    // line of the input and the range), while stdout keeps one parseable line per value.
+    let raw = temp("outside-ring.raw");
+    std::fs::write(&raw, ring_volume(0.0)).unwrap();
+    let out = slide_with(
+        &raw,
+        &["--raw-type", "u16", "--raw-dims", "18,15,13"],
+        b"1500\n1e9\n-5\n",
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let counts: Vec<&str> = text.lines().map(|l| l.split(' ').nth(3).unwrap()).collect();
+    assert!(counts[0] != "0" && counts[1..] == ["0", "0"], "{text}");
+    let warned: Vec<&str> = err.lines().filter(|l| l.contains("warning")).collect();
+    assert_eq!(warned.len(), 2, "{err}");
+    assert!(
+        warned[0].starts_with("isobar: warning: line 2: no surface at isovalue 1000000000: the values range over 0 .."),
+        "{err}"
+    );
+    assert!(
+        warned[1].starts_with("isobar: warning: line 3: no surface at isovalue -5"),
+        "{err}"
+    );
+}

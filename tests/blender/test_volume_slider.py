@@ -224,3 +224,34 @@ def test_a_volume_rewritten_after_import_is_rebuilt_on_the_next_slide(scene, iso
         want = core.set_isovalue(settings.isovalue)
     assert settings.triangles == len(want.triangles) > 0
     assert len(mesh_arrays(obj)[1]) == len(want.triangles)
+
+
+class _ImportVolume:
+    """Stands in for a running Import Volume operator: its settings, and its reports."""
+
+    def __init__(self, path):
+        self.filepath, self.memory_budget, self.lod_error_bound = str(path), 4.0, 0.0
+        self.reports = []
+
+    def report(self, kind, message):
+        self.reports.append((set(kind), message))
+
+
+def test_a_float64_volume_the_store_holds_coarsely_is_a_warning(scene, addon, tmp_path):
+    """The store holds float32: a pressure of 101325 Pa plus small variations, saved as
+    float64, becomes a few float32 steps. The import says so (what to do included); the
+    same variations without the offset import without a word."""
+    x = np.linspace(-1.0, 1.0, 20)
+    z, y, xx = np.meshgrid(x, x, x, indexing="ij")
+    variation = 0.02 * np.exp(-4 * (xx**2 + y**2 + z**2))
+    for name, values, warned in (("pressure.npy", 101325.0 + variation, True), ("variation.npy", variation, False)):
+        np.save(tmp_path / name, values)
+        op = _ImportVolume(tmp_path / name)
+        assert addon.operators.ISOBAR_OT_import_volume.execute(op, bpy.context) == {"FINISHED"}
+        said = [m for kind, m in op.reports if "WARNING" in kind]
+        if warned:
+            assert len(said) == 1 and said[0].startswith(f"{name}: the values are held as float32, in steps of 0.0078125"), op.reports
+            assert "subtract an offset" in said[0]
+        else:
+            assert said == [], op.reports
+        assert not [m for kind, m in op.reports if "ERROR" in kind], op.reports

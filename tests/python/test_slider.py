@@ -440,17 +440,43 @@ def test_a_long_jump_reports_progress_and_a_cancel_keeps_the_surface(tmp_path):
 def test_float64_values_that_float32_cannot_resolve_warn_and_values_beyond_it_are_refused(tmp_path):
     """The slider keeps float32 values: a pressure of 101325 ± 0.02 Pa became a few
     hundred float32 steps without a word (the surfaces were those of the rounded values),
-    and a finite 1e40 turned infinite and was blamed on the data."""
+    and a finite 1e40 turned infinite and was blamed on the data. The core narrows the
+    values and says so, for arrays and for files (a float64 .npy, as the CLI reads it)."""
     z, y, x = np.mgrid[0:16, 0:16, 0:16].astype(np.float64)
     pressure = 101325.0 + 0.02 * np.sin(x / 3.0) * np.cos(y / 4.0) * np.cos(z / 5.0)
-    with pytest.warns(isobar.IsobarWarning, match=r"stored as float32, in steps of 0\.0078125") as caught:
+    coarse = r"held as float32, in steps of 0\.0078125 near 101325\.0\d+: 19\.\d\d % of the value range 101324\.98\d+\.\.101325\.01\d+; subtract"
+    with pytest.warns(isobar.IsobarWarning, match=coarse) as caught:
         isobar.Slider.build_array(pressure, tmp_path / "p.isoslider")
     assert caught[0].filename == __file__  # the caller's line
+    np.save(tmp_path / "p.npy", pressure)
+    with pytest.warns(isobar.IsobarWarning, match=coarse) as caught:
+        isobar.Slider.build(tmp_path / "p.npy", tmp_path / "pf.isoslider")
+    assert caught[0].filename == __file__
     offset = pressure - pressure.mean()  # what the warning advises: no warning
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        # Each build issues its own warnings only, not the coarse builds' above.
         isobar.Slider.build_array(offset, tmp_path / "q.isoslider")
+        isobar.Slider.build_array(offset.astype(np.float32), tmp_path / "q32.isoslider")
+        isobar.Slider.build_array(np.zeros((16, 16, 16), np.int64) + np.arange(16), tmp_path / "i.isoslider")
     huge = offset.copy()
     huge[3, 2, 1] = 1e40
-    with pytest.raises(isobar.InvalidArgumentError, match=r"\[z, y, x\] = \[3, 2, 1\] \(1e\+40\) is beyond float32's range"):
+    beyond = r"node 801 \(x=1, y=2, z=3\) is 1e40, beyond the range of float32"
+    with pytest.raises(isobar.InvalidInputError, match=beyond):
         isobar.Slider.build_array(huge, tmp_path / "r.isoslider")
+    np.save(tmp_path / "r.npy", huge)
+    with pytest.raises(isobar.Error, match=r"r\.npy: .*" + beyond):
+        isobar.Slider.build(tmp_path / "r.npy", tmp_path / "rf.isoslider")
+    assert not (tmp_path / "r.isoslider").exists() and not (tmp_path / "rf.isoslider").exists()
+
+
+def test_origin_and_spacing_are_three_numbers(tmp_path):
+    """ctypes padded a two-value origin with 0 (a volume placed at z = 0 without a word)
+    and failed on four with a bare IndexError."""
+    values = np.zeros((4, 4, 4), np.float32)
+    for bad in ((5.0, 5.0), (1.0, 2.0, 3.0, 4.0), "abc"):
+        with pytest.raises(isobar.InvalidArgumentError, match="origin must be three numbers"):
+            isobar.Slider.build_array(values, tmp_path / "o.isoslider", origin=bad)
+        with pytest.raises(isobar.InvalidArgumentError, match="spacing must be three numbers"):
+            isobar.Slider.build_array(values, tmp_path / "s.isoslider", spacing=bad)
+    assert not list(tmp_path.iterdir())

@@ -161,8 +161,23 @@ def test_bad_inputs_give_an_error_naming_the_problem_and_empty_output():
     f.SetInputArrayToProcess(0, 0, 0, 0, "nope")
     errors = Errors(f)
     f.Update()
-    assert f.GetOutput().GetNumberOfPoints() == 0 and "point scalars" in f.GetErrorMessage()
+    assert f.GetOutput().GetNumberOfPoints() == 0
+    assert "the input has no point array 'nope'" in f.GetErrorMessage(), f.GetErrorMessage()
     assert errors.messages
+    # A vector: refused, not read as its first component.
+    vec = vtkUnstructuredGrid()
+    vec.DeepCopy(grid)
+    x = vtk_to_numpy(vec.GetPoints().GetData()).astype(np.float64)
+    arrow = numpy_to_vtk(x - x.mean(axis=0), deep=1)
+    arrow.SetName("arrow")
+    vec.GetPointData().AddArray(arrow)
+    f = vtkIsobarFESamples()
+    f.SetInputData(vec)
+    f.SetInputArrayToProcess(0, 0, 0, 0, "arrow")
+    Errors(f)
+    f.Update()
+    assert f.GetOutput().GetNumberOfPoints() == 0
+    assert "array 'arrow' has 3 components" in f.GetErrorMessage(), f.GetErrorMessage()
     # Mirrored points: every element inverted; the core names cell 0.
     bad = vtkUnstructuredGrid()
     bad.DeepCopy(grid)

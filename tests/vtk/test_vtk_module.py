@@ -300,6 +300,65 @@ def test_volume_slider_slides_without_rebuilding_and_matches_flying_edges():
 
 
 @test
+def test_volume_slider_narrows_doubles_in_the_core_and_says_what_that_loses():
+    """The filter cast double scalars to float itself: a pressure of 101325 Pa plus
+    small variations moved vertices by half a cell, a finite 1e300 became inf and was
+    blamed on the data, and an isovalue outside the values gave an empty output, all
+    without a word. Doubles now go to the core, which warns or refuses."""
+    from isobar_vtk import vtkIsobarVolumeSlider
+    from vtkmodules.vtkFiltersCore import vtkFlyingEdges3D
+
+    img, arr = blobs_image()
+    blobs = vtk_to_numpy(arr).astype(np.float64)
+    for offset, coarse in ((0.0, False), (101325.0, True)):
+        doubles = numpy_to_vtk(offset + 0.02 * blobs, deep=True)
+        doubles.SetName("pressure")
+        img.GetPointData().SetScalars(doubles)
+        f = vtkIsobarVolumeSlider()
+        f.SetInputData(img)
+        f.SetIsovalue(offset + 0.01)
+        warned = Errors(f, "WarningEvent")
+        f.Update()
+        assert f.GetErrorMessage() == "", f.GetErrorMessage()
+        assert f.GetOutput().GetNumberOfCells() > 100
+        if coarse:
+            assert len(warned.messages) == 1, warned.messages
+            assert "array 'pressure': the values are held as float32, in steps of 0.0078125" in warned.messages[0]
+        else:
+            assert warned.messages == [], warned.messages
+            # Exactly representable data: VTK's own marching cubes of the same values.
+            fe = vtkFlyingEdges3D()
+            fe.SetInputData(img)
+            fe.SetValue(0, offset + 0.01)
+            fe.Update()
+            assert f.GetOutput().GetNumberOfCells() == fe.GetOutput().GetNumberOfCells()
+    huge = numpy_to_vtk(blobs, deep=True)
+    huge.SetName("huge")
+    huge.SetValue(5, 1e300)
+    img.GetPointData().SetScalars(huge)
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(0.5)
+    f.Update()
+    assert "array 'huge'" in f.GetErrorMessage() and "1e300, beyond the range of float32" in f.GetErrorMessage()
+    # An isovalue outside the values: empty, and the filter says why.
+    img.GetPointData().SetScalars(arr)
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(5.0)
+    warned = Errors(f, "WarningEvent")
+    f.Update()
+    assert f.GetOutput().GetNumberOfCells() == 0 and f.GetErrorMessage() == ""
+    assert len(warned.messages) == 1 and "no surface at isovalue 5: array 'blobs' ranges over" in warned.messages[0]
+    # Memory Budget 0 is the core's default, as the panel says.
+    f.SetMemoryBudget(0.0)
+    f.SetIsovalue(0.5)
+    arr.Modified()
+    f.Update()
+    assert f.GetErrorMessage() == "" and f.GetOutput().GetNumberOfCells() > 100
+
+
+@test
 def test_volume_slider_within_a_small_memory_budget_gives_the_same_surface():
     from isobar_vtk import vtkIsobarVolumeSlider
 
@@ -427,6 +486,69 @@ def test_volume_slider_without_scalars_reports_an_error():
     f.Update()
     assert f.GetOutput().GetNumberOfCells() == 0
     assert "no point scalars" in f.GetErrorMessage() and errors.messages
+
+
+@test
+def test_a_partitioned_dataset_is_one_fluid():
+    """A vtkPartitionedDataSet is one dataset in pieces: its partitions' particles make
+    one surface (the unsplit frame's), not a closed surface per partition with walls at
+    the cuts. A partitioned dataset collection gives a surface per partitioned dataset;
+    partitions whose arrays differ are refused, naming the array and the partition."""
+    from vtkmodules.vtkCommonDataModel import vtkPartitionedDataSet, vtkPartitionedDataSetCollection, vtkPlane
+    from vtkmodules.vtkFiltersPoints import vtkExtractPoints
+
+    frame = reader(h.FRAME_26)
+    whole = free_surface_filter(frame)
+    whole.Update()
+    halves = vtkPartitionedDataSet()
+    for i, normal in enumerate(((1, 0, 0), (-1, 0, 0))):
+        plane = vtkPlane()
+        plane.SetNormal(*normal)
+        cut = vtkExtractPoints()
+        cut.SetImplicitFunction(plane)
+        cut.SetInputConnection(frame.GetOutputPort())
+        cut.Update()
+        assert 1000 < cut.GetOutput().GetNumberOfPoints() < 4000
+        halves.SetPartition(i, cut.GetOutput())
+    f = vtkIsobarSPHIsosurface()
+    f.SetInputData(halves)
+    f.SetSmoothingLength(h.H)
+    f.SetGridFactor(h.GRID_FACTOR)
+    f.SetIsovalue(0, h.ISO)
+    f.Update()
+    assert f.GetErrorMessage() == "", f.GetErrorMessage()
+    out = f.GetOutputDataObject(0)
+    assert out.IsA("vtkPolyData") and h.open_edges(out) == 0
+    assert out.GetNumberOfCells() == whole.GetOutput().GetNumberOfCells() > 1000
+    # The same vertices, from particles summed in another order: each coordinate's
+    # sorted values agree to rounding.
+    p, _ = h.arrays(out)
+    q, _ = h.arrays(whole.GetOutput())
+    assert p.shape == q.shape
+    assert np.abs(np.sort(p, axis=0) - np.sort(q, axis=0)).max() <= 1e-9
+
+    collection = vtkPartitionedDataSetCollection()
+    collection.SetPartitionedDataSet(0, halves)
+    collection.SetPartitionedDataSet(1, halves)
+    f.SetInputData(collection)
+    f.Update()
+    out = f.GetOutputDataObject(0)
+    assert out.IsA("vtkPartitionedDataSetCollection")
+    leaves = out.NewIterator()
+    leaves.InitTraversal()
+    cells = []
+    while not leaves.IsDoneWithTraversal():
+        cells.append(leaves.GetCurrentDataObject().GetNumberOfCells())
+        leaves.GoToNextItem()
+    assert cells == [whole.GetOutput().GetNumberOfCells()] * 2, cells
+
+    one = halves.GetPartition(1)
+    one.GetPointData().RemoveArray("velocity")
+    f.GetCarriedArraySelection().EnableArray("velocity")
+    f.SetInputData(halves)
+    halves.Modified()
+    f.Update()
+    assert "partition 1: the input has no point array 'velocity'" in f.GetErrorMessage(), f.GetErrorMessage()
 
 
 @test

@@ -3,6 +3,7 @@
 #include "vtkCellArray.h"
 #include "vtkCellData.h"
 #include "vtkCellType.h"
+#include "vtkDataObject.h"
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
 #include "vtkFloatArray.h"
@@ -320,11 +321,27 @@ std::string vtkIsobarFESamples::PrepareMesh(
   vtkUnstructuredGrid* input, vtkInformationVector** inputVector, std::string& field)
 {
   vtkDataArray* values = this->GetInputArrayToProcess(0, inputVector);
+  vtkInformation* chosen = this->GetInputArrayInformation(0);
+  const char* wanted = chosen && chosen->Has(vtkDataObject::FIELD_NAME())
+    ? chosen->Get(vtkDataObject::FIELD_NAME())
+    : nullptr;
   if (!values || values->GetNumberOfTuples() != input->GetNumberOfPoints())
   {
-    return "the input has no point scalars: choose a point array to contour";
+    if (!wanted || !*wanted)
+    {
+      return "the input has no point scalars: choose a point array to contour";
+    }
+    return std::string("the input has no point array '") + wanted +
+      (values ? "' (it is not point data)" : "'") + ": choose a point array to contour";
   }
   field = values->GetName() ? values->GetName() : "field";
+  // One value a point: a vector would be read as its first component without a word.
+  if (values->GetNumberOfComponents() != 1)
+  {
+    return "array '" + field + "' has " + std::to_string(values->GetNumberOfComponents()) +
+      " components: choose a one-component point array (a Calculator can make a magnitude "
+      "or pick a component)";
+  }
 
   // The core's copy of the mesh, made again only when the points, the cells or the
   // array changed. The arrays themselves are the key, not the data set: ParaView touches

@@ -15,6 +15,7 @@
 #include "vtkInformationVector.h"
 #include "vtkMultiProcessController.h"
 #include "vtkObjectFactory.h"
+#include "vtkPartitionedDataSet.h"
 #include "vtkPointData.h"
 #include "vtkPointSet.h"
 #include "vtkPoints.h"
@@ -145,8 +146,9 @@ void CopyAsDoubles(vtkDataArray* source, const std::vector<char>& keep, std::vec
   }
 }
 
-/// This rank's particles and requested arrays. Returns an error message or "".
-std::string CollectLocal(
+/// The particles of one point set (NULL: none) and their requested arrays, ghost points
+/// skipped. Returns an error message or "".
+std::string CollectPiece(
   vtkPointSet* input, const std::vector<Request>& requests, ParticleBuffers& out)
 {
   out = ParticleBuffers();
@@ -201,6 +203,47 @@ std::string CollectLocal(
     CopyAsDoubles(a, keep, out.Arrays[k].Data);
   }
   return std::string();
+}
+
+/// This rank's particles: those of `pieces` (one point set, or the partitions of a
+/// vtkPartitionedDataSet, which is one dataset cut into pieces: its particles are one
+/// fluid, and a surface per partition would have walls at the cuts), concatenated.
+std::string CollectLocal(
+  const std::vector<vtkPointSet*>& pieces, const std::vector<Request>& requests,
+  ParticleBuffers& out)
+{
+  out = ParticleBuffers();
+  std::string error = CollectPiece(nullptr, requests, out);
+  for (size_t p = 0; p < pieces.size() && error.empty(); ++p)
+  {
+    ParticleBuffers piece;
+    error = CollectPiece(pieces[p], requests, piece);
+    if (!error.empty() && pieces.size() > 1)
+    {
+      error = "partition " + std::to_string(p) + ": " + error;
+    }
+    if (!error.empty() || piece.Count == 0)
+    {
+      continue;
+    }
+    const bool first = out.Count == 0;
+    for (size_t k = 0; k < requests.size() && error.empty(); ++k)
+    {
+      const ParticleArray& a = piece.Arrays[k];
+      ParticleArray& into = out.Arrays[k];
+      if (!first && a.Components != into.Components)
+      {
+        error = "point array '" + a.Name + "' has " + std::to_string(a.Components) +
+          " components in partition " + std::to_string(p) + " but " +
+          std::to_string(into.Components) + " in the partitions before it (0: missing)";
+      }
+      into.Components = a.Components;
+      into.Data.insert(into.Data.end(), a.Data.begin(), a.Data.end());
+    }
+    out.Count += piece.Count;
+    out.Positions.insert(out.Positions.end(), piece.Positions.begin(), piece.Positions.end());
+  }
+  return error;
 }
 
 /// A message naming this rank's first particle with a non-finite position, or "".
@@ -737,6 +780,8 @@ std::string vtkIsobarSPHIsosurface::FieldString(const char* arrayName, int compo
 int vtkIsobarSPHIsosurface::FillInputPortInformation(int, vtkInformation* info)
 {
   info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkPointSet");
+  // Whole, not partition by partition (see CollectLocal).
+  info->Append(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkPartitionedDataSet");
   return 1;
 }
 
@@ -790,7 +835,7 @@ std::string vtkIsobarSPHIsosurface::FieldArrayName()
 int vtkIsobarSPHIsosurface::RequestData(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  vtkPointSet* input = vtkPointSet::GetData(inputVector[0], 0);
+  vtkDataObject* input = vtkDataObject::GetData(inputVector[0], 0);
   vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
   output->Initialize();
   IsobarBeginErrors(this, this->ErrorMessage);
@@ -864,7 +909,29 @@ int vtkIsobarSPHIsosurface::RequestData(
   // 2. This rank's particles. In a parallel run every rank takes part in every collective
   // call below; errors are agreed on first, so that all ranks return at the same point.
   ParticleBuffers particles;
-  std::string error = CollectLocal(input, requests, particles);
+  std::vector<vtkPointSet*> pieces;
+  std::string error;
+  if (auto* partitioned = vtkPartitionedDataSet::SafeDownCast(input))
+  {
+    for (unsigned int p = 0; p < partitioned->GetNumberOfPartitions() && error.empty(); ++p)
+    {
+      vtkDataObject* partition = partitioned->GetPartitionAsDataObject(p);
+      if (partition && !vtkPointSet::SafeDownCast(partition))
+      {
+        error = "partition " + std::to_string(p) + " is a " + partition->GetClassName() +
+          ", not a point set of particles";
+      }
+      pieces.push_back(vtkPointSet::SafeDownCast(partition));
+    }
+  }
+  else
+  {
+    pieces.push_back(vtkPointSet::SafeDownCast(input));
+  }
+  if (error.empty())
+  {
+    error = CollectLocal(pieces, requests, particles);
+  }
   vtkMultiProcessController* controller = this->Controller;
   const bool parallel = controller && controller->GetNumberOfProcesses() > 1;
   const int nproc = parallel ? controller->GetNumberOfProcesses() : 1;

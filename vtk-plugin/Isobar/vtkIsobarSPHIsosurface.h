@@ -3,7 +3,8 @@
  * @brief   exact isosurfaces of SPH particle data (Marching Correctors)
  *
  * The input is any vtkPointSet whose points are SPH particles and whose point data holds
- * the particle arrays. The output is a triangle mesh whose vertices lie on the level set
+ * the particle arrays, or a vtkPartitionedDataSet of such point sets (one dataset in
+ * pieces: its partitions' particles make one surface). The output is a triangle mesh whose vertices lie on the level set
  * of the SPH interpolant itself (to a relative tolerance, 1e-6 by default), with
  * "Normals" from the SPH gradient, "SumOfWeights", the carried arrays interpolated with
  * the same kernel, and "Isovalue" when several isovalues are given. Points are doubles.

@@ -162,7 +162,8 @@ int vtkIsobarVolumeSlider::RequestData(
                                      "0: the exact surface")
                                    .AtLeast("Lod Max Level", this->LodMaxLevel, 0,
                                      "0: the core's default")
-                                   .Above("Memory Budget", this->MemoryBudget, 0.0, "GiB")
+                                   .AtLeast("Memory Budget", this->MemoryBudget, 0.0,
+                                     "GiB, 0: the core's default")
                                    .Failure();
   if (!badSetting.empty())
   {
@@ -183,22 +184,53 @@ int vtkIsobarVolumeSlider::RequestData(
   {
     this->CloseStore();
     const vtkIdType n = values->GetNumberOfTuples();
-    std::vector<float> scalars(static_cast<size_t>(n));
-    for (vtkIdType i = 0; i < n; ++i)
-    {
-      scalars[static_cast<size_t>(i)] = static_cast<float>(values->GetComponent(i, 0));
-    }
     const size_t sizes[3] = { static_cast<size_t>(dims[0]), static_cast<size_t>(dims[1]),
       static_cast<size_t>(dims[2]) };
     const std::string path = NewStorePath();
+    // 0 (the core's default) stays 0.
     const uint64_t budget =
       static_cast<uint64_t>(std::min(this->MemoryBudget, 1.0e9) * 1024.0 * 1024.0 * 1024.0);
-    IsobarStatus status = isobar_slider_build_f32(
-      scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, budget, nullptr, nullptr);
+    // The store holds float32. Types it holds exactly go as float; wider ones (double,
+    // 32- and 64-bit integers) as double, which the core narrows, refusing values beyond
+    // float's range and warning where float steps are coarse for the value range (a
+    // pressure of 101325 ± 0.02 Pa): a cast here would move the surface without a word.
+    const int type = values->GetDataType();
+    const bool exact = type == VTK_FLOAT || vtkDataArray::GetDataTypeSize(type) <= 2;
+    IsobarStatus status;
+    const char* call;
+    if (exact)
+    {
+      std::vector<float> scalars(static_cast<size_t>(n));
+      for (vtkIdType i = 0; i < n; ++i)
+      {
+        scalars[static_cast<size_t>(i)] = static_cast<float>(values->GetComponent(i, 0));
+      }
+      call = "isobar_slider_build_f32";
+      status = isobar_slider_build_f32(
+        scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, budget, nullptr, nullptr);
+    }
+    else
+    {
+      std::vector<double> scalars(static_cast<size_t>(n));
+      for (vtkIdType i = 0; i < n; ++i)
+      {
+        scalars[static_cast<size_t>(i)] = values->GetComponent(i, 0);
+      }
+      call = "isobar_slider_build_f64";
+      status = isobar_slider_build_f64(
+        scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, budget, nullptr, nullptr);
+    }
     if (status != ISOBAR_STATUS_OK)
     {
-      this->Fail(CoreError("isobar_slider_build_f32", status));
+      std::ostringstream msg;
+      msg << "array '" << name << "': " << CoreError(call, status);
+      this->Fail(msg.str());
       return 1;
+    }
+    std::istringstream warnings(isobar_last_warnings());
+    for (std::string line; std::getline(warnings, line);)
+    {
+      vtkWarningMacro(<< "array '" << name << "': " << line);
     }
     this->StorePath = path;
     status = isobar_slider_open(path.c_str(), &this->Slider);
@@ -229,6 +261,16 @@ int vtkIsobarVolumeSlider::RequestData(
     this->AppliedIsovalue = this->Isovalue;
     ++this->NumberOfUpdates;
     this->LastUpdateSeconds = change.seconds;
+  }
+  // An empty output says why, as the SPH and FE filters' do.
+  double lo = 0.0;
+  double hi = 0.0;
+  if (isobar_slider_triangle_count(this->Slider) == 0 &&
+    isobar_slider_value_range(this->Slider, &lo, &hi) == ISOBAR_STATUS_OK &&
+    !(lo < this->Isovalue && this->Isovalue < hi))
+  {
+    vtkWarningMacro(<< "no surface at isovalue " << this->Isovalue << ": array '" << name
+                    << "' ranges over " << lo << ".." << hi);
   }
 
   // 3. The surface's arrays: the slider's exact ones, or its level of detail (computed

@@ -400,6 +400,22 @@ _PROTOTYPES = {
             c_void_p,
         ],
     ),
+    "isobar_slider_build_f64": (
+        _Status,
+        [
+            POINTER(c_double),
+            POINTER(c_size_t),
+            POINTER(c_double),
+            POINTER(c_double),
+            c_char_p,
+            c_double,
+            c_uint32,
+            c_uint64,
+            PROGRESS_FN,
+            c_void_p,
+        ],
+    ),
+    "isobar_last_warnings": (c_char_p, []),
     "isobar_slider_open": (_Status, [c_char_p, POINTER(POINTER(SliderHandle))]),
     "isobar_slider_set_isovalue": (
         _Status,

@@ -57,34 +57,23 @@ def _one_at_a_time(method):
     return locked
 
 
-def _check_float32_precision(values: np.ndarray) -> None:
-    """The slider keeps float32 values. Refuses finite values beyond float32's range (they
-    would turn infinite and be blamed on the data), and warns when float32 resolves the
-    value range in fewer than 10,000 steps (a field offset far from zero, as a pressure
-    of 101325 ± 0.02 Pa): the surfaces would be those of the rounded values."""
-    # Reductions with `where`, not masked copies: a float64 volume may be gigabytes.
-    finite = np.isfinite(values)
-    if not finite.any():
-        return
-    lo = float(np.min(values, where=finite, initial=np.inf))
-    hi = float(np.max(values, where=finite, initial=-np.inf))
-    limit = float(np.finfo(np.float32).max)
-    if max(abs(lo), abs(hi)) > limit:
-        index = tuple(int(i) for i in np.argwhere(finite & ((values > limit) | (values < -limit)))[0])
-        raise InvalidArgumentError(
-            f"value at [z, y, x] = {list(index)} ({values[index]:g}) is beyond float32's range, "
-            "which the slider stores; scale the values first"
-        )
-    step = float(np.spacing(np.float32(max(abs(lo), abs(hi)))))
-    if hi > lo and step > 1e-4 * (hi - lo):
-        issue(
-            [
-                f"the float64 values are stored as float32, in steps of {step:g} near {max(abs(lo), abs(hi)):g}: "
-                f"{100 * step / (hi - lo):.2g} % of the value range {lo:g}..{hi:g}; subtract an offset "
-                "(e.g. the mean) before building to keep the surfaces of the exact values"
-            ],
-            stacklevel=3,
-        )
+def _triple(values, name: str) -> list:
+    """Three floats (x, y, z), or InvalidArgumentError naming `name`: ctypes would pad two
+    with a zero and fail on four with a bare IndexError."""
+    try:
+        out = [float(v) for v in values]
+    except (TypeError, ValueError):
+        raise InvalidArgumentError(f"{name} must be three numbers (x, y, z), got {values!r}") from None
+    if len(out) != 3:
+        raise InvalidArgumentError(f"{name} must be three numbers (x, y, z), got {len(out)}: {values!r}")
+    return out
+
+
+def _issue_build_warnings() -> None:
+    """Issues what the last build warned about (values wider than float32 that the store
+    holds coarsely), from the caller of the public build method."""
+    text = lib.isobar_last_warnings()
+    issue([line for line in (text or b"").decode("utf-8", "replace").split("\n") if line], stacklevel=3)
 
 
 class SliderUpdate:
@@ -196,6 +185,7 @@ class Slider:
             ),
             progress,
         )
+        _issue_build_warnings()
 
     @staticmethod
     def build_array(
@@ -213,18 +203,22 @@ class Slider:
         values = np.asarray(values)
         if values.ndim != 3:
             raise InvalidArgumentError(f"values must be a 3-D array [z, y, x], got shape {values.shape}")
-        if values.dtype.kind == "f" and values.dtype.itemsize > 4:
-            _check_float32_precision(values)
-        data = np.ascontiguousarray(values, dtype=np.float32)
+        # Types float32 holds exactly go as float32; wider ones (float64, 32- and 64-bit
+        # integers) as float64, which the core narrows, saying what that loses.
+        exact = values.dtype.kind in "biuf" and values.dtype.itemsize <= (4 if values.dtype.kind == "f" else 2)
+        wide = not exact
+        data = np.ascontiguousarray(values, dtype=np.float64 if wide else np.float32)
         nz, ny, nx = data.shape
         dims = (c_size_t * 3)(nx, ny, nz)
-        o = (c_double * 3)(*[float(v) for v in origin])
-        s = (c_double * 3)(*[float(v) for v in spacing])
+        o = (c_double * 3)(*_triple(origin, "origin"))
+        s = (c_double * 3)(*_triple(spacing, "spacing"))
         store = encode(store_path, "store path")
         budget = _budget(memory_budget)
+        build = lib.isobar_slider_build_f64 if wide else lib.isobar_slider_build_f32
+        pointer = POINTER(np.ctypeslib.ctypes.c_double if wide else np.ctypeslib.ctypes.c_float)
         _wired(
-            lambda callback: lib.isobar_slider_build_f32(
-                data.ctypes.data_as(POINTER(np.ctypeslib.ctypes.c_float)),
+            lambda callback: build(
+                data.ctypes.data_as(pointer),
                 dims,
                 o,
                 s,
@@ -237,6 +231,7 @@ class Slider:
             ),
             progress,
         )
+        _issue_build_warnings()
 
     def _live(self):
         if not self._finalizer.alive:

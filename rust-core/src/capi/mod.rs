@@ -58,6 +58,14 @@ thread_local! {
     /// The text `isobar_auto_backend_note` hands out, kept apart from `LAST_ERROR` so the
     /// call's own success (which clears the error message) leaves the note intact.
     static AUTO_NOTE: RefCell<CString> = RefCell::new(CString::default());
+    /// What the last call that reports warnings this way warned about although it
+    /// succeeded (the slider's builds: what reading the volume lost).
+    static LAST_WARNINGS: RefCell<CString> = RefCell::new(CString::default());
+}
+
+pub(crate) fn set_last_warnings(warnings: &[String]) {
+    let c = warning_lines(warnings);
+    LAST_WARNINGS.with(|w| *w.borrow_mut() = c);
 }
 
 fn set_last_error(message: &str) {
@@ -343,6 +351,15 @@ pub(crate) fn put<T>(out: *mut T, value: T, name: &'static str) -> Result<(), Er
 #[no_mangle]
 pub extern "C" fn isobar_last_error_message() -> *const c_char {
     LAST_ERROR.with(|e| e.borrow().as_ptr())
+}
+
+/// What the last `isobar_slider_build_*` call on this thread warned about although it
+/// succeeded, one warning a line ("" for none): values wider than f32 that the store holds
+/// coarsely. Results that carry their own warnings (surfaces, samples) have their own
+/// `*_warnings` calls. Valid until the next build call on the same thread.
+#[no_mangle]
+pub extern "C" fn isobar_last_warnings() -> *const c_char {
+    LAST_WARNINGS.with(|w| w.borrow().as_ptr())
 }
 
 /// Why `ISOBAR_BACKEND_AUTO` runs on the CPU on this machine, for hosts to tell their

@@ -7,10 +7,10 @@
 //! next `isobar_slider_set_lod`.
 
 use super::{
-    free_boxed, guard, invalid, non_null, opt_str, put, slice, with_progress, IsobarProgressFn,
-    IsobarStatus,
+    free_boxed, guard, invalid, non_null, opt_str, put, set_last_warnings, slice, with_progress,
+    IsobarProgressFn, IsobarStatus,
 };
-use crate::field::grid::{Lattice, Values, Volume};
+use crate::field::grid::{Lattice, Narrowing, Values, Volume};
 use crate::slider::{build_store, BuildParams, Change, LodParams, Slider};
 use glam::DVec3;
 use std::ffi::{c_char, c_void};
@@ -66,6 +66,7 @@ fn build_to(
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> crate::Result<()> {
+    set_last_warnings(&volume.warnings);
     with_progress(progress, user, |p| {
         build_store(volume, Path::new(output), &params, p)
     })?;
@@ -91,6 +92,7 @@ pub extern "C" fn isobar_slider_build_file(
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> IsobarStatus {
+    set_last_warnings(&[]);
     guard(|| {
         let input = required(volume_path, "volume_path")?;
         let output = required(store_path, "store_path")?;
@@ -119,9 +121,88 @@ pub extern "C" fn isobar_slider_build_f32(
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> IsobarStatus {
+    let array = Array {
+        dims,
+        origin,
+        spacing,
+    };
+    build_array(
+        array,
+        store_path,
+        threshold,
+        max_levels,
+        memory_budget,
+        progress,
+        user,
+        |lattice, n| Volume::new(lattice, Values::F32(slice(values, n, "values")?.to_vec())),
+    )
+}
+
+/// [`isobar_slider_build_f32`] of f64 values, which the store holds as f32: a finite
+/// value beyond f32's range is refused, and a value range f32 resolves coarsely (an
+/// offset far from zero) is warned about (`isobar_last_warnings`).
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub extern "C" fn isobar_slider_build_f64(
+    values: *const f64,
+    dims: *const usize,
+    origin: *const f64,
+    spacing: *const f64,
+    store_path: *const c_char,
+    threshold: f64,
+    max_levels: u32,
+    memory_budget: u64,
+    progress: IsobarProgressFn,
+    user: *mut c_void,
+) -> IsobarStatus {
+    let array = Array {
+        dims,
+        origin,
+        spacing,
+    };
+    build_array(
+        array,
+        store_path,
+        threshold,
+        max_levels,
+        memory_budget,
+        progress,
+        user,
+        |lattice, n| {
+            let mut narrowing = Narrowing::default();
+            let narrowed = slice(values, n, "values")?
+                .iter()
+                .map(|&v| narrowing.narrow(v))
+                .collect();
+            narrowing.finish(lattice, narrowed)
+        },
+    )
+}
+
+/// Where an array's nodes lie, as the `build_*` calls take it.
+struct Array {
+    dims: *const usize,
+    origin: *const f64,
+    spacing: *const f64,
+}
+
+/// The `build_*` calls of arrays: the lattice checked, then `volume(lattice, node count)`
+/// (which reads the values) built into a store.
+#[allow(clippy::too_many_arguments)]
+fn build_array(
+    array: Array,
+    store_path: *const c_char,
+    threshold: f64,
+    max_levels: u32,
+    memory_budget: u64,
+    progress: IsobarProgressFn,
+    user: *mut c_void,
+    volume: impl FnOnce(Lattice, usize) -> crate::Result<Volume>,
+) -> IsobarStatus {
+    set_last_warnings(&[]);
     guard(|| {
         let output = required(store_path, "store_path")?;
-        let d = slice(dims, 3, "dims")?;
+        let d = slice(array.dims, 3, "dims")?;
         let dims = [d[0], d[1], d[2]];
         let three = |p: *const f64, name, default: f64| -> crate::Result<DVec3> {
             if p.is_null() {
@@ -133,15 +214,14 @@ pub extern "C" fn isobar_slider_build_f32(
         };
         let lattice = Lattice::new(
             dims,
-            three(origin, "origin", 0.0)?,
-            three(spacing, "spacing", 1.0)?,
+            three(array.origin, "origin", 0.0)?,
+            three(array.spacing, "spacing", 1.0)?,
         )?;
         let n = dims
             .iter()
             .try_fold(1usize, |a, &d| a.checked_mul(d))
             .ok_or_else(|| invalid("dims", "product overflows"))?;
-        let values = slice(values, n, "values")?.to_vec();
-        let volume = Volume::new(lattice, Values::F32(values))?;
+        let volume = volume(lattice, n)?;
         let params = build_params(threshold, max_levels, memory_budget);
         build_to(&volume, &output, params, progress, user)
     })

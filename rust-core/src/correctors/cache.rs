@@ -133,7 +133,9 @@ impl NodeCache {
         if self.lookups == 0 {
             0.0
         } else {
-            1.0 - self.evaluations as f64 / self.lookups as f64
+            // Nodes evaluated ahead of a lookup (a wave's corners) can outnumber the
+            // lookups of a walk that finds nothing: no hits then, not a negative share.
+            (1.0 - self.evaluations as f64 / self.lookups as f64).max(0.0)
         }
     }
 }

@@ -214,6 +214,91 @@ impl Lattice {
 pub struct Volume {
     pub lattice: Lattice,
     pub values: Values,
+    /// What reading the values lost although they were accepted (see [`Narrowing`]).
+    pub warnings: Vec<String>,
+}
+
+/// Values wider than f32 (f64, 32- and 64-bit integers) narrowed to the f32 a volume
+/// holds, and what the narrowing loses. A finite value beyond f32's range would turn
+/// infinite and be blamed on the data: refused, naming it. A value range that f32
+/// resolves in fewer than 10,000 steps (a field offset far from zero, as a pressure of
+/// 101325 ± 0.02 Pa, becomes a few hundred steps) gives the surfaces of the rounded
+/// values: warned about, with the remedy.
+#[derive(Clone, Copy, Debug)]
+pub struct Narrowing {
+    lo: f64,
+    hi: f64,
+    seen: usize,
+    beyond: Option<(usize, f64)>,
+}
+
+impl Default for Narrowing {
+    fn default() -> Self {
+        Narrowing {
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
+            seen: 0,
+            beyond: None,
+        }
+    }
+}
+
+impl Narrowing {
+    /// The next value (in node order) as f32.
+    #[inline]
+    pub fn narrow(&mut self, v: f64) -> f32 {
+        let f = v as f32;
+        if v.is_finite() {
+            self.lo = self.lo.min(v);
+            self.hi = self.hi.max(v);
+            if f.is_infinite() && self.beyond.is_none() {
+                self.beyond = Some((self.seen, v));
+            }
+        }
+        self.seen += 1;
+        f
+    }
+
+    /// The volume of the narrowed `values` on `lattice`, carrying the precision warning.
+    pub fn finish(self, lattice: Lattice, values: Vec<f32>) -> Result<Volume> {
+        if let Some((i, v)) = self.beyond {
+            let [x, y, z] = lattice.coords(i);
+            return Err(Error::InvalidInput(format!(
+                "volume value at node {i} (x={x}, y={y}, z={z}) is {v:e}, beyond the range of \
+                 float32, which volumes are held in; scale the values first"
+            )));
+        }
+        let mut volume = Volume::new(lattice, Values::F32(values))?;
+        volume.warnings.extend(self.warning());
+        Ok(volume)
+    }
+
+    fn warning(&self) -> Option<String> {
+        let (lo, hi) = (self.lo, self.hi);
+        if hi <= lo {
+            return None;
+        }
+        let largest = lo.abs().max(hi.abs()) as f32;
+        // The gap from `largest` to the next f32: the step of the rounded values there.
+        let step = (f32::from_bits(largest.to_bits() + 1) - largest) as f64;
+        // Fixed decimals that tell the range's ends apart (three digits of its width).
+        let decimals = (2.0 - (hi - lo).log10().floor()).clamp(0.0, 12.0) as usize;
+        let show = |v: f64| match v.abs() < 1e9 {
+            true => format!("{v:.decimals$}"),
+            false => format!("{v:e}"),
+        };
+        (step > 1e-4 * (hi - lo)).then(|| {
+            format!(
+                "the values are held as float32, in steps of {step} near {}: {:.2} % of the \
+                 value range {}..{}; subtract an offset (e.g. the mean) first to keep the \
+                 surfaces of the exact values",
+                show(largest as f64),
+                100.0 * step / (hi - lo),
+                show(lo),
+                show(hi)
+            )
+        })
+    }
 }
 
 impl Volume {
@@ -239,7 +324,36 @@ impl Volume {
                 )));
             }
         }
-        Ok(Volume { lattice, values })
+        Ok(Volume {
+            lattice,
+            values,
+            warnings: Vec::new(),
+        })
+    }
+
+    /// Reverses the node order along `axis`, with the origin moved to the last node, so
+    /// that each value keeps its position: the volume of a file whose index runs against
+    /// the axis (spacing `-self.lattice.spacing[axis]` from the origin as read).
+    pub fn reverse_axis(&mut self, axis: usize) {
+        fn reverse<T>(v: &mut [T], dims: [usize; 3], axis: usize) {
+            let stride = [1, dims[0], dims[0] * dims[1]][axis];
+            let n = dims[axis];
+            for start in 0..v.len() {
+                // Each line along `axis` once, from its node at index 0.
+                if (start / stride).is_multiple_of(n) {
+                    for i in 0..n / 2 {
+                        v.swap(start + i * stride, start + (n - 1 - i) * stride);
+                    }
+                }
+            }
+        }
+        let dims = self.lattice.dims;
+        match &mut self.values {
+            Values::F32(v) => reverse(v, dims, axis),
+            Values::U16(v) => reverse(v, dims, axis),
+            Values::U8(v) => reverse(v, dims, axis),
+        }
+        self.lattice.origin[axis] -= (dims[axis] - 1) as f64 * self.lattice.spacing[axis];
     }
 
     /// Value at node (x, y, z).
@@ -344,6 +458,48 @@ impl ScalarField for Volume {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `values` along x of an nx×2×2 volume (nx at least 2), the rest repeating the last.
+    fn narrowed(values: &[f64]) -> Result<Volume> {
+        let nx = values.len().max(2);
+        let lattice = Lattice::new([nx, 2, 2], DVec3::ZERO, DVec3::ONE).unwrap();
+        let last = values[values.len() - 1];
+        let all = (0..4 * nx).map(|i| values.get(i).copied().unwrap_or(last));
+        let mut narrowing = Narrowing::default();
+        let v = all.map(|x| narrowing.narrow(x)).collect();
+        narrowing.finish(lattice, v)
+    }
+
+    #[test]
+    fn narrowing_refuses_values_beyond_f32_and_warns_of_coarse_steps() {
+        // A range f32 resolves finely: the values as f32, no warning.
+        let fine = narrowed(&[0.25, -1.5, 3.0e3]).unwrap();
+        assert_eq!(fine.values.get(1), -1.5);
+        assert!(fine.warnings.is_empty(), "{:?}", fine.warnings);
+        // 101325 ± 0.02: f32 steps of 1/128 near 101325 are 19.5 % of the range.
+        let coarse = narrowed(&[101324.98, 101325.0, 101325.02]).unwrap();
+        assert_eq!(coarse.warnings.len(), 1);
+        let w = &coarse.warnings[0];
+        assert!(
+            w.contains("steps of 0.0078125 near 101325.0234: 19.53 %"),
+            "{w}"
+        );
+        assert!(w.contains("range 101324.9800..101325.0200"), "{w}");
+        // The largest finite f32 still narrows; past it, refused, naming node and value.
+        assert!(narrowed(&[0.0, f32::MAX as f64]).is_ok());
+        let e = narrowed(&[0.0, 1.0, -1e300, 2e300])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("node 2 (x=2, y=0, z=0) is -1e300, beyond the range of float32"),
+            "{e}"
+        );
+        // NaN and infinities keep the message they always had (the value is as read).
+        let e = narrowed(&[0.0, f64::NAN]).unwrap_err().to_string();
+        assert!(e.contains("node 1 (x=1, y=0, z=0) is NaN"), "{e}");
+        // One value (no range): nothing to warn about.
+        assert!(narrowed(&[101325.0]).unwrap().warnings.is_empty());
+    }
 
     #[test]
     fn trilinear_reproduces_corners_and_a_linear_field() {

@@ -338,6 +338,20 @@ impl SphField {
         for (p, v) in particles.iter_mut().zip(&volumes) {
             p.weight_scale *= v;
         }
+        let unit_values = particles.iter().all(|p| p.value == 1.0);
+        if settings.shepard && unit_values {
+            // A / S with A = S: 1 wherever a particle reaches, 0 elsewhere. No isovalue
+            // has a surface, and every grid factor would be blamed in turn.
+            return Err(Error::InvalidParameter {
+                name: "shepard",
+                message: "Shepard normalisation divides the field by the sum of weights, and the \
+                          field is the sum of weights (or an array that is 1 at every \
+                          particle): the result is 1 wherever a particle reaches, with no \
+                          surface; turn Shepard off for the free surface, or choose a particle \
+                          array as the field"
+                    .into(),
+            });
+        }
         let bounds = super::neighbours::bounds(&data.positions);
         let warnings = support_spans_the_data(n, max_support, bounds, settings)
             .into_iter()
@@ -350,7 +364,7 @@ impl SphField {
             h_scale: settings.h_scale,
             max_support,
             bounds,
-            unit_values: particles.iter().all(|p| p.value == 1.0),
+            unit_values,
             particles,
             warnings,
         })
@@ -767,12 +781,11 @@ mod tests {
             Kernel::QuinticSpline,
             Kernel::Quadratic,
         ] {
-            for shepard in [false, true] {
+            {
                 let settings = SphSettings {
                     kernel,
                     smoothing_length: SmoothingLength::Constant(0.11),
                     quantity: Quantity::SumOfWeights,
-                    shepard,
                     ..SphSettings::default()
                 };
                 let field = SphField::new(&data, &settings).unwrap();
@@ -791,6 +804,37 @@ mod tests {
         }
     }
 
+    /// Shepard normalisation of the sum of weights is 1 wherever a particle reaches: no
+    /// surface at any isovalue, so it is refused up front rather than reported as an
+    /// empty surface blamed on the grid. A field array that varies is Shepard's use.
+    #[test]
+    fn shepard_of_the_sum_of_weights_is_refused() {
+        let (mut data, _) = block();
+        let n = data.positions.len();
+        data.attributes.push(Attribute::scalar("one", vec![1.0; n]));
+        data.attributes
+            .push(Attribute::scalar("p", (0..n).map(|i| i as f64).collect()));
+        for (quantity, refused) in [
+            (Quantity::SumOfWeights, true),
+            (Quantity::Scalar("one".into()), true),
+            (Quantity::Scalar("p".into()), false),
+        ] {
+            let settings = SphSettings {
+                smoothing_length: SmoothingLength::Constant(0.11),
+                quantity: quantity.clone(),
+                shepard: true,
+                ..SphSettings::default()
+            };
+            match SphField::new(&data, &settings) {
+                Err(e) => {
+                    assert!(refused, "{quantity:?}: {e}");
+                    assert!(e.to_string().contains("turn Shepard off"), "{e}");
+                }
+                Ok(_) => assert!(!refused, "{quantity:?} accepted"),
+            }
+        }
+    }
+
     /// Rows of nodes (lanes) give each node's sums to the bit, for every kernel, with
     /// smoothing lengths varying by 1.75×, signed values, with and without Shepard,
     /// inside the block, across its faces and outside it.
@@ -805,7 +849,12 @@ mod tests {
         data.attributes.push(Attribute::scalar("p", p));
         for kernel in Kernel::ALL {
             for quantity in [Quantity::SumOfWeights, Quantity::Scalar("p".into())] {
-                for shepard in [false, true] {
+                // Shepard of the sum of weights is refused (constant 1).
+                let sheparded: &[bool] = match quantity {
+                    Quantity::SumOfWeights => &[false],
+                    _ => &[false, true],
+                };
+                for &shepard in sheparded {
                     let settings = SphSettings {
                         kernel,
                         smoothing_length: SmoothingLength::Array("h".into()),

@@ -5,7 +5,7 @@
 
 use super::numeric::{show, Endian, Scalar};
 use crate::error::{Error, Result};
-use crate::field::grid::{Lattice, Values, Volume};
+use crate::field::grid::{Lattice, Narrowing, Values, Volume};
 use glam::DVec3;
 use std::io::Read;
 use std::path::Path;
@@ -361,13 +361,19 @@ pub fn read_nrrd(bytes: &[u8], name: &str) -> Result<Volume> {
             }
         )));
     }
-    build(
+    let mut volume = build(
         name,
         [nx, ny, nz],
         origin,
-        spacing,
+        spacing.abs(),
         decode(ty, &data[..count], endian),
-    )
+    )?;
+    // An index that runs against its axis: the same nodes, stored the other way round
+    // (a lattice's spacing is positive), so the surface is not mirrored.
+    for axis in (0..3).filter(|&a| spacing[a] < 0.0) {
+        volume.reverse_axis(axis);
+    }
+    Ok(volume)
 }
 
 /// Where a NRRD's data starts after its skipped lines.
@@ -422,8 +428,9 @@ fn axis_triple(v: &[f64]) -> std::result::Result<DVec3, String> {
 }
 
 /// The node spacing from `space directions: (a,0,0) (0,b,0) (0,0,c)`: each vector's
-/// length. Only axis-aligned volumes are supported; a non-spatial axis (`none`) cannot be
-/// one of a scalar volume's three.
+/// signed length (negative: the index runs against the axis, as in LPS scans). Only
+/// axis-aligned volumes are supported; a non-spatial axis (`none`) cannot be one of a
+/// scalar volume's three.
 fn direction_lengths(value: &str) -> std::result::Result<DVec3, String> {
     let mut vectors = Vec::new();
     for (axis, word) in value
@@ -451,7 +458,7 @@ fn direction_lengths(value: &str) -> std::result::Result<DVec3, String> {
                     .into(),
             );
         }
-        spacing[a] = v[a].abs();
+        spacing[a] = v[a];
     }
     Ok(spacing)
 }
@@ -470,27 +477,79 @@ fn nrrd_type(t: &str) -> Option<Scalar> {
     })
 }
 
-/// Values decoded from f64s of element type `ty`: u8 and u16 kept, the rest as f32.
-fn from_f64(ty: Scalar, data: &[f64]) -> Values {
+/// Values as read: u8 and u16 kept, types f32 holds exactly (i8, i16, f32) as f32, wider
+/// ones (f64, 32- and 64-bit integers) narrowed to f32 with what that loses.
+#[derive(Debug)]
+enum Decoded {
+    Kept(Values),
+    Narrowed(Vec<f32>, Narrowing),
+}
+
+impl Decoded {
+    fn into_volume(self, lattice: Lattice) -> Result<Volume> {
+        match self {
+            Decoded::Kept(values) => Volume::new(lattice, values),
+            Decoded::Narrowed(values, narrowing) => narrowing.finish(lattice, values),
+        }
+    }
+
+    #[cfg(test)]
+    fn values(self) -> Values {
+        match self {
+            Decoded::Kept(values) => values,
+            Decoded::Narrowed(values, _) => Values::F32(values),
+        }
+    }
+}
+
+/// True for element types whose every value f32 holds exactly.
+fn exact_in_f32(ty: Scalar) -> bool {
+    matches!(
+        ty,
+        Scalar::U8 | Scalar::I8 | Scalar::U16 | Scalar::I16 | Scalar::F32
+    )
+}
+
+/// Values decoded from f64s of element type `ty`.
+fn from_f64(ty: Scalar, data: &[f64]) -> Decoded {
     match ty {
-        Scalar::U8 => Values::U8(data.iter().map(|&v| v as u8).collect()),
-        Scalar::U16 => Values::U16(data.iter().map(|&v| v as u16).collect()),
-        _ => Values::F32(data.iter().map(|&v| v as f32).collect()),
+        Scalar::U8 => Decoded::Kept(Values::U8(data.iter().map(|&v| v as u8).collect())),
+        Scalar::U16 => Decoded::Kept(Values::U16(data.iter().map(|&v| v as u16).collect())),
+        _ if exact_in_f32(ty) => {
+            Decoded::Kept(Values::F32(data.iter().map(|&v| v as f32).collect()))
+        }
+        _ => {
+            let mut narrowing = Narrowing::default();
+            let values = data.iter().map(|&v| narrowing.narrow(v)).collect();
+            Decoded::Narrowed(values, narrowing)
+        }
     }
 }
 
 /// Values decoded from `bytes` of element type `ty`, as [`from_f64`] keeps them: a volume
 /// is never held as f64s (twice an f32 volume's bytes) on its way in.
-fn decode(ty: Scalar, bytes: &[u8], endian: Endian) -> Values {
+fn decode(ty: Scalar, bytes: &[u8], endian: Endian) -> Decoded {
     match ty {
-        Scalar::U8 => Values::U8(bytes.to_vec()),
-        Scalar::U16 => Values::U16(decode_as(ty, bytes, endian, |x| x as u16)),
-        _ => Values::F32(decode_as(ty, bytes, endian, |x| x as f32)),
+        Scalar::U8 => Decoded::Kept(Values::U8(bytes.to_vec())),
+        Scalar::U16 => Decoded::Kept(Values::U16(decode_as(ty, bytes, endian, |x| x as u16))),
+        _ if exact_in_f32(ty) => {
+            Decoded::Kept(Values::F32(decode_as(ty, bytes, endian, |x| x as f32)))
+        }
+        _ => {
+            let mut narrowing = Narrowing::default();
+            let values = decode_as(ty, bytes, endian, |x| narrowing.narrow(x));
+            Decoded::Narrowed(values, narrowing)
+        }
     }
 }
 
 /// `bytes` decoded a bounded slice at a time through f64, each value converted.
-fn decode_as<T>(ty: Scalar, bytes: &[u8], endian: Endian, convert: impl Fn(f64) -> T) -> Vec<T> {
+fn decode_as<T>(
+    ty: Scalar,
+    bytes: &[u8],
+    endian: Endian,
+    mut convert: impl FnMut(f64) -> T,
+) -> Vec<T> {
     const SLICE: usize = 1 << 16;
     let mut out = Vec::with_capacity(bytes.len() / ty.size());
     let mut decoded = Vec::with_capacity(SLICE);
@@ -508,11 +567,11 @@ fn build(
     dims: [usize; 3],
     origin: DVec3,
     spacing: DVec3,
-    values: Values,
+    values: Decoded,
 ) -> Result<Volume> {
     let lattice =
         Lattice::new(dims, origin, spacing).map_err(|e| Error::format(name, e.to_string()))?;
-    Volume::new(lattice, values).map_err(|e| match e {
+    values.into_volume(lattice).map_err(|e| match e {
         Error::InvalidInput(m) => Error::format(name, m),
         e => e,
     })
@@ -542,13 +601,45 @@ mod tests {
             (Scalar::F64, Endian::Big),
         ] {
             let bytes: Vec<u8> = (0..n * ty.size()).map(|i| (i * 131 % 256) as u8).collect();
-            let through = from_f64(ty, &ty.decode(&bytes, endian));
+            let through = from_f64(ty, &ty.decode(&bytes, endian)).values();
             assert_eq!(through.len(), n);
             // NaN != NaN: compare bits.
             let bits = |v: &Values| (0..v.len()).map(|i| v.get(i).to_bits()).collect::<Vec<_>>();
-            let direct = decode(ty, &bytes, endian);
+            let direct = decode(ty, &bytes, endian).values();
             assert_eq!(direct.value_type(), through.value_type(), "{ty:?}");
             assert!(bits(&direct) == bits(&through), "{ty:?} {endian:?}");
+        }
+    }
+
+    /// `space directions` whose index runs against an axis (LPS scans write (-1,0,0)):
+    /// every value stays where the file puts it, not mirrored about the origin.
+    #[test]
+    fn a_nrrd_index_running_against_its_axis_keeps_each_value_in_place() {
+        let dims = [3, 4, 5];
+        let v = ramp(dims);
+        let le: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let head = "NRRD0004\ntype: unsigned short\ndimension: 3\nsizes: 3 4 5\nendian: little\n\
+                    space directions: (-0.5,0,0) (0,0.5,0) (0,0,-2)\nspace origin: (1,2,3)\n\
+                    encoding: raw\n\n";
+        let mut bytes = head.as_bytes().to_vec();
+        bytes.extend_from_slice(&le);
+        let volume = read_nrrd(&bytes, "lps.nrrd").unwrap();
+        assert_eq!(volume.lattice.spacing, DVec3::new(0.5, 0.5, 2.0));
+        assert_eq!(volume.lattice.origin, DVec3::new(0.0, 2.0, -5.0));
+        for (i, &value) in v.iter().enumerate() {
+            let [x, y, z] = [i % 3, (i / 3) % 4, i / 12];
+            // Where the file puts node (x, y, z), and the node of the volume there.
+            let p = DVec3::new(
+                1.0 - 0.5 * x as f64,
+                2.0 + 0.5 * y as f64,
+                3.0 - 2.0 * z as f64,
+            );
+            let c = (p - volume.lattice.origin) / volume.lattice.spacing;
+            let node = c.round().as_uvec3();
+            assert_eq!(
+                volume.at(node.x as usize, node.y as usize, node.z as usize),
+                value as f32
+            );
         }
     }
 
@@ -604,7 +695,7 @@ mod tests {
         let npy = super::super::npy::tests::npy("<u2", "(5, 4, 3)", false, &le);
         let (d, ty, endian, data) = super::super::npy::read_npy_volume(&npy, "a.npy").unwrap();
         assert_eq!((d, ty, endian), (dims, Scalar::U16, Endian::Little));
-        assert_eq!(decode(ty, data, endian), expect);
+        assert_eq!(decode(ty, data, endian).values(), expect);
         let bad = super::super::npy::tests::npy("<u2", "(60,)", false, &le);
         assert!(super::super::npy::read_npy_volume(&bad, "a.npy").is_err());
 
@@ -734,6 +825,17 @@ mod tests {
             let e = read_vti(vti(origin, spacing).as_bytes(), "v.vti", None).unwrap_err();
             assert!(e.to_string().contains(named), "{e}");
         }
+        // VTK 9's Direction: the identity reads as before; rotated or flipped axes are
+        // refused, not read past (the volume would be placed wrongly).
+        let directed = |d: &str| {
+            vti("0 0 0", "1 1 1").replace("Spacing=", &format!("Direction=\"{d}\" Spacing="))
+        };
+        assert!(read_vti(directed("1 0 0 0 1 0 0 0 1").as_bytes(), "v.vti", None).is_ok());
+        let e = read_vti(directed("-1 0 0 0 1 0 0 0 1").as_bytes(), "v.vti", None).unwrap_err();
+        assert!(
+            e.to_string().contains("v.vti") && e.to_string().contains("Direction [-1.0, 0.0"),
+            "{e}"
+        );
     }
 
     /// A header claiming 10^15 nodes over three values is refused by what the file

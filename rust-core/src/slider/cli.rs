@@ -32,8 +32,15 @@ pub struct VolumeArgs {
 }
 
 impl VolumeArgs {
-    /// Reads `input` as these options say.
+    /// Reads `input` as these options say; prints what reading it lost (see
+    /// [`crate::field::grid::Narrowing`]).
     pub fn read(&self, input: &Path) -> Result<Volume> {
+        let volume = self.read_quietly(input)?;
+        crate::io::print_warnings(input, &volume.warnings);
+        Ok(volume)
+    }
+
+    fn read_quietly(&self, input: &Path) -> Result<Volume> {
         let three = |v: Option<Vec<f64>>, name: &'static str| -> Result<Option<DVec3>> {
             match v.as_deref() {
                 None => Ok(None),
@@ -307,6 +314,10 @@ fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
             message: format!("line {}: '{text}' is not a number", k + 1),
         })?;
         let change = slider.set_isovalue(iso)?;
+        let (lo, hi) = slider.store().value_range();
+        if let Some(why) = outside(iso, lo as f64, hi as f64) {
+            eprintln!("isobar: warning: line {}: {why}", k + 1);
+        }
         write!(
             out,
             "iso {iso} triangles {} vertices {} update_ms {:.3} added {} removed {} held_mib {:.1}",
@@ -332,6 +343,12 @@ fn scripted(slider: &mut Slider, lod: bool) -> Result<()> {
         writeln!(out).map_err(|e| Error::io("<stdout>", e))?;
     }
     Ok(())
+}
+
+/// Why isovalue `iso` has no surface when it lies outside the values `lo..hi`.
+fn outside(iso: f64, lo: f64, hi: f64) -> Option<String> {
+    (!(lo..=hi).contains(&iso))
+        .then(|| format!("no surface at isovalue {iso}: the values range over {lo} .. {hi}"))
 }
 
 /// Reads the next line of `input` into `line`; false at the end of the input. An
@@ -422,7 +439,15 @@ fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Re
             let m = slider.lod_mesh()?;
             eprint!(" lod {:<10} {:>8.3} ms", m.triangles.len(), m.seconds * 1e3);
         }
-        eprint!("   ");
+        eprint!(
+            "{}",
+            outside(iso, lo, lo + range).map_or("   ", |_| " (outside the values)")
+        );
+        // A Ctrl-C during the update: the read below would wait for a key first.
+        if crate::terminal::interrupted() {
+            eprintln!();
+            return Ok(());
+        }
         loop {
             let read = match stdin.read(&mut key) {
                 // Ctrl-C (the terminal keeps sending signals) quits like q, and the
@@ -446,7 +471,8 @@ fn interactive(slider: &mut Slider, args: &SlideArgs, lo: f64, range: f64) -> Re
                     escape = 1;
                     continue;
                 }
-                (1, b'[') => {
+                // ESC O A..D in the terminal's application cursor mode.
+                (1, b'[' | b'O') => {
                     escape = 2;
                     continue;
                 }

@@ -323,6 +323,19 @@ impl<'a> Document<'a> {
                     Some(t) => self.finite(&t, "Spacing")?,
                     None => [1.0; 3],
                 };
+                // VTK 9 writes the image's axes (rotated, or an index running against an
+                // axis) as a row-major 3×3 Direction: read past, the volume would be
+                // placed and oriented wrongly without a word.
+                if let Some(t) = attr("Direction")? {
+                    let d = self.numbers::<9, f64>(&t, "Direction")?;
+                    if d != [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0] {
+                        return Err(self.err(format!(
+                            "<ImageData> Direction {d:?} is not the identity: rotated or \
+                             flipped image axes are not supported (resample the image, e.g. \
+                             with ParaView's Resample To Image, first)"
+                        )));
+                    }
+                }
                 self.image = Some(ImageGeometry {
                     whole_extent,
                     origin,
