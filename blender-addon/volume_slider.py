@@ -51,8 +51,8 @@ def store_path_for(path: str) -> str:
 
 def ensure_store(path: str, memory_budget_gib: float = 0.0) -> Tuple[str, List[str]]:
     """Builds the store of the volume at `path` unless an up-to-date one exists; returns
-    its path and what the build warned about (float64 values the store holds coarsely as
-    float32), for the caller to show. `memory_budget_gib` bounds what the build holds
+    its path and what the build warned about (values wider than float32, float64 or 32/64-bit
+    integers, that the store holds coarsely as float32), for the caller to show. `memory_budget_gib` bounds what the build holds
     besides the volume (0: the core's default; past about 29 bytes a node it sorts on
     disk, beside the store). Raises isobar.Error (naming the file) when the volume cannot
     be read or the budget is too small."""
@@ -66,7 +66,11 @@ def ensure_store(path: str, memory_budget_gib: float = 0.0) -> Tuple[str, List[s
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", isobar.IsobarWarning)
             isobar.Slider.build(path, store, memory_budget=budget)
-        said = [f"{os.path.basename(path)}: {w.message}" for w in caught if issubclass(w.category, isobar.IsobarWarning)]
+        for w in caught:
+            if issubclass(w.category, isobar.IsobarWarning):
+                said.append(f"{os.path.basename(path)}: {w.message}")
+            else:  # not ours to report: shown as Python would have
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     return store, said
 
 

@@ -12,7 +12,10 @@ pub struct PointSamples {
     pub positions: Vec<[f64; 3]>,
     /// Unit normals (along the field's gradient), one per point.
     pub normals: Vec<[f32; 3]>,
-    /// Radius of the disk each point stands for (covers the surface without gaps).
+    /// Radius of the disk each point stands for: the covering radius d/√3 of an even
+    /// hexagonal packing of the local spacing d. The spacing is not perfectly even, so a
+    /// few per cent of the surface lie outside every disk; splat renderers that must
+    /// show no holes scale the radii up (1.6× closed every gap measured).
     pub radii: Vec<f64>,
     /// Per-point arrays (element id, reference coordinates, curvature, energy ...).
     pub attributes: Vec<Attribute>,

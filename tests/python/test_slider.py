@@ -474,7 +474,7 @@ def test_origin_and_spacing_are_three_numbers(tmp_path):
     """ctypes padded a two-value origin with 0 (a volume placed at z = 0 without a word)
     and failed on four with a bare IndexError."""
     values = np.zeros((4, 4, 4), np.float32)
-    for bad in ((5.0, 5.0), (1.0, 2.0, 3.0, 4.0), "abc"):
+    for bad in ((5.0, 5.0), (1.0, 2.0, 3.0, 4.0), "abc", "123"):
         with pytest.raises(isobar.InvalidArgumentError, match="origin must be three numbers"):
             isobar.Slider.build_array(values, tmp_path / "o.isoslider", origin=bad)
         with pytest.raises(isobar.InvalidArgumentError, match="spacing must be three numbers"):

@@ -316,39 +316,40 @@ def test_an_empty_frame_in_a_sequence(tmp_path):
 
 def test_a_frame_with_no_particles(tmp_path):
     """An emitter's first frame holds 0 particles: that frame is an empty surface with the
-    sequence's primvars (no rows), a warning names the file, and the next frame equals the
-    core's extraction. A primvar array the empty file lacks is still an error."""
+    sequence's primvars (no rows; the core's Isovalue too, for several isovalues), a
+    warning names the file, and the next frame equals the core's extraction. An array
+    the empty file does not declare (VTK writes no point data for 0 points) is left out
+    of that frame, not an error."""
     rng = np.random.default_rng(7)
     blob = rng.normal(scale=0.04, size=(400, 3))
     arrays = {"velocity": np.tile([0.0, -1.0, 0.0], (400, 1)), "pressure": np.linalg.norm(blob, axis=1)}
     folder = tmp_path / "frames"
     folder.mkdir()
-    np.savez(folder / "drip_0001.npz", positions=blob[:0], **{k: v[:0] for k, v in arrays.items()})
+    np.savez(folder / "drip_0001.npz", positions=blob[:0], velocity=arrays["velocity"][:0])
     np.savez(folder / "drip_0002.npz", positions=blob, **arrays)
     out = tmp_path / "drip.usda"
+    isos = [ISO, 0.3]
     options = dict(h=0.03, attributes=["pressure"])
-    result = isobar_usd.write_sequence(folder / "drip_####.npz", out, ISO, **options)
+    result = isobar_usd.write_sequence(folder / "drip_####.npz", out, isos, **options)
     assert result.frames == [1, 2]
     assert result.warnings == {1: ["drip_0001.npz holds 0 particles: an empty surface"]}
+
+    from pxr import UsdGeom
 
     stage = open_stage(out)
     empty = mesh_at(stage, 1)
     assert empty["points"].shape == (0, 3) and empty["indices"].shape == (0,)
     assert empty["velocities"].shape == (0, 3) and empty["normals"].shape == (0, 3)
-    from pxr import UsdGeom
-
-    pressure = UsdGeom.PrimvarsAPI(empty["mesh"]).GetPrimvar("pressure")
-    assert len(pressure.Get(1)) == 0
+    primvars = UsdGeom.PrimvarsAPI(empty["mesh"])
+    assert len(primvars.GetPrimvar("Isovalue").Get(1)) == 0
     with isobar.Particles.read(str(folder / "drip_0002.npz")) as particles:
-        surface = isobar.extract(particles, ISO, h=0.03, attributes=["pressure", "velocity"])
+        surface = isobar.extract(particles, isos, h=0.03, attributes=["pressure", "velocity"])
     assert surface.triangles.shape[0] > 0
     assert_same_mesh(mesh_at(stage, 2), surface)
-    np.testing.assert_array_equal(pressure.Get(2), surface.attributes["pressure"].astype(np.float32))
+    for name in ("pressure", "Isovalue"):
+        np.testing.assert_array_equal(primvars.GetPrimvar(name).Get(2), surface.attributes[name].astype(np.float32))
     assert isobar_usd.check(out) == []
     assert validation_errors(stage) == []
-
-    with pytest.raises(isobar_usd.FrameError, match="frame 1 .*no particle array 'density'"):
-        isobar_usd.write_sequence(folder / "drip_####.npz", tmp_path / "bad.usda", ISO, h=0.03, attributes=["density"])
 
 
 def test_an_empty_extraction(tmp_path, dam_frames):

@@ -637,7 +637,7 @@ def test_settings_out_of_range_are_refused_naming_them_not_clamped():
     s.SetIsovalue(0.5)
     for setting, value, expected in (("LodErrorBound", -0.1, "Lod Error Bound must be >= 0"),
                                      ("LodMaxLevel", -1, "Lod Max Level must be >= 0"),
-                                     ("MemoryBudget", -1.0, "Memory Budget must be > 0")):
+                                     ("MemoryBudget", -1.0, "Memory Budget must be >= 0 (GiB, 0: the core's default)")):
         getattr(s, "Set" + setting)(value)
         errors = Errors(s)
         s.Update()
@@ -831,12 +831,32 @@ def test_bad_inputs_give_error_and_empty_output():
 
 @test
 def test_empty_input_gives_empty_output_without_error():
+    """An emitter before its first particle: empty, not an error, but said."""
     f = vtkIsobarSPHIsosurface()
     f.SetInputData(vtkPolyData())
     f.SetSmoothingLength(h.H)
     errors = Errors(f)
+    warned = Errors(f, "WarningEvent")
     f.Update()
     assert f.GetOutput().GetNumberOfPoints() == 0 and not errors.messages
+    assert len(warned.messages) == 1 and "no particles: empty output" in warned.messages[0], warned.messages
+
+
+@test
+def test_adaptive_says_which_settings_it_ignores():
+    """Carried Arrays and Full Grid belong to Marching Correctors: with Method Adaptive
+    they did nothing without a word."""
+    f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE)
+    warned = Errors(f, "WarningEvent")
+    f.Update()
+    assert not [m for m in warned.messages if "ignore" in m], warned.messages
+    f.GetCarriedArraySelection().EnableArray("velocity")
+    f.SetFullGrid(True)
+    f.Update()
+    said = [m for m in warned.messages if "ignore" in m]
+    assert len(said) == 2, warned.messages
+    assert "Carried Arrays are ignored" in said[0] and "Full Grid applies to 'Marching Correctors'" in said[1]
+    assert f.GetErrorMessage() == "" and f.GetOutput().GetNumberOfCells() > 1000
 
 
 @test

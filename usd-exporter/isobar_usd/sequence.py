@@ -268,7 +268,13 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
             # An emitter before its first particle, or a fluid that has drained: an
             # empty frame, as ParaView's filter and the Blender add-on give. The core
             # refuses empty data, so that a whole empty input is an error there.
-            return to_mesh(_empty_surface(path, infos, wanted, options), primvars=primvars, velocities=velocity)
+            surface = _empty_surface(path, infos, wanted + primvars + [velocity] if velocity else wanted + primvars, options)
+            present = surface["attributes"]
+            return to_mesh(
+                surface,
+                primvars=[name for name in primvars if name in present],
+                velocities=velocity if velocity in present else None,
+            )
         keep_going = lambda _f, _p: not _STOP.is_set()  # noqa: E731
         try:
             # The warnings travel in FrameMesh.warnings (the results, the progress reports,
@@ -289,14 +295,17 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         surface.release()
 
 
-def _empty_surface(path: str, infos: Mapping[str, int], wanted: List[str], options: Mapping[str, Any]) -> Dict[str, Any]:
-    """The surface of a file with 0 particles, shaped as an extraction would give it (the
-    arrays asked for, with no rows), so the sequence's primvars stay the same per frame."""
-    missing = [name for name in wanted if name not in infos and name not in CORE_ATTRIBUTES]
-    if missing:
-        raise InputError(f"no particle array '{missing[0]}' (arrays: {', '.join(infos) or 'none'})")
+def _empty_surface(path: str, infos: Mapping[str, int], names: List[str], options: Mapping[str, Any]) -> Dict[str, Any]:
+    """The surface of a file with 0 particles, shaped as an extraction would give it: the
+    arrays `names` asks for, with no rows (the core's own, SumOfWeights and Isovalue,
+    one component each). An array the file does not declare is left out, not refused:
+    VTK writes no point data for 0 points, and the sequence's other frames declare it
+    (a primvar a frame lacks is allowed; one whose type differs is not)."""
+    components = {**{name: 1 for name in CORE_ATTRIBUTES}, **infos}
     attributes = {
-        name: np.zeros((0, infos[name]) if infos.get(name, 1) > 1 else 0, dtype=np.float32) for name in wanted
+        name: np.zeros((0, components[name]) if components[name] > 1 else 0, dtype=np.float32)
+        for name in dict.fromkeys(names)
+        if name in components
     }
     return {
         "points": np.zeros((0, 3), np.float32),

@@ -233,9 +233,11 @@ std::string CollectLocal(
       ParticleArray& into = out.Arrays[k];
       if (!first && a.Components != into.Components)
       {
-        error = "point array '" + a.Name + "' has " + std::to_string(a.Components) +
-          " components in partition " + std::to_string(p) + " but " +
-          std::to_string(into.Components) + " in the partitions before it (0: missing)";
+        auto count = [](int components) {
+          return components > 0 ? std::to_string(components) + " components" : "none";
+        };
+        error = "point array '" + a.Name + "' has " + count(a.Components) + " in partition " +
+          std::to_string(p) + " but " + count(into.Components) + " in the partitions before it";
       }
       into.Components = a.Components;
       into.Data.insert(into.Data.end(), a.Data.begin(), a.Data.end());
@@ -875,9 +877,19 @@ int vtkIsobarSPHIsosurface::RequestData(
   }
   const bool hFromArray = NonEmpty(this->SmoothingLengthArrayName);
   const bool hAuto = !hFromArray && this->SmoothingLength <= 0.0;
-  // The adaptive surface carries no particle arrays: do not gather them.
+  // The adaptive surface carries no particle arrays: do not gather them, and say so
+  // (a panel's settings that do nothing would otherwise look like a lost result).
   const std::vector<std::string> carried =
     adaptive ? std::vector<std::string>() : this->CarriedArrayNames();
+  if (adaptive && !this->CarriedArrayNames().empty())
+  {
+    vtkWarningMacro(<< "Method 'Adaptive' carries no particle arrays onto the surface: "
+                       "Carried Arrays are ignored (choose 'Marching Correctors' for them)");
+  }
+  if (adaptive && this->FullGrid)
+  {
+    vtkWarningMacro(<< "Full Grid applies to 'Marching Correctors'; 'Adaptive' ignores it");
+  }
   std::vector<Request> requests;
   if (!fieldArray.empty())
   {
@@ -953,7 +965,12 @@ int vtkIsobarSPHIsosurface::RequestData(
   }
   if (total == 0)
   {
-    vtkDebugMacro(<< "No particles: empty output");
+    // An emitter before its first particle: an empty surface, not an error, but said
+    // (once, by rank 0), as an isovalue the field never crosses is.
+    if (rank == 0)
+    {
+      vtkWarningMacro(<< "no particles: empty output");
+    }
     return 1;
   }
 

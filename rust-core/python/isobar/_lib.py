@@ -254,6 +254,19 @@ PROGRESS_FN = CFUNCTYPE(c_int32, c_void_p, c_double, c_char_p)
 _Status = c_int  # IsobarStatus: a C enum, int-sized
 
 # name: (restype, argtypes)
+#: The parameters after the values of isobar_slider_build_f32 and isobar_slider_build_f64.
+_BUILD_ARRAY = [
+    POINTER(c_size_t),
+    POINTER(c_double),
+    POINTER(c_double),
+    c_char_p,
+    c_double,
+    c_uint32,
+    c_uint64,
+    PROGRESS_FN,
+    c_void_p,
+]
+
 _PROTOTYPES = {
     "isobar_last_error_message": (c_char_p, []),
     "isobar_abi_version": (c_uint32, []),
@@ -385,36 +398,8 @@ _PROTOTYPES = {
         _Status,
         [c_char_p, c_char_p, c_char_p, c_double, c_uint32, c_uint64, PROGRESS_FN, c_void_p],
     ),
-    "isobar_slider_build_f32": (
-        _Status,
-        [
-            POINTER(c_float),
-            POINTER(c_size_t),
-            POINTER(c_double),
-            POINTER(c_double),
-            c_char_p,
-            c_double,
-            c_uint32,
-            c_uint64,
-            PROGRESS_FN,
-            c_void_p,
-        ],
-    ),
-    "isobar_slider_build_f64": (
-        _Status,
-        [
-            POINTER(c_double),
-            POINTER(c_size_t),
-            POINTER(c_double),
-            POINTER(c_double),
-            c_char_p,
-            c_double,
-            c_uint32,
-            c_uint64,
-            PROGRESS_FN,
-            c_void_p,
-        ],
-    ),
+    "isobar_slider_build_f32": (_Status, [POINTER(c_float), *_BUILD_ARRAY]),
+    "isobar_slider_build_f64": (_Status, [POINTER(c_double), *_BUILD_ARRAY]),
     "isobar_last_warnings": (c_char_p, []),
     "isobar_slider_open": (_Status, [c_char_p, POINTER(POINTER(SliderHandle))]),
     "isobar_slider_set_isovalue": (

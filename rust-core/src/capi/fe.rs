@@ -469,7 +469,8 @@ pub extern "C" fn isobar_samples_normals(s: *const IsobarSamples) -> *const f32 
     samples(s).map_or(std::ptr::null(), |s| s.samples.normals.as_ptr().cast())
 }
 
-/// count f64 splat radii (disks of these radii cover the surface), or NULL.
+/// count f64 splat radii (the covering radius of an even packing of the local spacing:
+/// uneven spacing leaves a few per cent of the surface outside every disk), or NULL.
 #[no_mangle]
 pub extern "C" fn isobar_samples_radii(s: *const IsobarSamples) -> *const f64 {
     samples(s).map_or(std::ptr::null(), |s| s.samples.radii.as_ptr())

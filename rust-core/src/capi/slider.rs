@@ -66,10 +66,10 @@ fn build_to(
     progress: IsobarProgressFn,
     user: *mut c_void,
 ) -> crate::Result<()> {
-    set_last_warnings(&volume.warnings);
     with_progress(progress, user, |p| {
         build_store(volume, Path::new(output), &params, p)
     })?;
+    set_last_warnings(&volume.warnings);
     Ok(())
 }
 

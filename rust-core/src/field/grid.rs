@@ -279,17 +279,26 @@ impl Narrowing {
             return None;
         }
         let largest = lo.abs().max(hi.abs()) as f32;
-        // The gap from `largest` to the next f32: the step of the rounded values there.
-        let step = (f32::from_bits(largest.to_bits() + 1) - largest) as f64;
+        // The gap from `largest` to the next f32: the step of the rounded values there
+        // (below it at f32::MAX, where there is no next one).
+        let above = f32::from_bits(largest.to_bits() + 1);
+        let step = match above.is_finite() {
+            true => (above - largest) as f64,
+            false => (largest - f32::from_bits(largest.to_bits() - 1)) as f64,
+        };
         // Fixed decimals that tell the range's ends apart (three digits of its width).
         let decimals = (2.0 - (hi - lo).log10().floor()).clamp(0.0, 12.0) as usize;
         let show = |v: f64| match v.abs() < 1e9 {
             true => format!("{v:.decimals$}"),
             false => format!("{v:e}"),
         };
+        let step_text = match (1e-4..1e9).contains(&step) {
+            true => format!("{step}"),
+            false => format!("{step:e}"),
+        };
         (step > 1e-4 * (hi - lo)).then(|| {
             format!(
-                "the values are held as float32, in steps of {step} near {}: {:.2} % of the \
+                "the values are held as float32, in steps of {step_text} near {}: {:.2} % of the \
                  value range {}..{}; subtract an offset (e.g. the mean) first to keep the \
                  surfaces of the exact values",
                 show(largest as f64),
@@ -485,8 +494,16 @@ mod tests {
             "{w}"
         );
         assert!(w.contains("range 101324.9800..101325.0200"), "{w}");
-        // The largest finite f32 still narrows; past it, refused, naming node and value.
-        assert!(narrowed(&[0.0, f32::MAX as f64]).is_ok());
+        // The largest finite f32 still narrows (a no-data marker: the range is huge, its
+        // steps fine); past it, refused, naming node and value.
+        let marked = narrowed(&[0.0, f32::MAX as f64]).unwrap();
+        assert!(marked.warnings.is_empty(), "{:?}", marked.warnings);
+        let near = narrowed(&[f32::MAX as f64 * 0.999999, f32::MAX as f64]).unwrap();
+        assert!(
+            near.warnings[0].contains("steps of 2.028240960365167e31 near 3.4028234663852886e38"),
+            "{:?}",
+            near.warnings
+        );
         let e = narrowed(&[0.0, 1.0, -1e300, 2e300])
             .unwrap_err()
             .to_string();

@@ -338,20 +338,21 @@ impl SphField {
         for (p, v) in particles.iter_mut().zip(&volumes) {
             p.weight_scale *= v;
         }
-        let unit_values = particles.iter().all(|p| p.value == 1.0);
-        if settings.shepard && unit_values {
-            // A / S with A = S: 1 wherever a particle reaches, 0 elsewhere. No isovalue
-            // has a surface, and every grid factor would be blamed in turn.
+        if settings.shepard && settings.quantity == Quantity::SumOfWeights {
+            // S / S: 1 wherever a particle reaches, 0 elsewhere. No isovalue has a
+            // surface, and every grid factor would be blamed in turn. (An array that
+            // happens to be 1 at these particles is data, not a setting: a rank's piece
+            // or a frame may hold such values, and gets the empty surface's warning.)
             return Err(Error::InvalidParameter {
                 name: "shepard",
                 message: "Shepard normalisation divides the field by the sum of weights, and the \
-                          field is the sum of weights (or an array that is 1 at every \
-                          particle): the result is 1 wherever a particle reaches, with no \
-                          surface; turn Shepard off for the free surface, or choose a particle \
-                          array as the field"
+                          field is the sum of weights: the result is 1 wherever a particle \
+                          reaches, with no surface; turn Shepard off for the free surface, or \
+                          choose a particle array as the field"
                     .into(),
             });
         }
+        let unit_values = particles.iter().all(|p| p.value == 1.0);
         let bounds = super::neighbours::bounds(&data.positions);
         let warnings = support_spans_the_data(n, max_support, bounds, settings)
             .into_iter()
@@ -816,7 +817,8 @@ mod tests {
             .push(Attribute::scalar("p", (0..n).map(|i| i as f64).collect()));
         for (quantity, refused) in [
             (Quantity::SumOfWeights, true),
-            (Quantity::Scalar("one".into()), true),
+            // Data, not a setting: accepted (a piece of a larger set may be all 1).
+            (Quantity::Scalar("one".into()), false),
             (Quantity::Scalar("p".into()), false),
         ] {
             let settings = SphSettings {

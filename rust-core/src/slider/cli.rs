@@ -94,6 +94,8 @@ pub struct BuildOptions {
     /// Memory budget of the precomputation in bytes, the volume excluded. Over about 29
     /// bytes a node, the node values are sorted on disk (an external-memory sort, in
     /// unnamed temporary files beside the output) and the skip-list levels spooled there.
+    /// The levels' open blocks stay in memory and grow with the surface's extent: a noisy
+    /// volume needs more than a smooth one, and a budget below that is refused.
     #[arg(long, default_value_t = crate::field::DEFAULT_MEMORY_BUDGET)]
     pub memory_budget: u64,
 }
