@@ -314,24 +314,26 @@ def test_an_empty_frame_in_a_sequence(tmp_path):
     assert validation_errors(stage) == []
 
 
-def test_a_frame_with_no_particles(tmp_path):
+@pytest.mark.parametrize("layout", ["clips", "flat"])
+def test_a_frame_with_no_particles(tmp_path, layout):
     """An emitter's first frame holds 0 particles: that frame is an empty surface with the
     sequence's primvars (no rows; the core's Isovalue too, for several isovalues), a
     warning names the file, and the next frame equals the core's extraction. An array
-    the empty file does not declare (VTK writes no point data for 0 points) is left out
-    of that frame, not an error."""
+    the empty file does not declare (VTK writes no point data for 0 points) is not an
+    error, and that frame shows none of the next frame's values (in a flat layer USD
+    would hold the nearest sample: 400 pressures against 0 points)."""
     rng = np.random.default_rng(7)
     blob = rng.normal(scale=0.04, size=(400, 3))
     arrays = {"velocity": np.tile([0.0, -1.0, 0.0], (400, 1)), "pressure": np.linalg.norm(blob, axis=1)}
     folder = tmp_path / "frames"
     folder.mkdir()
-    np.savez(folder / "drip_0001.npz", positions=blob[:0], velocity=arrays["velocity"][:0])
+    np.savez(folder / "drip_0001.npz", positions=blob[:0])
     np.savez(folder / "drip_0002.npz", positions=blob, **arrays)
     out = tmp_path / "drip.usda"
     isos = [ISO, 0.3]
     options = dict(h=0.03, attributes=["pressure"])
-    result = isobar_usd.write_sequence(folder / "drip_####.npz", out, isos, **options)
-    assert result.frames == [1, 2]
+    result = isobar_usd.write_sequence(folder / "drip_####.npz", out, isos, layout=layout, velocities="velocity", **options)
+    assert result.frames == [1, 2] and result.layout == layout
     assert result.warnings == {1: ["drip_0001.npz holds 0 particles: an empty surface"]}
 
     from pxr import UsdGeom
@@ -339,9 +341,12 @@ def test_a_frame_with_no_particles(tmp_path):
     stage = open_stage(out)
     empty = mesh_at(stage, 1)
     assert empty["points"].shape == (0, 3) and empty["indices"].shape == (0,)
-    assert empty["velocities"].shape == (0, 3) and empty["normals"].shape == (0, 3)
+    assert empty["normals"].shape == (0, 3)
+    assert empty["velocities"] is None or empty["velocities"].shape == (0, 3)
     primvars = UsdGeom.PrimvarsAPI(empty["mesh"])
-    assert len(primvars.GetPrimvar("Isovalue").Get(1)) == 0
+    for name in ("Isovalue", "pressure"):
+        value = primvars.GetPrimvar(name).Get(1)
+        assert value is None or len(value) == 0, (name, value)
     with isobar.Particles.read(str(folder / "drip_0002.npz")) as particles:
         surface = isobar.extract(particles, isos, h=0.03, attributes=["pressure", "velocity"])
     assert surface.triangles.shape[0] > 0

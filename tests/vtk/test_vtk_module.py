@@ -549,6 +549,20 @@ def test_a_partitioned_dataset_is_one_fluid():
     halves.Modified()
     f.Update()
     assert "partition 1: the input has no point array 'velocity'" in f.GetErrorMessage(), f.GetErrorMessage()
+    # The same array with other components in another partition: refused, naming both.
+    f.GetCarriedArraySelection().DisableArray("velocity")
+    for i, components in enumerate((1, 3)):
+        part = halves.GetPartition(i)
+        extra = numpy_to_vtk(np.zeros((part.GetNumberOfPoints(), components)), deep=True)
+        extra.SetName("extra")
+        part.GetPointData().AddArray(extra)
+    f.GetCarriedArraySelection().EnableArray("extra")
+    halves.Modified()
+    f.Update()
+    assert (
+        "point array 'extra' has 3 components in partition 1 but 1 component in the partitions before it"
+        in f.GetErrorMessage()
+    ), f.GetErrorMessage()
 
 
 @test

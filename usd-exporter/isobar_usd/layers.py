@@ -229,6 +229,8 @@ class MeshLayer:
         self.triangles = 0
         #: (frame, points, extent) of each frame, for the extent's held samples.
         self._extents: List[Tuple[int, int, np.ndarray]] = []
+        #: The attributes each frame authored, for those it lacks (see _fill_absent).
+        self._authored: Dict[int, set] = {}
 
     def add(self, mesh: FrameMesh, frame: int) -> List[SchemaEntry]:
         """Authors `mesh` as the time samples at time code `frame`."""
@@ -239,10 +241,27 @@ class MeshLayer:
         for entry in entries:
             attr = _declare(prim, entry)
             attr.Set(_array(values[entry[0]], entry[1]), float(frame))
+        self._authored[int(frame)] = {entry[0] for entry in entries}
         self.frames.append(int(frame))
         self.points, self.triangles = mesh.n_points, mesh.n_triangles
         self._extents.append((int(frame), mesh.n_points, np.asarray(mesh.extent)))
         return entries
+
+    def _fill_absent(self) -> None:
+        """An attribute a frame lacks (a primvar an empty frame's file does not declare)
+        would show the nearest frame's samples there, as many values as that frame has
+        points. It is authored empty at a frame with no points, and blocked (no value)
+        at any other."""
+        Sdf, _, _, _ = _pxr()
+        points = {frame: n for frame, n, _ in self._extents}
+        prim = self.mesh.GetPrim()
+        for frame, authored in self._authored.items():
+            for name, type_name, _, _ in self.schema.values():
+                if name in authored:
+                    continue
+                empty = np.zeros((0, {"float2[]": 2, "float4[]": 4}.get(type_name, 1)))
+                value = _array(empty, type_name) if points[frame] == 0 else Sdf.ValueBlock()
+                prim.GetAttribute(name).Set(value, float(frame))
 
     def _hold_extents(self) -> None:
         """Between two frames whose point counts differ, USD cannot interpolate the points
@@ -261,6 +280,7 @@ class MeshLayer:
         `atomic` False, for a path that is itself a staging file) directly."""
         if not self.frames:
             raise InputError("no frame to write")
+        self._fill_absent()
         self._hold_extents()
         start, end = min(self.frames), max(self.frames)
         _stage_metadata(self.stage, self.settings, start, end)

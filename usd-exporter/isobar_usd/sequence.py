@@ -243,12 +243,14 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
             adaptive = options.get("method") == "adaptive"
             velocity = VELOCITY_ARRAY if infos.get(VELOCITY_ARRAY) == 3 and not adaptive else None
         elif job.velocities is not None:
-            if job.velocities not in infos:
+            if job.velocities not in infos and len(particles) == 0:
+                pass  # an empty file need not declare it (VTK writes no point data)
+            elif job.velocities not in infos:
                 raise InputError(
                     f"no particle array '{job.velocities}' for velocities "
                     f"(arrays: {', '.join(infos) or 'none'})"
                 )
-            if infos[job.velocities] != 3:
+            elif infos[job.velocities] != 3:
                 raise InputError(
                     f"particle array '{job.velocities}' has {infos[job.velocities]} components; "
                     "velocities need 3"

@@ -234,7 +234,9 @@ std::string CollectLocal(
       if (!first && a.Components != into.Components)
       {
         auto count = [](int components) {
-          return components > 0 ? std::to_string(components) + " components" : "none";
+          return components <= 0 ? std::string("none")
+                                 : std::to_string(components) +
+              (components == 1 ? " component" : " components");
         };
         error = "point array '" + a.Name + "' has " + count(a.Components) + " in partition " +
           std::to_string(p) + " but " + count(into.Components) + " in the partitions before it";

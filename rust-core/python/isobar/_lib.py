@@ -253,7 +253,6 @@ PROGRESS_FN = CFUNCTYPE(c_int32, c_void_p, c_double, c_char_p)
 
 _Status = c_int  # IsobarStatus: a C enum, int-sized
 
-# name: (restype, argtypes)
 #: The parameters after the values of isobar_slider_build_f32 and isobar_slider_build_f64.
 _BUILD_ARRAY = [
     POINTER(c_size_t),
@@ -267,6 +266,7 @@ _BUILD_ARRAY = [
     c_void_p,
 ]
 
+# name: (restype, argtypes)
 _PROTOTYPES = {
     "isobar_last_error_message": (c_char_p, []),
     "isobar_abi_version": (c_uint32, []),
