@@ -416,8 +416,8 @@ const double *isobar_samples_positions(const struct IsobarSamples *s);
 // count × 3 f32 unit normals (along the field's gradient), or NULL.
 const float *isobar_samples_normals(const struct IsobarSamples *s);
 
-// count f64 splat radii (the covering radius of an even packing of the local spacing:
-// uneven spacing leaves a few per cent of the surface outside every disk), or NULL.
+// count f64 splat radii (each sample's Voronoi cell reach: the disks cover the
+// surface), or NULL.
 const double *isobar_samples_radii(const struct IsobarSamples *s);
 
 // Number of per-sample arrays.

@@ -12,10 +12,9 @@ pub struct PointSamples {
     pub positions: Vec<[f64; 3]>,
     /// Unit normals (along the field's gradient), one per point.
     pub normals: Vec<[f32; 3]>,
-    /// Radius of the disk each point stands for: the covering radius d/√3 of an even
-    /// hexagonal packing of the local spacing d. The spacing is not perfectly even, so a
-    /// few per cent of the surface lie outside every disk; splat renderers that must
-    /// show no holes scale the radii up (1.6× closed every gap measured).
+    /// Radius of the disk each point stands for: the reach of its Voronoi cell among its
+    /// neighbours in its tangent plane, so that the disks cover the surface (at least
+    /// d/√3 for the local spacing d, an even packing's, and at most 2.5 times that).
     pub radii: Vec<f64>,
     /// Per-point arrays (element id, reference coordinates, curvature, energy ...).
     pub attributes: Vec<Attribute>,

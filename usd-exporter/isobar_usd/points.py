@@ -1,8 +1,8 @@
 """Oriented point samples (isobar's high-order FE isosurfaces) as a UsdGeomPoints.
 
 The samples of ``isobar.sample_fe`` become one Points prim: ``points``, ``normals``,
-``widths`` (twice each sample's radius: disks covering an even packing of the local
-spacing, a few per cent of the surface left between them where the spacing is uneven) and the per-sample
+``widths`` (twice each sample's radius, which reaches the sample's Voronoi cell, so
+the disks cover the surface) and the per-sample
 arrays as vertex primvars (``Element`` int, ``Curvature`` and ``Energy`` float,
 ``Reference`` float3), under a root Xform that is the stage's defaultPrim::
 

@@ -190,9 +190,8 @@ class Samples:
         points: (n, 3) float64 world positions, each with |F - C| at most the tolerance.
         normals: (n, 3) float32 unit normals along the field's gradient.
         radii: (n,) float64 radii of the disks the points stand for (hosts draw them
-            as splats or point gaussians): the covering radius of an even packing of the
-            local spacing; uneven spacing leaves a few per cent of the surface outside
-            every disk (scale them up, 1.6× closed every gap measured, for no holes).
+            as splats or point gaussians): each reaches its sample's Voronoi cell, so
+            the disks cover the surface.
         arrays: ``Element`` (cell id), ``Reference`` ((n, 3) coordinates in the cell),
             ``Curvature`` (sqrt(k1² + k2²)), ``Energy``.
         stats: particles, seeds, iterations, evaluations, splits, deletes, spacing,

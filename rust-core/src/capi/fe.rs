@@ -469,8 +469,8 @@ pub extern "C" fn isobar_samples_normals(s: *const IsobarSamples) -> *const f32 
     samples(s).map_or(std::ptr::null(), |s| s.samples.normals.as_ptr().cast())
 }
 
-/// count f64 splat radii (the covering radius of an even packing of the local spacing:
-/// uneven spacing leaves a few per cent of the surface outside every disk), or NULL.
+/// count f64 splat radii (each sample's Voronoi cell reach: the disks cover the
+/// surface), or NULL.
 #[no_mangle]
 pub extern "C" fn isobar_samples_radii(s: *const IsobarSamples) -> *const f64 {
     samples(s).map_or(std::ptr::null(), |s| s.samples.radii.as_ptr())

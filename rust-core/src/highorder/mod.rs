@@ -18,6 +18,7 @@ pub mod marching;
 mod neighbours;
 mod particle;
 mod seed;
+mod splats;
 mod system;
 #[cfg(test)]
 pub(crate) mod tests;
@@ -259,13 +260,16 @@ fn to_samples(particles: &[particle::Particle], params: &Params, s: f64) -> Poin
     let mut reference = Vec::with_capacity(3 * particles.len());
     let mut curvature = Vec::with_capacity(particles.len());
     let mut energy = Vec::with_capacity(particles.len());
+    // Local spacing d = β/α; a hexagonal Voronoi cell of spacing d fits in a disk of
+    // radius d/√3 = β d. The packing is not even: each radius reaches its own cell.
+    let even: Vec<f64> = particles
+        .iter()
+        .map(|p| BETA * BETA / alpha(s, params.rho, p.d, amax))
+        .collect();
+    out.radii = splats::covering_radii(particles, &even);
     for p in particles {
         out.positions.push(p.x.to_array());
         out.normals.push(p.n.as_vec3().to_array());
-        // Local spacing d = β/α; a hexagonal Voronoi cell of spacing d fits in a disk of
-        // radius d/√3 = β d.
-        out.radii
-            .push(BETA * BETA / alpha(s, params.rho, p.d, amax));
         element.push(p.cell as f64);
         reference.extend(p.u.to_array());
         curvature.push(p.d);
