@@ -247,14 +247,13 @@ def extract(particles, params: Params, progress: Optional[ProgressFn] = None) ->
             array, file or parameter), isobar.Cancelled when `progress` returned False.
     """
     with isobar_module().quiet_warnings():
-        if params.method == "ADAPTIVE":
-            return _extract_adaptive(particles, params, progress)
-        return _extract_correctors(particles, params, progress)
+        return _extract(particles, params, progress)
 
 
-def _extract_correctors(particles, params: Params, progress: Optional[ProgressFn]) -> FrameMesh:
-    """Marching Correctors: vertices on the level set, the particle arrays interpolated
-    onto them, the velocity as motion blur."""
+def _extract(particles, params: Params, progress: Optional[ProgressFn]) -> FrameMesh:
+    """Either method's surface with the particle arrays interpolated onto its vertices and
+    the velocity as motion blur: Marching Correctors (vertices on the level set) or the
+    adaptive 3-level grid (vertices by bisection on its own grids)."""
     isobar = isobar_module()
     names = array_infos(particles)
     velocity = velocity_name(names, params.velocity_array)
@@ -267,35 +266,30 @@ def _extract_correctors(particles, params: Params, progress: Optional[ProgressFn
         particles.add_array("speed", np.linalg.norm(particles.array(velocity), axis=1))
         if "speed" not in arrays:
             arrays.append("speed")
-    surface = isobar.extract(particles, progress=progress, attributes=arrays, **_isobar_kwargs(params))
+    kwargs = _isobar_kwargs(params)
+    if params.method == "ADAPTIVE":
+        for correctors_only in ("correct", "trim"):
+            kwargs.pop(correctors_only)
+        surface, _stats = isobar.extract_adaptive(
+            particles,
+            progress=progress,
+            attributes=arrays,
+            splash_threshold=int(params.splash_threshold),
+            max_error=float(params.max_error),
+            bisection_iterations=int(params.bisection_iterations),
+            **kwargs,
+        )
+    else:
+        surface = isobar.extract(particles, progress=progress, attributes=arrays, **kwargs)
     try:
         mesh = frame_mesh_from_surface(surface, velocity if params.motion_blur else "", params.velocity_scale)
     finally:
         surface.release()
     if (params.attributes or "").strip().lower() == "none":
-        # The core gives every vertex its sum of weights; "none" asks for no sph_* array.
+        # Marching Correctors gives every vertex its sum of weights; "none" asks for no
+        # sph_* array.
         mesh.attributes.pop(blender_name("SumOfWeights"), None)
     return mesh
-
-
-def _extract_adaptive(particles, params: Params, progress: Optional[ProgressFn]) -> FrameMesh:
-    """The adaptive 3-level surface: the same SPH field settings, vertices by bisection on
-    its own grids; it carries no particle arrays yet, so no attributes or motion blur."""
-    kwargs = _isobar_kwargs(params)
-    for correctors_only in ("correct", "trim"):
-        kwargs.pop(correctors_only)
-    surface, _stats = isobar_module().extract_adaptive(
-        particles,
-        progress=progress,
-        splash_threshold=int(params.splash_threshold),
-        max_error=float(params.max_error),
-        bisection_iterations=int(params.bisection_iterations),
-        **kwargs,
-    )
-    try:
-        return frame_mesh_from_surface(surface)
-    finally:
-        surface.release()
 
 
 def frame_mesh_from_surface(surface, velocity: str = "", velocity_scale: float = 1.0) -> FrameMesh:

@@ -65,7 +65,7 @@ KERNELS = [
 
 METHODS = [
     ("CORRECTORS", "Marching Correctors", "Every vertex on the SPH level set; attributes, trimming, motion blur"),
-    ("ADAPTIVE", "Adaptive", "Crack-free 3-level grid: far fewer triangles, splashes kept fine; no attributes"),
+    ("ADAPTIVE", "Adaptive", "Crack-free 3-level grid: far fewer triangles, splashes kept fine"),
 ]
 
 BACKENDS = [

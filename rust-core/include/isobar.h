@@ -314,7 +314,9 @@ const char *isobar_version(void);
 // Writes the default adaptive options (with `struct_size` set) to `out`.
 enum IsobarStatus isobar_adaptive_params_default(struct IsobarAdaptiveParams *out);
 
-// Extracts the adaptive crack-free surface of the particles' SPH field. `progress` and
+// Extracts the adaptive crack-free surface of the particles' SPH field, carrying the
+// particle arrays `sph->attributes` names onto its vertices as `isobar_sph_extract` does
+// (the other Marching Correctors options of `sph` are not used). `progress` and
 // `stats` may be NULL. On success `*out` owns a surface to free with
 // `isobar_surface_free` (its `isobar_surface_stats` carries vertices, triangles, field
 // evaluations and total time); on failure `*out` is left untouched.

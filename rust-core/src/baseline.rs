@@ -74,7 +74,7 @@ pub fn extract(
         warnings: field.warnings().to_vec(),
         ..Stats::default()
     };
-    let attributes = surface::AttributeSource::new(field, data, &params.attributes)?;
+    let attributes = surface::Carried::new(field, data, &params.attributes)?;
     let mut mesh = Mesh::default();
     let n = params.isovalues.len() as f64;
     for (k, &iso) in params.isovalues.iter().enumerate() {

@@ -93,3 +93,28 @@ def test_max_error_changes_the_levels_and_bad_values_are_refused():
     assert isobar.adaptive.default_params().max_error > 0
     with pytest.raises(isobar.InvalidArgumentError, match="max_error"):
         isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, max_error=-1)
+
+
+@pytest.mark.parametrize("backend", ["cpu", "gpu"])
+def test_particle_arrays_are_carried_onto_the_adaptive_vertices(backend):
+    """'side' is 1 on particles with x > 0, 0 elsewhere: a vertex farther than the kernel
+    support (2h) from x = 0 carries exactly one or the other; 'v' = (x, -x, 7) keeps its
+    components apart. The surface is the one extracted without arrays."""
+    xyz = ball_with_droplet()
+    particles = isobar.Particles.from_arrays(
+        xyz, {"side": (xyz[:, 0] > 0).astype(float),
+              "v": np.stack([xyz[:, 0], -xyz[:, 0], np.full(len(xyz), 7.0)], axis=1)})
+    bare, _ = isobar.extract_adaptive(particles, 0.5, h=0.2, backend=backend)
+    surface, stats = isobar.extract_adaptive(particles, 0.5, h=0.2, backend=backend,
+                                             attributes=["side", "v"])
+    assert np.array_equal(surface.points, bare.points)
+    assert list(surface.attributes) == ["side", "v"]
+    side, v = surface.attributes["side"], surface.attributes["v"]
+    assert side.shape == (surface.n_points,) and v.shape == (surface.n_points, 3)
+    x = surface.points[:, 0]
+    assert (x > 0.4).sum() > 20 and (x < -0.4).sum() > 20
+    assert (side[x > 0.4] == 1).all() and (side[x < -0.4] == 0).all()
+    assert ((side >= 0) & (side <= 1)).all()
+    assert np.allclose(v[:, 0], -v[:, 1], atol=1e-12) and np.allclose(v[:, 2], 7, atol=1e-12)
+    with pytest.raises(isobar.InvalidInputError, match="pressure"):
+        isobar.extract_adaptive(particles, 0.5, h=0.2, backend=backend, attributes="pressure")

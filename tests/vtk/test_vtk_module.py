@@ -857,19 +857,30 @@ def test_empty_input_gives_empty_output_without_error():
 
 
 @test
-def test_adaptive_says_which_settings_it_ignores():
-    """Carried Arrays and Full Grid belong to Marching Correctors: with Method Adaptive
-    they did nothing without a word."""
+def test_adaptive_carries_arrays_as_the_cli_and_says_what_it_ignores():
+    """Carried Arrays reach the adaptive surface as `isobar adaptive --attributes` puts
+    them; Full Grid belongs to Marching Correctors, and doing nothing is said."""
+    import subprocess
+
     f = free_surface_filter(reader(h.FRAME_26), Method=vtkIsobarSPHIsosurface.ADAPTIVE)
     warned = Errors(f, "WarningEvent")
+    f.GetCarriedArraySelection().EnableArray("velocity")
     f.Update()
     assert not [m for m in warned.messages if "ignore" in m], warned.messages
-    f.GetCarriedArraySelection().EnableArray("velocity")
+    out = f.GetOutput()
+    ref_path = os.path.join(TMP, "adaptive_velocity.vtp")
+    subprocess.run([h.CLI, "adaptive", h.FRAME_26, "--quiet", "-o", ref_path, "--iso", str(h.ISO),
+                    "--h", str(h.H), "--grid-factor", str(h.GRID_FACTOR), "--attributes", "velocity"],
+                   check=True, capture_output=True)
+    ref = h.read_vtp(ref_path)
+    h.assert_same_surface(out, ref, 1e-12, "adaptive")
+    h.assert_same_point_data(out, ref, ["velocity"], 1e-9, "adaptive velocity")
+    velocity = vtk_to_numpy(out.GetPointData().GetArray("velocity"))
+    assert velocity.shape == (out.GetNumberOfPoints(), 3) and np.abs(velocity).max() > 0.1
     f.SetFullGrid(True)
     f.Update()
     said = [m for m in warned.messages if "ignore" in m]
-    assert len(said) == 2, warned.messages
-    assert "Carried Arrays are ignored" in said[0] and "Full Grid applies to 'Marching Correctors'" in said[1]
+    assert len(said) == 1 and "Full Grid applies to 'Marching Correctors'" in said[0], warned.messages
     assert f.GetErrorMessage() == "" and f.GetOutput().GetNumberOfCells() > 1000
 
 

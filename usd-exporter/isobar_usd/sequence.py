@@ -104,7 +104,7 @@ def _check_stop() -> None:
 
 
 #: Extraction methods: Marching Correctors (exact vertices, attributes, trimming) or the
-#: adaptive 3-level grid (crack-free, far fewer triangles, one isovalue, no attributes).
+#: adaptive 3-level grid (crack-free, far fewer triangles, one isovalue).
 METHODS = ("correctors", "adaptive")
 
 
@@ -239,9 +239,7 @@ def extract_file(path: PathLike, job: Job) -> FrameMesh:
         if job.velocities is not None and not isinstance(job.velocities, str):
             raise InputError("a velocities array applies to in-memory surfaces, not to particle files")
         if job.velocities == "auto":
-            # Adaptive surfaces carry no particle attributes, so no velocities by default.
-            adaptive = options.get("method") == "adaptive"
-            velocity = VELOCITY_ARRAY if infos.get(VELOCITY_ARRAY) == 3 and not adaptive else None
+            velocity = VELOCITY_ARRAY if infos.get(VELOCITY_ARRAY) == 3 else None
         elif job.velocities is not None:
             if job.velocities not in infos and len(particles) == 0:
                 pass  # an empty file need not declare it (VTK writes no point data)
@@ -319,24 +317,21 @@ def _empty_surface(path: str, infos: Mapping[str, int], names: List[str], option
 
 
 def _extract_adaptive(particles, job: Job, options: Dict[str, Any], wanted, velocity, progress):
-    """The adaptive 3-level surface: one isovalue, the SPH field options only (it places
-    vertices by bisection on its own grids, and carries no particle attributes yet)."""
+    """The adaptive 3-level surface: one isovalue, the SPH field options and the particle
+    arrays to carry (it places vertices by bisection on its own grids)."""
     import isobar
 
     if len(job.iso) != 1:
         raise InputError(f"the adaptive method extracts one isovalue at a time, got {len(job.iso)}")
-    if wanted:
-        raise InputError(
-            "the adaptive method carries no particle attributes onto the surface yet "
-            f"(asked for {', '.join(wanted)}); use method 'correctors'"
-        )
     if not options.get("correct", True) or options.get("full_grid", False):
         raise InputError("preview and full-grid apply to method 'correctors', not 'adaptive'")
     if options.get("trim", "auto") not in ("auto", None, False):
         raise InputError("trimming applies to method 'correctors', not 'adaptive'")
     accepted = set(_signature(isobar.extract_adaptive))
     chosen = {k: v for k, v in options.items() if k in accepted and v is not None}
-    surface, _stats = isobar.extract_adaptive(particles, job.iso[0], progress=progress, **chosen)
+    surface, _stats = isobar.extract_adaptive(
+        particles, job.iso[0], progress=progress, attributes=wanted, **chosen
+    )
     return surface
 
 

@@ -879,15 +879,7 @@ int vtkIsobarSPHIsosurface::RequestData(
   }
   const bool hFromArray = NonEmpty(this->SmoothingLengthArrayName);
   const bool hAuto = !hFromArray && this->SmoothingLength <= 0.0;
-  // The adaptive surface carries no particle arrays: do not gather them, and say so
-  // (a panel's settings that do nothing would otherwise look like a lost result).
-  const std::vector<std::string> carried =
-    adaptive ? std::vector<std::string>() : this->CarriedArrayNames();
-  if (adaptive && !this->CarriedArrayNames().empty())
-  {
-    vtkWarningMacro(<< "Method 'Adaptive' carries no particle arrays onto the surface: "
-                       "Carried Arrays are ignored (choose 'Marching Correctors' for them)");
-  }
+  const std::vector<std::string> carried = this->CarriedArrayNames();
   if (adaptive && this->FullGrid)
   {
     vtkWarningMacro(<< "Full Grid applies to 'Marching Correctors'; 'Adaptive' ignores it");

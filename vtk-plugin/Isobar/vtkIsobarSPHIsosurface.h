@@ -147,15 +147,15 @@ public:
   /// How the surface is extracted.
   enum Methods
   {
-    MARCHING_CORRECTORS = 0, ///< vertices on the level set, carried arrays, trimming, MPI pieces
+    MARCHING_CORRECTORS = 0, ///< vertices on the level set, trimming, MPI pieces
     ADAPTIVE = 1             ///< crack-free 3-level grid: far fewer triangles, one process
   };
 
   ///@{
   /// MARCHING_CORRECTORS (default) or ADAPTIVE. The adaptive surface (isobar's 3-level
   /// grid, cells of GridFactor at the finest level, four times that at the coarsest) uses
-  /// one isovalue, carries no arrays besides Normals and SumOfWeights and runs in one
-  /// process; Correct, Trim, FullGrid and the carried arrays apply to Marching Correctors.
+  /// one isovalue, carries Normals and the carried arrays and runs in one process;
+  /// Correct, Trim and FullGrid apply to Marching Correctors.
   vtkSetClampMacro(Method, int, MARCHING_CORRECTORS, ADAPTIVE);
   vtkGetMacro(Method, int);
   ///@}

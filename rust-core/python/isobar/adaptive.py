@@ -4,7 +4,7 @@ marching cubes at the finest level; splashes kept at the finest level)."""
 from __future__ import annotations
 
 from ctypes import byref, sizeof
-from typing import Optional, Tuple, Union
+from typing import Iterable, Optional, Tuple, Union
 
 import numpy as np
 
@@ -31,6 +31,7 @@ def extract_adaptive(
     h_scale: float = 1.0,
     grid_factor: float = 0.5,
     normals: bool = True,
+    attributes: Union[str, Iterable[str]] = (),
     volume_array: Optional[str] = None,
     density_array: Optional[str] = None,
     mass: Optional[float] = None,
@@ -50,6 +51,8 @@ def extract_adaptive(
     (level-3) cell in units of the smallest h, coarse cells being four times larger.
 
     Args:
+        attributes: particle array names to interpolate onto the vertices, as
+            :func:`isobar.extract` does (normalised by the sum of weights).
         splash_threshold: coarse cells holding 1..=N particles become level 3 (the
             paper's rule is 1; core default 0, none: the error criterion alone decides).
         splash_dilation: layers of neighbour cells raised to level 3 around each splash
@@ -76,7 +79,7 @@ def extract_adaptive(
     if not isinstance(particles, Particles):
         particles = Particles.from_arrays(particles)
     params, keep = _sph_params(particles, float(iso), field, kernel, h, h_array, h_scale,
-                               grid_factor, True, 1e-6, None, normals, (), volume_array,
+                               grid_factor, True, 1e-6, None, normals, attributes, volume_array,
                                density_array, mass, mass_array, shepard, memory_budget,
                                False, None, None)
     adaptive = default_params()

@@ -1,10 +1,11 @@
 //! The `isobar adaptive` subcommand's body: the binary parses the SPH field options
 //! shared with `isobar sph` and hands them here with these adaptive ones.
 
-use super::{extract, extract_sph, grid_for, Extraction, Params, Stats};
+use super::{carry, extract, extract_sph, grid_for, Extraction, Params, Stats};
 use crate::correctors;
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
+use crate::field::sph::carried::Carried;
 use crate::field::sph::{SphField, SphSettings};
 use crate::gpu::Backend;
 use crate::io;
@@ -52,6 +53,8 @@ pub struct Common<'a> {
     pub iso: &'a [f64],
     pub grid_factor: f64,
     pub normals: bool,
+    /// Particle arrays to carry onto the vertices.
+    pub attributes: &'a [String],
     pub memory_budget: u64,
     pub quiet: bool,
     pub stats_json: Option<&'a Path>,
@@ -103,9 +106,15 @@ pub fn run(
             let field = settings(&data)
                 .and_then(|s| SphField::build(&data, &s, progress))
                 .map_err(|e| e.in_file(path))?;
+            // A missing array is refused before the surface is made.
+            let carried =
+                Carried::new(&field, &data, common.attributes).map_err(|e| e.in_file(path))?;
             let build_s = t.elapsed().as_secs_f64();
-            progress.window(0.1, 1.0);
-            let out = extract_sph(&field, &params, progress)?;
+            let end = if carried.is_empty() { 1.0 } else { 0.95 };
+            progress.window(0.1, end);
+            let mut out = extract_sph(&field, &params, progress)?;
+            progress.window(end, 1.0);
+            carry(&field, &carried, &mut out, progress)?;
             Ok((field, build_s, out))
         })?;
         io::write_mesh(&output, &out.mesh)?;
@@ -182,6 +191,10 @@ fn rows(data: &ParticleData, s: &Stats, build_s: f64) -> Vec<(String, String)> {
         (
             "time: assembly (s)".into(),
             format!("{:.3}", s.timings.assembly),
+        ),
+        (
+            "time: attributes (s)".into(),
+            format!("{:.3}", s.timings.attributes),
         ),
         (
             "time: adaptive total (s)".into(),

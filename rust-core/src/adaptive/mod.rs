@@ -21,6 +21,7 @@ pub mod levels;
 pub mod refine;
 
 use crate::error::{Error, Result};
+use crate::field::sph::carried::Carried;
 use crate::field::sph::SphField;
 use crate::field::ScalarField;
 use crate::gpu::Backend;
@@ -163,6 +164,8 @@ pub struct Timings {
     pub cracks: f64,
     /// Merging the levels' points into one mesh.
     pub assembly: f64,
+    /// Particle arrays carried onto the vertices ([`carry`]).
+    pub attributes: f64,
     pub total: f64,
 }
 
@@ -366,6 +369,29 @@ pub fn extract_sph(
         .warnings
         .splice(0..0, field.warnings().iter().cloned());
     Ok(out)
+}
+
+/// Carries the particle arrays in `carried` onto the surface's vertices, as Marching
+/// Correctors does (Shepard-normalised SPH interpolation, one field evaluation a vertex),
+/// on either back end's mesh.
+pub fn carry(
+    field: &SphField,
+    carried: &Carried,
+    out: &mut Extraction,
+    progress: &mut Progress,
+) -> Result<()> {
+    if carried.is_empty() {
+        return Ok(());
+    }
+    let t = Instant::now();
+    progress.phase("attributes", 0.0, 1.0)?;
+    let attributes = carried.onto(field, &out.mesh.positions, progress)?;
+    out.mesh.attributes.extend(attributes);
+    out.stats.field_evaluations += out.mesh.positions.len() as u64;
+    let elapsed = t.elapsed().as_secs_f64();
+    out.stats.timings.attributes += elapsed;
+    out.stats.timings.total += elapsed;
+    Ok(())
 }
 
 /// [`extract_sph`] on the GPU: the field uploaded once, registration on the device

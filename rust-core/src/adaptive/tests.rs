@@ -4,7 +4,8 @@
 use super::grid::{CoarseGrid, FINE_PER_COARSE};
 use super::*;
 use crate::field::kernel::Kernel;
-use crate::field::particles::ParticleData;
+use crate::field::particles::{Attribute, ParticleData};
+use crate::field::sph::carried::Carried;
 use crate::field::sph::{SmoothingLength, SphSettings};
 use crate::mesh::hausdorff::hausdorff;
 use glam::DVec3;
@@ -781,4 +782,99 @@ fn hidden_surface_rule_keeps_a_droplet_between_the_corners() {
             assert!(d < 0.5, "{what}");
         }
     }
+}
+
+/// Particle arrays reach the adaptive surface's vertices: 'side' is 1 on particles with
+/// x > 0 and 0 elsewhere, so a vertex farther than the kernel support from x = 0 must
+/// carry exactly 1 or 0 (a particle order mixed up between the arrays and the field
+/// would break it); the three components of 'v' = (x, −x, 7) stay apart (the second
+/// the negated first, the third 7 everywhere). A missing array is refused, named.
+#[test]
+fn particle_arrays_are_carried_onto_the_adaptive_vertices() {
+    let mut data = fluid(0.6, 0.1, &[DVec3::new(1.05, 0.0, 0.0)]);
+    let side = data
+        .positions
+        .iter()
+        .map(|p| f64::from(p.x > 0.0))
+        .collect();
+    let v = data
+        .positions
+        .iter()
+        .flat_map(|p| [p.x, -p.x, 7.0])
+        .collect();
+    data.attributes = vec![
+        Attribute::scalar("side", side),
+        Attribute {
+            name: "v".into(),
+            components: 3,
+            data: v,
+        },
+    ];
+    let h = 0.2;
+    let field = sph(&data, h);
+    let params = Params {
+        isovalue: 0.5,
+        ..Params::default()
+    };
+    let names = ["side".to_string(), "v".to_string()];
+    let carried = Carried::new(&field, &data, &names).unwrap();
+    let mut out = extract_sph(&field, &params, &mut Progress::none()).unwrap();
+    let bare = out.clone();
+    carry(&field, &carried, &mut out, &mut Progress::none()).unwrap();
+    let n = out.mesh.vertex_count();
+    assert!(n > 150, "{n} vertices");
+    assert_eq!(out.mesh.positions, bare.mesh.positions, "the surface moved");
+    assert_eq!(
+        out.stats.field_evaluations,
+        bare.stats.field_evaluations + n as u64
+    );
+    let [side, v] = &out.mesh.attributes[..] else {
+        panic!(
+            "{:?}",
+            out.mesh
+                .attributes
+                .iter()
+                .map(|a| &a.name)
+                .collect::<Vec<_>>()
+        )
+    };
+    assert_eq!(
+        (side.name.as_str(), side.components, side.data.len()),
+        ("side", 1, n)
+    );
+    assert_eq!(
+        (v.name.as_str(), v.components, v.data.len()),
+        ("v", 3, 3 * n)
+    );
+    let support = 2.0 * h;
+    let (mut far_left, mut far_right) = (0, 0);
+    for (i, p) in out.mesh.positions.iter().enumerate() {
+        let s = side.data[i];
+        assert!((0.0..=1.0).contains(&s), "vertex {i}: side {s}");
+        if p[0] > support {
+            assert_eq!(s, 1.0, "vertex {i} at {p:?}");
+            far_right += 1;
+        } else if p[0] < -support {
+            assert_eq!(s, 0.0, "vertex {i} at {p:?}");
+            far_left += 1;
+        }
+        let c = &v.data[3 * i..3 * i + 3];
+        assert!(
+            (c[0] + c[1]).abs() < 1e-12 && (c[2] - 7.0).abs() < 1e-12,
+            "vertex {i}: {c:?}"
+        );
+        // The Shepard mean of x over the particles near p lies within their reach.
+        assert!(
+            (c[0] - p[0]).abs() < support,
+            "vertex {i} at {p:?}: x carried as {}",
+            c[0]
+        );
+    }
+    assert!(far_left > 20 && far_right > 20, "{far_left} {far_right}");
+    let missing = ["pressure".to_string()];
+    let e = Carried::new(&field, &data, &missing)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("pressure") && e.contains("side"), "{e}");
 }

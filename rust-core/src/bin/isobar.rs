@@ -112,6 +112,9 @@ struct FieldArgs {
     /// No vertex normals.
     #[arg(long)]
     no_normals: bool,
+    /// Particle arrays to interpolate onto the surface, comma separated.
+    #[arg(long, value_delimiter = ',')]
+    attributes: Vec<String>,
     /// Memory budget in GiB for extent-sized structures.
     #[arg(long, default_value_t = (DEFAULT_MEMORY_BUDGET >> 30) as f64)]
     memory_budget: f64,
@@ -151,9 +154,6 @@ struct CorrectorsArgs {
     /// No trimming at free surfaces.
     #[arg(long, conflicts_with = "trim")]
     no_trim: bool,
-    /// Particle arrays to interpolate onto the surface, comma separated.
-    #[arg(long, value_delimiter = ',')]
-    attributes: Vec<String>,
     /// Put the virtual grid on a fixed lattice X,Y,Z,CELL (nodes at origin + integer
     /// multiples of CELL; replaces --grid-factor), so separately extracted pieces line up.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
@@ -297,7 +297,7 @@ fn params_from(args: &SphArgs, quantity: &Quantity) -> Result<Params> {
         tolerance: own.tolerance,
         trim,
         normals: !common.no_normals,
-        attributes: own.attributes.clone(),
+        attributes: common.attributes.clone(),
         lattice: own.lattice.as_ref().map(|l| Lattice {
             origin: DVec3::new(l[0], l[1], l[2]),
             cell_size: l[3],
@@ -361,6 +361,7 @@ fn run_adaptive(field: &FieldArgs, adaptive: &isobar::adaptive::cli::AdaptiveArg
         iso: &field.iso,
         grid_factor: field.grid_factor,
         normals: !field.no_normals,
+        attributes: &field.attributes,
         memory_budget: (field.memory_budget * (1u64 << 30) as f64) as u64,
         quiet: field.quiet,
         stats_json: field.stats_json.as_deref(),

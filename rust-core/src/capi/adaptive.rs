@@ -11,6 +11,7 @@ use super::{
 };
 use crate::adaptive::{self, Params};
 use crate::correctors;
+use crate::field::sph::carried::Carried;
 use crate::field::sph::SphField;
 use crate::gpu::Backend;
 use std::ffi::c_void;
@@ -122,7 +123,9 @@ fn read_adaptive(p: *const IsobarAdaptiveParams) -> Result<IsobarAdaptiveParams,
     )
 }
 
-/// Extracts the adaptive crack-free surface of the particles' SPH field. `progress` and
+/// Extracts the adaptive crack-free surface of the particles' SPH field, carrying the
+/// particle arrays `sph->attributes` names onto its vertices as `isobar_sph_extract` does
+/// (the other Marching Correctors options of `sph` are not used). `progress` and
 /// `stats` may be NULL. On success `*out` owns a surface to free with
 /// `isobar_surface_free` (its `isobar_surface_stats` carries vertices, triangles, field
 /// evaluations and total time); on failure `*out` is left untouched.
@@ -173,8 +176,14 @@ pub extern "C" fn isobar_adaptive_extract(
         let extraction = with_progress(progress, user, |sink| {
             sink.window(0.0, 0.1);
             let field = SphField::build(&particles.data, &field_settings, sink)?;
-            sink.window(0.1, 1.0);
-            adaptive::extract_sph(&field, &params, sink)
+            // A missing array is refused before the surface is made.
+            let carried = Carried::new(&field, &particles.data, &sph_params.attributes)?;
+            let end = if carried.is_empty() { 1.0 } else { 0.95 };
+            sink.window(0.1, end);
+            let mut out = adaptive::extract_sph(&field, &params, sink)?;
+            sink.window(end, 1.0);
+            adaptive::carry(&field, &carried, &mut out, sink)?;
+            Ok(out)
         })?;
         let s = &extraction.stats;
         if !stats.is_null() {
@@ -216,7 +225,8 @@ pub extern "C" fn isobar_adaptive_extract(
 mod tests {
     use super::*;
     use crate::capi::{
-        isobar_particles_create, isobar_particles_free, isobar_surface_free,
+        isobar_particles_add_array, isobar_particles_create, isobar_particles_free,
+        isobar_surface_attribute, isobar_surface_attribute_count, isobar_surface_free,
         isobar_surface_triangle_count, isobar_surface_vertex_count,
     };
     use crate::field::particles::ParticleData;
@@ -303,7 +313,57 @@ mod tests {
         assert_eq!(stats.triangles as usize, rust.mesh.triangles.len());
         assert_eq!(stats.cells_per_level, rust.stats.cells_per_level);
         assert!(stats.cells_per_level[2] > 0, "the droplet is level 3");
+        assert_eq!(isobar_surface_attribute_count(surface), 0);
         isobar_surface_free(surface);
+        // The arrays `sph.attributes` names reach the vertices (a constant one stays
+        // constant); a missing one is refused.
+        let sevens = vec![7.0; positions.len()];
+        let name = c"seven";
+        assert_eq!(
+            isobar_particles_add_array(handle, name.as_ptr(), sevens.as_ptr(), sevens.len(), 1),
+            IsobarStatus::Ok
+        );
+        for (names, expect) in [
+            ([name.as_ptr()], IsobarStatus::Ok),
+            ([c"none".as_ptr()], IsobarStatus::ErrInvalidInput),
+        ] {
+            let with = IsobarSphParams {
+                attributes: names.as_ptr(),
+                attribute_count: 1,
+                ..sph
+            };
+            let mut carried = std::ptr::null_mut();
+            let status = isobar_adaptive_extract(
+                handle,
+                &with,
+                &adaptive,
+                None,
+                std::ptr::null_mut(),
+                &mut carried,
+                std::ptr::null_mut(),
+            );
+            assert_eq!(status, expect);
+            if status != IsobarStatus::Ok {
+                assert!(carried.is_null());
+                continue;
+            }
+            assert_eq!(
+                isobar_surface_vertex_count(carried),
+                rust.mesh.vertex_count()
+            );
+            assert_eq!(isobar_surface_attribute_count(carried), 1);
+            let (mut n, mut c, mut d) = (std::ptr::null(), 0usize, std::ptr::null());
+            assert_eq!(
+                isobar_surface_attribute(carried, 0, &mut n, &mut c, &mut d),
+                IsobarStatus::Ok
+            );
+            // SAFETY: the surface owns a vertex_count-long array and a NUL-terminated name.
+            let values = unsafe { std::slice::from_raw_parts(d, rust.mesh.vertex_count()) };
+            assert_eq!(unsafe { std::ffi::CStr::from_ptr(n) }, name);
+            assert_eq!(c, 1);
+            assert!(values.iter().all(|v| (v - 7.0).abs() < 1e-12), "{values:?}");
+            isobar_surface_free(carried);
+        }
         // Refused calls return nothing and leave `out` untouched.
         let refused = |sph: &IsobarSphParams, adaptive: &IsobarAdaptiveParams| {
             let mut none = std::ptr::null_mut();

@@ -310,7 +310,7 @@ pub fn extract(
     params.validate()?;
     let start = Instant::now();
     let grid = virtual_grid(field, params)?;
-    let attributes = surface::AttributeSource::new(field, data, &params.attributes)?;
+    let attributes = surface::Carried::new(field, data, &params.attributes)?;
     let mut stats = Stats {
         virtual_cells: grid.cell_count(),
         warnings: field.warnings().to_vec(),

@@ -7,59 +7,17 @@ use super::cache::{NodeSample, NodeValues};
 use super::trimming::{self, CutTarget, Untrimmed};
 use super::vertices::{self, Placement};
 use super::{Params, Stats};
-use crate::error::{Error, Result};
-use crate::field::particles::{Attribute, ParticleData};
+use crate::error::Result;
+use crate::field::particles::Attribute;
 use crate::field::sph::SphField;
 use crate::mc::{self, ActiveCell, VirtualGrid};
 use crate::mesh::Mesh;
-use crate::progress::{chunked, for_chunks, Progress};
+use crate::progress::{for_chunks, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Surface arrays the extractor writes itself.
-pub const RESERVED: [&str; 2] = ["SumOfWeights", "Isovalue"];
-
-/// Particle arrays to carry onto the surface, reordered for interpolation.
-pub struct AttributeSource {
-    arrays: Vec<(String, usize, Vec<f64>)>,
-}
-
-impl AttributeSource {
-    /// Looks up `names` in `data`; a missing name is an error that lists what exists.
-    pub fn new(field: &SphField, data: &ParticleData, names: &[String]) -> Result<Self> {
-        let mut arrays = Vec::new();
-        for name in names {
-            if RESERVED.contains(&name.as_str()) {
-                return Err(Error::InvalidParameter {
-                    name: "attributes",
-                    message: format!("'{name}' is the name of an array isobar computes itself; rename the particle array"),
-                });
-            }
-            let a = data.require(name)?;
-            // A NaN carried onto the surface would reach every vertex near its particle
-            // (and a renderer's motion blur) without a word: refused, naming the particle.
-            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
-                return Err(Error::InvalidInput(format!(
-                    "array '{name}' holds a non-finite value ({}) at particle {}: it cannot \
-                     be carried onto the surface",
-                    a.data[i],
-                    i / a.components
-                )));
-            }
-            arrays.push((
-                a.name.clone(),
-                a.components,
-                field.to_grid_order(&a.data, a.components),
-            ));
-        }
-        Ok(AttributeSource { arrays })
-    }
-
-    fn components(&self) -> usize {
-        self.arrays.iter().map(|a| a.1).sum()
-    }
-}
+pub use crate::field::sph::carried::{Carried, RESERVED};
 
 /// Appends one isovalue's surface to the extraction's mesh, tagging its vertices with an
 /// `Isovalue` array when there are several; an empty one is a warning, which says whether
@@ -233,7 +191,7 @@ pub fn finish(
     iso: f64,
     params: &Params,
     placement: Placement,
-    attributes: &AttributeSource,
+    attributes: &Carried,
     progress: &mut Progress,
     span: (f64, f64),
     stats: &mut Stats,
@@ -295,37 +253,11 @@ pub fn finish(
     } = surface;
     drop(gradients);
     let mut mesh_attributes = vec![Attribute::scalar("SumOfWeights", weights)];
-    let width = attributes.components();
-    if width > 0 {
-        let arrays: Vec<(&[f64], usize)> = attributes
-            .arrays
-            .iter()
-            .map(|(_, c, d)| (d.as_slice(), *c))
-            .collect();
-        let values: Vec<Vec<f64>> = chunked(&positions, progress, |part| {
-            part.par_iter()
-                .map(|&x| {
-                    let mut out = vec![0.0; width];
-                    field.interpolate(x, &arrays, &mut out);
-                    out
-                })
-                .collect()
-        })?;
-        stats.field_evaluations += values.len() as u64;
-        let mut offset = 0;
-        for (name, c, _) in &attributes.arrays {
-            let data = values
-                .iter()
-                .flat_map(|v| v[offset..offset + c].iter().copied())
-                .collect();
-            mesh_attributes.push(Attribute {
-                name: name.clone(),
-                components: *c,
-                data,
-            });
-            offset += c;
-        }
+    let carried = attributes.onto(field, &positions, progress)?;
+    if !carried.is_empty() {
+        stats.field_evaluations += positions.len() as u64;
     }
+    mesh_attributes.extend(carried);
     stats.timings.attributes += t.elapsed().as_secs_f64();
     Ok(Mesh {
         // Same size and alignment: collected in place, without a second buffer.

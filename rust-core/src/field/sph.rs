@@ -167,6 +167,7 @@ macro_rules! with_kernel {
     };
 }
 
+pub mod carried;
 pub(crate) mod nodes;
 pub use nodes::NodeTiles;
 
