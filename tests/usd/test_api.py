@@ -179,6 +179,52 @@ def test_partial_rewrite_keeps_the_other_frames(tmp_path, dam_frames, reference)
     assert open_stage(out).GetStartTimeCode() == 26
 
 
+def test_a_root_with_the_same_stem_keeps_its_frames(tmp_path, dam_frames):
+    """fluid.usd and fluid.usda share the clips folder fluid.clips/: a second sequence
+    written as fluid.usda replaced fluid.usd's frames and removed those it lacked."""
+    out = tmp_path / "fluid.usd"
+    isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, ISO, **DAM)
+    before = {p.name: p.read_bytes() for p in isobar_usd.clips_folder(out).iterdir()}
+    only = link_frames(tmp_path / "only", {26: FRAME_26})
+    with pytest.raises(isobar_usd.InputError, match="also the one of .*fluid.usd"):
+        isobar_usd.write_sequence(only / "frame_####.vtk", tmp_path / "fluid.usda", ISO, layout="clips", **DAM)
+    assert {p.name: p.read_bytes() for p in isobar_usd.clips_folder(out).iterdir()} == before
+    assert not (tmp_path / "fluid.usda").exists()
+
+
+def test_a_partial_clips_rewrite_of_a_flat_root_is_refused(tmp_path, dam_frames):
+    """A flat run over a clips root leaves the old clips folder; a later partial clips run
+    joined its stale frames (another isovalue) to the new one without a word."""
+    out = tmp_path / "fluid.usd"
+    isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, ISO, **DAM)
+    isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, 0.5, layout="flat", **DAM)
+    flat = out.read_bytes()
+    with pytest.raises(isobar_usd.InputError, match="is a flat layer"):
+        isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, 0.5, frames="26", layout="clips", **DAM)
+    assert out.read_bytes() == flat
+    # Every frame: the clips folder is this run's alone again.
+    result = isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, 0.5, layout="clips", **DAM)
+    assert result.frames == [1, 26]
+
+
+def test_frames_missing_from_a_sequence_are_reported(cli, tmp_path):
+    """Frames 1, 2, 4 and 7 at stride 1: 3, 5 and 6 missing, said with the frame after each
+    gap (in the result and on stderr), as the isobar CLI says it; a steady stride of 2
+    lacks nothing."""
+    from conftest import CLI_DAM, run_cli
+
+    frames = link_frames(tmp_path / "gappy", {1: FRAME_01, 2: FRAME_26, 4: FRAME_01, 7: FRAME_26})
+    result = isobar_usd.write_sequence(frames / "frame_####.vtk", tmp_path / "gappy.usd", ISO, **DAM)
+    assert result.warnings == {
+        4: ["frame 3 missing: the stage goes from frame 2 to frame 4"],
+        7: ["frames 5, 6 missing: the stage goes from frame 4 to frame 7"],
+    }, result.warnings
+    proc = run_cli(cli, "sph", frames / "frame_####.vtk", *CLI_DAM, "-o", tmp_path / "cli.usd")
+    assert "isobar-usd: warning: frame 7 (" in proc.stderr and "frames 5, 6 missing" in proc.stderr, proc.stderr
+    steady = link_frames(tmp_path / "steady", {1: FRAME_01, 3: FRAME_26, 5: FRAME_01})
+    assert isobar_usd.write_sequence(steady / "frame_####.vtk", tmp_path / "steady.usd", ISO, **DAM).warnings == {}
+
+
 def test_write_frame_into_a_sequence_then_stitch(tmp_path, reference):
     out = tmp_path / "manual.usd"
     isobar_usd.clips_folder(out).mkdir()

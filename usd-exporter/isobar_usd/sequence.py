@@ -416,6 +416,9 @@ def _pool_task(task):
 class FrameEntry:
     number: int
     item: Any
+    #: What the sequence lacks just before this frame ("frames 4, 5 missing: ..."), said
+    #: with this frame's warnings.
+    gap: Optional[str] = None
 
 
 def _frame_entries(source) -> Tuple[Iterator[FrameEntry], Optional[int], str]:
@@ -491,7 +494,27 @@ def _numbered(paths, numbers, what) -> Iterator[FrameEntry]:
             dup = next((n, ps) for n, ps in counts.items() if len(ps) > 1)
             raise InputError(f"{what}: files {' and '.join(dup[1])} both have frame number {dup[0]}")
         numbers = list(range(len(paths)))  # names without numbers: their order
-    return iter([FrameEntry(n, p) for n, p in zip(numbers, paths)])
+        return iter([FrameEntry(n, p) for n, p in zip(numbers, paths)])
+    gaps = _gaps(numbers)
+    return iter([FrameEntry(n, p, gaps.get(n)) for n, p in zip(numbers, paths)])
+
+
+def _gaps(numbers: List[int]) -> Dict[int, str]:
+    """frame -> what is missing just before it, at the sequence's stride (its smallest
+    step; 0, 10, 20, 50 lacks 30 and 40), as the isobar CLI reports gaps: a hole left by
+    a failed solver step is not passed over in silence. Irregular steps have no stride."""
+    ordered = sorted(numbers)
+    steps = [b - a for a, b in zip(ordered, ordered[1:]) if b > a]
+    if not steps or any(d % min(steps) for d in steps):
+        return {}
+    stride = min(steps)
+    gaps = {}
+    for a, b in zip(ordered, ordered[1:]):
+        lacking = list(range(a + stride, b, stride))
+        if lacking:
+            shown = ", ".join(map(str, lacking[:10])) + (f" and {len(lacking) - 10} more" if len(lacking) > 10 else "")
+            gaps[b] = f"frame{'s' if len(lacking) > 1 else ''} {shown} missing: the stage goes from frame {a} to frame {b}"
+    return gaps
 
 
 # -- results --------------------------------------------------------------------------
@@ -709,9 +732,11 @@ def write_sequence(
     return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0)
 
 
-def _report(progress, warned: Dict[int, List[str]], done, total, frame, item, info) -> None:
-    """A frame is written: keeps its warnings in `warned` (for the result) and tells
-    `progress`."""
+def _report(progress, warned: Dict[int, List[str]], done, total, frame, item, info, gap: Optional[str] = None) -> None:
+    """A frame is written: keeps its warnings in `warned` (for the result), the `gap`
+    before it first, and tells `progress`."""
+    if gap:
+        info = {**info, "warnings": [gap, *info.get("warnings", ())]}
     if info.get("warnings"):
         warned[frame] = list(info["warnings"])
     if progress is not None:
@@ -752,7 +777,7 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
             if "backendNote" in info:  # the flat layer's record says it too
                 layer.info["backendNote"] = info["backendNote"]
             del frame_mesh
-            _report(progress, warned, done, total, entry.number, entry.item, info)
+            _report(progress, warned, done, total, entry.number, entry.item, info, entry.gap)
         if not layer.frames:
             raise InputError("no frames to write")
         _check_stop()
@@ -764,15 +789,44 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
     return SequenceResult(output, "flat", frames, frames, None, schema, time.perf_counter() - t0, dict(sorted(warned.items())))
 
 
-def _clips_folder_for_writing(output: Path) -> Path:
-    """The clips folder of `output`; raises InputError when it is there but frames cannot
-    be written in it (before any extraction)."""
+#: Root-file suffixes whose clips folders coincide for one stem (``fluid.clips/``).
+_ROOT_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
+def _clips_folder_for_writing(output: Path, replace: bool) -> Path:
+    """The clips folder of `output`; raises InputError, before any extraction, when it is
+    there but frames cannot be written in it, when it is another root's too (the same
+    stem with another suffix: writing would replace that stage's frames), or when a
+    partial rewrite would join frame layers the root does not use (the root is now a
+    flat layer; its clips are from an earlier run)."""
     folder = clips_folder(output)
     if folder.is_dir():
         check_writable_folder(folder, f"output '{output}'")
+        for suffix in _ROOT_SUFFIXES:
+            other = output.with_suffix(suffix)
+            if suffix != output.suffix.lower() and other.exists():
+                raise InputError(
+                    f"output '{output}': its clips folder '{folder}' is also the one of '{other}' "
+                    "(the same name with another suffix), whose frames this run would replace: "
+                    "choose another output name"
+                )
+        if not replace and output.exists() and _layout_of(output) == "flat":
+            raise InputError(
+                f"output '{output}' is a flat layer, and '{folder}' holds the frame layers of an "
+                "earlier clips run, which a partial rewrite would join to this one's: write every "
+                "frame (no frame selection) or remove that folder"
+            )
     elif folder.exists() or folder.is_symlink():
         raise InputError(f"output '{output}': '{folder}' (its clips folder) is not a folder")
     return folder
+
+
+def _layout_of(root: Path) -> Optional[str]:
+    """The layout the writer recorded in root layer `root` ("flat", "clips"), or None."""
+    try:
+        return str(read_record(root).info.get("layout")) or None
+    except Error:
+        return None
 
 
 _GUARD_HINT = (
@@ -810,7 +864,7 @@ def _check_workers(pool, pids: set, done: int) -> None:
 
 
 def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0) -> SequenceResult:
-    folder = _clips_folder_for_writing(output)
+    folder = _clips_folder_for_writing(output, replace)
     created = not folder.exists()
     try:
         folder.mkdir(exist_ok=True)
@@ -834,6 +888,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                 staged[e.number] = (_atomic.staging_path(final), final)
                 tasks.append((e.number, os.fspath(e.item), os.fspath(staged[e.number][0]), job))
             labels = {e.number: _label(e.item) for e in entries}
+            gaps = {e.number: e.gap for e in entries}
             ctx = multiprocessing.get_context("spawn")
             with ctx.Pool(processes=min(jobs, max(1, len(tasks))), initializer=_worker_init, initargs=(jobs,)) as pool:
                 pids = {p.pid for p in getattr(pool, "_pool", ())}
@@ -852,7 +907,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                     if err is not None:
                         raise frame_error(frame, labels[frame], err)
                     done += 1
-                    _report(progress, warned, done, total, frame, labels[frame], info)
+                    _report(progress, warned, done, total, frame, labels[frame], info, gaps.get(frame))
         else:
             for done, entry in enumerate(entries, 1):
                 _check_stop()
@@ -864,7 +919,7 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                     info = write_clip(entry.number, entry.item, staged[entry.number][0], job)
                 except Exception as e:
                     raise frame_error(entry.number, _label(entry.item), e) from e
-                _report(progress, warned, done, total, entry.number, entry.item, info)
+                _report(progress, warned, done, total, entry.number, entry.item, info, entry.gap)
         if not staged:
             raise InputError("no frames to write")
 

@@ -64,11 +64,20 @@ impl NeighbourGrid {
             // Past this a cell index loses the particle (f64 cell coordinates, and three
             // axes' product in 128 bits): refused, not clamped onto the last cell.
             if n.is_nan() || n > MAX_CELLS_PER_AXIS as f64 {
+                // Usually one particle flung far from the rest: name the two extremes.
+                let along = |i: &usize| positions[*i][a];
+                let first = (0..positions.len()).min_by(|i, j| along(i).total_cmp(&along(j)));
+                let last = (0..positions.len()).max_by(|i, j| along(i).total_cmp(&along(j)));
+                let (first, last) = (first.unwrap_or(0), last.unwrap_or(0));
                 return Err(Error::InvalidInput(format!(
                     "the particles spread over {:?}..{:?}: {n:.3e} cells of {cell_size} along \
-                     axis {a}, more than the {MAX_CELLS_PER_AXIS} a neighbour grid indexes",
+                     axis {a}, more than the {MAX_CELLS_PER_AXIS} a neighbour grid indexes; \
+                     the extremes along it are particle {first} at {:?} and particle {last} at \
+                     {:?} (one flung far from the rest, or positions in mixed units?)",
                     lo.to_array(),
-                    hi.to_array()
+                    hi.to_array(),
+                    positions[first].to_array(),
+                    positions[last].to_array()
                 )));
             }
             box_dims[a] = n as usize;
@@ -541,6 +550,23 @@ mod tests {
                 assert_exact_neighbours(&grid, &pts, p, reach, r);
             }
         }
+    }
+
+    /// A particle flung to x = 1e30 spreads the box past what a grid indexes: the error
+    /// names it (and the other extreme along that axis), not only the bounds.
+    #[test]
+    fn a_particle_far_from_the_rest_is_named() {
+        let mut pts: Vec<DVec3> = (0..50).map(|i| DVec3::splat(i as f64 * 0.01)).collect();
+        pts[42].x = 1e30;
+        let e = NeighbourGrid::build(&pts, 0.05, 1, 1 << 30)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("axis 0") && e.contains("particle 42 at [1e30"),
+            "{e}"
+        );
+        assert!(e.contains("particle 0 at [0.0"), "{e}");
     }
 
     #[test]
