@@ -4,7 +4,8 @@
 
 use crate::error::{Error, Result};
 
-/// Receives (fraction done in [0, 1], phase name); returns false to cancel.
+/// Receives (fraction done in [0, 1], never less than the last one; phase name); returns
+/// false to cancel.
 pub type Callback<'a> = dyn FnMut(f64, &str) -> bool + 'a;
 
 /// A progress sink with optional callback.
@@ -15,6 +16,9 @@ pub struct Progress<'a> {
     /// Fraction range of the whole run that the current operation occupies.
     window: (f64, f64),
     phase: &'static str,
+    /// The largest fraction reported so far: a phase whose total is an estimate (the
+    /// surface tracked so far) can step back, and a host's bar must not.
+    reached: f64,
 }
 
 impl<'a> Progress<'a> {
@@ -25,6 +29,7 @@ impl<'a> Progress<'a> {
             span: (0.0, 1.0),
             window: (0.0, 1.0),
             phase: "",
+            reached: 0.0,
         }
     }
 
@@ -35,6 +40,7 @@ impl<'a> Progress<'a> {
             span: (0.0, 1.0),
             window: (0.0, 1.0),
             phase: "",
+            reached: 0.0,
         }
     }
 
@@ -68,7 +74,8 @@ impl<'a> Progress<'a> {
         let (a, b) = self.span;
         let within = a + (b - a) * fraction.clamp(0.0, 1.0);
         let (wa, wb) = self.window;
-        let overall = wa + (wb - wa) * within;
+        let overall = (wa + (wb - wa) * within).max(self.reached);
+        self.reached = overall;
         if let Some(cb) = self.callback.as_mut() {
             if !cb(overall, self.phase) {
                 return Err(Error::Cancelled);
@@ -146,4 +153,30 @@ pub fn collect_ranges<R>(
     let mut out = Vec::new();
     for_ranges(len, progress, work, |part| out.extend(part))?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A phase whose estimate steps back (tracking's: the surface found so far grows), and
+    /// a later phase starting below where an earlier one ended, never move a host's bar
+    /// back.
+    #[test]
+    fn reported_fractions_never_decrease() {
+        let mut seen = Vec::new();
+        let mut record = |f: f64, _: &str| {
+            seen.push(f);
+            true
+        };
+        let mut progress = Progress::new(&mut record);
+        progress.phase("tracking", 0.2, 0.6).unwrap();
+        for f in [0.5, 0.3, 0.8] {
+            progress.report(f).unwrap();
+        }
+        progress.phase("checking", 0.1, 0.2).unwrap();
+        progress.phase("vertices", 0.6, 1.0).unwrap();
+        progress.done();
+        assert_eq!(seen, [0.2, 0.4, 0.4, 0.52, 0.52, 0.6, 1.0]);
+    }
 }

@@ -309,6 +309,56 @@ fn every_separated_cluster_gives_a_component() {
     assert!(out.mesh.topology().is_watertight_oriented());
 }
 
+/// Empty cavities inside the fluid (bubbles, 2 h and 1.5 h across the hole) have inner
+/// surfaces: no particle pair straddles them and no particle lacks a neighbour on a
+/// side, so only the cavity probe of the seed search finds them. The preview surface
+/// equals the full-grid baseline's; the corrected one has the same three components.
+#[test]
+fn cavities_inside_the_fluid_give_inner_surfaces() {
+    let (dx, h) = (0.05, 0.05);
+    let holes = [
+        (DVec3::new(0.3, 0.3, 0.3), 2.0 * h),
+        (DVec3::new(0.62, 0.55, 0.5), 1.5 * h),
+    ];
+    let full = block(DVec3::ZERO, DVec3::splat(0.85), dx, 17);
+    let positions: Vec<DVec3> = full
+        .positions
+        .iter()
+        .copied()
+        .filter(|p| holes.iter().all(|(c, r)| p.distance(*c) > *r))
+        .collect();
+    assert!(positions.len() < full.positions.len() - 40);
+    let data = common::with_fields(positions, 0.85);
+    let s = settings(Kernel::CubicSpline, h, Quantity::SumOfWeights);
+    let field = SphField::new(&data, &s).unwrap();
+    let preview = Params {
+        isovalues: vec![0.6],
+        correct: false,
+        trim: None,
+        ..Params::default()
+    };
+    let mc = correctors::extract(&field, &data, &preview, &mut Progress::none()).unwrap();
+    let grid = baseline::extract(&field, &data, &preview, &mut Progress::none()).unwrap();
+    assert_eq!(grid.mesh.components(), 3, "the baseline sees both cavities");
+    assert_eq!(mc.mesh.components(), 3, "Marching Correctors' components");
+    assert!(
+        mc.mesh.positions == grid.mesh.positions && mc.mesh.triangles == grid.mesh.triangles,
+        "{} triangles, the baseline {}",
+        mc.mesh.triangles.len(),
+        grid.mesh.triangles.len()
+    );
+    let corrected = run(
+        &data,
+        &s,
+        &Params {
+            correct: true,
+            ..preview
+        },
+    );
+    assert_eq!(corrected.mesh.components(), 3);
+    assert!(corrected.mesh.topology().is_watertight_oriented());
+}
+
 #[test]
 fn output_does_not_depend_on_the_thread_count() {
     let data = block(DVec3::ZERO, DVec3::new(0.6, 0.4, 0.4), 0.05, 21);

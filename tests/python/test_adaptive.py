@@ -36,6 +36,8 @@ def test_adaptive_surface_is_closed_and_reports_levels():
 
 
 def test_adaptive_refuses_bad_input_with_the_core_message():
+    with pytest.raises(isobar.InvalidArgumentError, match="one isovalue at a time, got 2"):
+        isobar.extract_adaptive(ball_with_droplet(), [0.5, 0.6], h=0.2)
     with pytest.raises(isobar.InvalidArgumentError, match="bisection_iterations"):
         isobar.extract_adaptive(ball_with_droplet(), 0.5, h=0.2, bisection_iterations=17)
     with pytest.raises(isobar.Cancelled):

@@ -50,6 +50,26 @@ def test_free_surface_of_a_point_cloud_is_manifold_with_the_core_volume():
     assert 0.5 * (4 / 3 * math.pi * 0.23**3) < core.volume() < 4 / 3 * math.pi * 0.3**3
 
 
+def test_adaptive_method_of_a_point_cloud_is_the_cores_adaptive_surface():
+    """method='adaptive' gives isobar.extract_adaptive's surface with the carried arrays,
+    its stats in field data; an unknown method is refused by name."""
+    import json
+
+    cloud = blob_cloud()
+    mesh = ipv.surface_from_polydata(cloud, 0.6, method="adaptive", grid_factor=0.25,
+                                     attributes=["velocity"], backend="cpu")
+    particles = isobar.Particles.from_arrays(np.asarray(cloud.points), h=cloud.point_data["h"],
+                                             velocity=cloud.point_data["velocity"])
+    core, stats = isobar.extract_adaptive(particles, 0.6, grid_factor=0.25, attributes=["velocity"],
+                                          backend="cpu")
+    assert np.array_equal(core.points, mesh.points) and mesh.n_cells == core.n_triangles > 100
+    assert mesh.n_open_edges == 0 and mesh.is_manifold
+    assert np.array_equal(mesh.point_data["velocity"], core.attributes["velocity"])
+    assert json.loads(mesh.field_data["isobar_adaptive"][0])["triangles"] == stats["triangles"]
+    with pytest.raises(isobar.InvalidArgumentError, match="method"):
+        ipv.surface_from_polydata(cloud, 0.6, method="marching")
+
+
 def test_single_particle_cloud_gives_the_kernel_sphere_volume():
     h, q = 0.2, 0.8
     cloud = pv.PolyData(np.array([[1.0, 2.0, 3.0]]))

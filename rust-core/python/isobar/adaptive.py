@@ -9,6 +9,7 @@ from typing import Iterable, Optional, Tuple, Union
 import numpy as np
 
 from ._lib import BACKENDS, AdaptiveParams, AdaptiveStats, backend_name, check, lib
+from .errors import InvalidArgumentError
 from .particles import Particles
 from .sph import ProgressCallback, _run, _sph_params
 from .surface import Surface
@@ -74,6 +75,10 @@ def extract_adaptive(
         ``triangles_per_level``, ``transition_faces``, ``crack_triangles``, ``vertices``,
         ``triangles``, ``field_evaluations``, ``array_bytes``, ``seconds_total`` and ``backend`` ("cpu" or "gpu").
     """
+    if isinstance(iso, (list, tuple, np.ndarray)):
+        raise InvalidArgumentError(
+            f"extract_adaptive takes one isovalue at a time, got {len(iso)}; call it once per isovalue"
+        )
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")
     if not isinstance(particles, Particles):

@@ -11,11 +11,13 @@ needs it (``pip install pyvista`` for this module)::
 
 from __future__ import annotations
 
+import json
 from typing import Iterable, Optional
 
 import numpy as np
 
-from .errors import issue, quiet_warnings
+from .adaptive import extract_adaptive
+from .errors import InvalidArgumentError, issue, quiet_warnings
 from .fe import FeMesh, Samples, sample_fe
 from .particles import Particles
 from .sph import DEFAULT_H_ARRAYS, extract, is_sum_of_weights
@@ -86,7 +88,8 @@ def to_pyvista(surface: Surface):
     return mesh
 
 
-def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[float] = None, **kw):
+def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[float] = None,
+                          method: str = "correctors", **kw):
     """Extracts an isosurface of a point cloud's SPH field and returns a ``pv.PolyData``.
 
     Args:
@@ -97,8 +100,12 @@ def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[f
             None for the free surface (SumOfWeights).
         h: constant smoothing length; else ``h_array=NAME`` in `kw`, or a point array
             named ``h``, ``smoothing_length`` or ``hsml``.
-        **kw: any other argument of :func:`isobar.extract` (kernel, grid_factor, trim,
-            attributes, volume_array, progress ...).
+        method: "correctors" (Marching Correctors, :func:`isobar.extract`) or "adaptive"
+            (the crack-free 3-level surface, :func:`isobar.extract_adaptive`: one
+            isovalue, far fewer triangles; its stats are the returned mesh's
+            ``field_data["isobar_adaptive"]`` as a JSON string).
+        **kw: any other argument of that function (kernel, grid_factor, trim,
+            attributes, volume_array, max_error, backend, progress ...).
 
     Returns:
         ``pv.PolyData`` triangles with ``Normals`` and the surface attributes as point data.
@@ -111,15 +118,24 @@ def surface_from_polydata(cloud, iso, field: Optional[str] = None, h: Optional[f
     needed.update([attributes] if isinstance(attributes, str) else attributes)
     if h is None and not kw.get("h_array"):
         needed.update(DEFAULT_H_ARRAYS)
+    if method not in ("correctors", "adaptive"):
+        raise InvalidArgumentError(f"method must be 'correctors' or 'adaptive', got {method!r}")
     particles = particles_from_dataset(cloud, arrays=needed)
+    stats = None
     try:
         with quiet_warnings():  # issued below, from the caller's line
-            surface = extract(particles, iso, field=field, h=h, **kw)
+            if method == "adaptive":
+                surface, stats = extract_adaptive(particles, iso, field=field, h=h, **kw)
+            else:
+                surface = extract(particles, iso, field=field, h=h, **kw)
     finally:
         particles.close()
     issue(surface.warnings, stacklevel=2)  # the line that called surface_from_polydata()
     surface.release()
-    return to_pyvista(surface)
+    mesh = to_pyvista(surface)
+    if stats is not None:
+        mesh.field_data["isobar_adaptive"] = [json.dumps(stats)]
+    return mesh
 
 
 def _offsets(grid):
