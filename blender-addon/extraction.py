@@ -104,7 +104,19 @@ class Params:
             if isinstance(value, float):
                 data[key] = repr(value)
         data["source"] = source
+        # What the core makes of the same parameters changes between releases (the
+        # adaptive surface gained the particle arrays, Marching Correctors empty
+        # cavities): frames baked by another release are made again.
+        try:
+            data["isobar"] = isobar_module().__version__ + SURFACE_REVISION
+        except Exception:  # the library cannot load: nothing is extracted either
+            data["isobar"] = "unavailable" + SURFACE_REVISION
         return json.dumps(data, sort_keys=True)
+
+
+#: Raised when the surfaces made from unchanged parameters change within one version of
+#: the isobar package (baked frames must then be made again).
+SURFACE_REVISION = "+s35"
 
 
 @dataclass

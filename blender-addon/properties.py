@@ -64,8 +64,8 @@ KERNELS = [
 ]
 
 METHODS = [
-    ("CORRECTORS", "Marching Correctors", "Every vertex on the SPH level set; attributes, trimming, motion blur"),
-    ("ADAPTIVE", "Adaptive", "Crack-free 3-level grid: far fewer triangles, splashes kept fine"),
+    ("CORRECTORS", "Marching Correctors", "Every vertex on the SPH level set; trimming, sph_SumOfWeights"),
+    ("ADAPTIVE", "Adaptive", "Crack-free 3-level grid: far fewer triangles, splashes kept fine; no sph_SumOfWeights"),
 ]
 
 BACKENDS = [

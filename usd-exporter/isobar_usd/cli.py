@@ -71,7 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--memory-budget", type=float, help="memory budget in GiB for extent-sized structures (default: the core's, 4)")
     g.add_argument("--method", choices=["correctors", "adaptive"], default="correctors",
                    help="correctors (default): Marching Correctors, vertices on the level set; adaptive: crack-free "
-                   "3-level grid, far fewer triangles, one isovalue, no attributes")
+                   "3-level grid, far fewer triangles, one isovalue (both carry --attributes and velocities)")
     g.add_argument("--backend", choices=["cpu", "gpu", "auto"],
                    help="where the GPU-capable steps run (correctors: the seed cells' neighbour search; adaptive: the "
                    "grids): cpu, gpu (wgpu; an error without an adapter) or auto (a hardware GPU when there is one); "

@@ -103,8 +103,8 @@ def _check_stop() -> None:
 # -- extraction options ---------------------------------------------------------------
 
 
-#: Extraction methods: Marching Correctors (exact vertices, attributes, trimming) or the
-#: adaptive 3-level grid (crack-free, far fewer triangles, one isovalue).
+#: Extraction methods: Marching Correctors (vertices on the level set, trimming) or the
+#: adaptive 3-level grid (crack-free, far fewer triangles, one isovalue); both carry arrays.
 METHODS = ("correctors", "adaptive")
 
 
@@ -510,10 +510,11 @@ def _gaps(numbers: List[int]) -> Dict[int, str]:
     stride = min(steps)
     gaps = {}
     for a, b in zip(ordered, ordered[1:]):
-        lacking = list(range(a + stride, b, stride))
-        if lacking:
-            shown = ", ".join(map(str, lacking[:10])) + (f" and {len(lacking) - 10} more" if len(lacking) > 10 else "")
-            gaps[b] = f"frame{'s' if len(lacking) > 1 else ''} {shown} missing: the stage goes from frame {a} to frame {b}"
+        count = (b - a) // stride - 1  # counted, not listed: a stray frame_20240101
+        if count > 0:
+            lacking = range(a + stride, min(b, a + 11 * stride), stride)
+            shown = ", ".join(map(str, lacking)) + (f" and {count - 10} more" if count > 10 else "")
+            gaps[b] = f"frame{'s' if count > 1 else ''} {shown} missing: the stage goes from frame {a} to frame {b}"
     return gaps
 
 
@@ -804,11 +805,11 @@ def _clips_folder_for_writing(output: Path, replace: bool) -> Path:
         check_writable_folder(folder, f"output '{output}'")
         for suffix in _ROOT_SUFFIXES:
             other = output.with_suffix(suffix)
-            if suffix != output.suffix.lower() and other.exists():
+            if suffix != output.suffix.lower() and other.exists() and _layout_of(other) == "clips":
                 raise InputError(
                     f"output '{output}': its clips folder '{folder}' is also the one of '{other}' "
                     "(the same name with another suffix), whose frames this run would replace: "
-                    "choose another output name"
+                    f"choose another output name, or remove '{other}' first"
                 )
         if not replace and output.exists() and _layout_of(output) == "flat":
             raise InputError(

@@ -6,8 +6,9 @@
  * the particle arrays, or a vtkPartitionedDataSet of such point sets (one dataset in
  * pieces: its partitions' particles make one surface). The output is a triangle mesh whose vertices lie on the level set
  * of the SPH interpolant itself (to a relative tolerance, 1e-6 by default), with
- * "Normals" from the SPH gradient, "SumOfWeights", the carried arrays interpolated with
- * the same kernel, and "Isovalue" when several isovalues are given. Points are doubles.
+ * "Normals" from the SPH gradient, "SumOfWeights" (Marching Correctors), the carried arrays
+ * interpolated with the same kernel, and "Isovalue" when several isovalues are given.
+ * Points are doubles.
  *
  * All numeric work is done by the isobar core (Rust, linked statically through
  * isobar.h); this class converts arrays, maps its parameters onto IsobarSphParams,

@@ -75,9 +75,9 @@ def extract_adaptive(
         ``triangles_per_level``, ``transition_faces``, ``crack_triangles``, ``vertices``,
         ``triangles``, ``field_evaluations``, ``array_bytes``, ``seconds_total`` and ``backend`` ("cpu" or "gpu").
     """
-    if isinstance(iso, (list, tuple, np.ndarray)):
+    if np.ndim(iso) != 0:
         raise InvalidArgumentError(
-            f"extract_adaptive takes one isovalue at a time, got {len(iso)}; call it once per isovalue"
+            f"extract_adaptive takes one isovalue at a time, got {np.size(iso)}; call it once per isovalue"
         )
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")

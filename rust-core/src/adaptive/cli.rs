@@ -1,7 +1,7 @@
 //! The `isobar adaptive` subcommand's body: the binary parses the SPH field options
 //! shared with `isobar sph` and hands them here with these adaptive ones.
 
-use super::{carry, extract, extract_sph, grid_for, Extraction, Params, Stats};
+use super::{extract, extract_sph, extract_sph_carrying, grid_for, Extraction, Params, Stats};
 use crate::correctors;
 use crate::error::{Error, Result};
 use crate::field::particles::ParticleData;
@@ -110,11 +110,7 @@ pub fn run(
             let carried =
                 Carried::new(&field, &data, common.attributes).map_err(|e| e.in_file(path))?;
             let build_s = t.elapsed().as_secs_f64();
-            let end = if carried.is_empty() { 1.0 } else { 0.95 };
-            progress.window(0.1, end);
-            let mut out = extract_sph(&field, &params, progress)?;
-            progress.window(end, 1.0);
-            carry(&field, &carried, &mut out, progress)?;
+            let out = extract_sph_carrying(&field, &carried, &params, (0.1, 1.0), progress)?;
             Ok((field, build_s, out))
         })?;
         io::write_mesh(&output, &out.mesh)?;

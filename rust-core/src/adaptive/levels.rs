@@ -346,20 +346,38 @@ pub(crate) fn edge_point(
     }
 }
 
-/// Refuses levels whose arrays would not fit `budget` bytes, before allocating them.
-pub fn check_budget(levels: &[u8], budget: u64) -> Result<()> {
+/// Cells of level 1, 2, 3.
+fn counts(levels: &[u8]) -> [u64; 3] {
     let mut count = [0u64; 3];
     for &l in levels {
         count[l as usize - 1] += 1;
     }
-    let needed: u64 = (1..=3u8)
+    count
+}
+
+/// Bytes the level arrays of `levels` take before edges are known.
+fn needed_bytes(levels: &[u8]) -> u64 {
+    let count = counts(levels);
+    (1..=3u8)
         .map(|l| count[l as usize - 1] * bytes_per_cell(l))
         .sum::<u64>()
-        + levels.len() as u64 * 5;
+        + levels.len() as u64 * 5
+}
+
+/// Refuses levels whose arrays, with `held` bytes held besides, would not fit `budget`
+/// bytes, before allocating them.
+pub fn check_budget(levels: &[u8], held: u64, budget: u64) -> Result<()> {
+    let count = counts(levels);
+    let needed = needed_bytes(levels) + held;
     if needed > budget {
+        let besides = if held > 0 {
+            format!(" with {held} bytes of field values held")
+        } else {
+            String::new()
+        };
         return Err(Error::OverBudget {
             what: format!(
-                "adaptive grid arrays for {} / {} / {} cells of level 1 / 2 / 3",
+                "adaptive grid arrays for {} / {} / {} cells of level 1 / 2 / 3{besides}",
                 count[0], count[1], count[2]
             ),
             needed_bytes: needed,

@@ -394,6 +394,27 @@ pub fn carry(
     Ok(())
 }
 
+/// [`extract_sph`], then [`carry`]: the run's progress window `from..to` (a caller's share
+/// after building the field), its last 5 % for the arrays when there are any.
+pub fn extract_sph_carrying(
+    field: &SphField,
+    carried: &Carried,
+    params: &Params,
+    (from, to): (f64, f64),
+    progress: &mut Progress,
+) -> Result<Extraction> {
+    let end = if carried.is_empty() {
+        to
+    } else {
+        to - 0.05 * (to - from)
+    };
+    progress.window(from, end);
+    let mut out = extract_sph(field, params, progress)?;
+    progress.window(end, to);
+    carry(field, carried, &mut out, progress)?;
+    Ok(out)
+}
+
 /// [`extract_sph`] on the GPU: the field uploaded once, registration on the device
 /// (`gpu::register`, counts equal to the CPU's), splitting and balancing on the CPU, then
 /// [`extract_gpu`]'s per-level work on the same upload. `timings.levels` includes the
@@ -502,6 +523,7 @@ fn extract_on<F: ScalarField + ?Sized>(
         |arrays, faces, progress| {
             cracks::fill(grid, levels, arrays, faces, params.isovalue, progress)
         },
+        || lattice.borrow().bytes(),
     )?;
     out.stats.array_bytes += lattice.borrow().bytes();
     Ok(out)
@@ -571,6 +593,8 @@ fn extract_gpu_on(
             let fine = [b[1].as_ref(), b[2].as_ref()];
             crate::gpu::cracks::fill(gpu, grid, levels, fine, faces, iso)
         },
+        // Values and cases stay on the device.
+        || 0,
     )?;
     out.stats.backend = Backend::Gpu;
     Ok(out)
@@ -581,7 +605,9 @@ fn extract_gpu_on(
 type Fills = Vec<[(u8, u32); 3]>;
 
 /// Levels checked, then `build` for levels 1, 2, 3, `fill` for the cracks of every
-/// transition face, and the mesh assembled.
+/// transition face, and the mesh assembled. `held` gives the bytes the back end holds
+/// besides the level arrays (the CPU's finest-lattice values): with the arrays built so
+/// far they must stay within the budget, checked after each level, before the next.
 fn extract_with(
     grid: &CoarseGrid,
     levels: &[u8],
@@ -589,11 +615,12 @@ fn extract_with(
     progress: &mut Progress,
     mut build: impl FnMut(u8, &mut Progress) -> Result<LevelArrays>,
     fill: impl FnOnce(&[LevelArrays], &[cracks::TransitionFace], &mut Progress) -> Result<Fills>,
+    held: impl Fn() -> u64,
 ) -> Result<Extraction> {
     params.validate()?;
     progress.phase("checking levels", 0.0, 0.05)?;
     grid::check_levels(grid, levels, progress)?;
-    levels::check_budget(levels, params.memory_budget)?;
+    levels::check_budget(levels, held(), params.memory_budget)?;
     let start = Instant::now();
     let mut stats = Stats {
         coarse_cells: levels.len() as u64,
@@ -611,6 +638,18 @@ fn extract_with(
         stats.field_evaluations += a.evaluations;
         stats.triangles_per_level[level as usize - 1] = a.triangles.len() as u64;
         arrays.push(a);
+        let needed = arrays.iter().map(array_bytes).sum::<u64>() + held();
+        if needed > params.memory_budget {
+            return Err(Error::OverBudget {
+                what: format!(
+                    "the adaptive surface's arrays up to level {level} ({} / {} / {} cells of \
+                     level 1 / 2 / 3; a larger grid factor or max_error needs fewer)",
+                    stats.cells_per_level[0], stats.cells_per_level[1], stats.cells_per_level[2]
+                ),
+                needed_bytes: needed,
+                budget_bytes: params.memory_budget,
+            });
+        }
     }
     stats.array_bytes = arrays.iter().map(array_bytes).sum();
     stats.timings.surfaces = t.elapsed().as_secs_f64();

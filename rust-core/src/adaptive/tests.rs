@@ -878,3 +878,35 @@ fn particle_arrays_are_carried_onto_the_adaptive_vertices() {
         .to_string();
     assert!(e.contains("pressure") && e.contains("side"), "{e}");
 }
+
+/// The budget covers the level arrays and the field values held with them together: an
+/// extraction whose arrays reach `array_bytes` at their largest runs within a budget of
+/// exactly that and is refused, naming the level arrays, one byte below (it ran on, 1.65×
+/// over a 256 MiB budget, when each part was checked against the whole budget alone).
+#[test]
+fn the_budget_holds_the_level_arrays_and_field_values_together() {
+    let data = fluid(0.5, 0.1, &[DVec3::new(0.95, 0.0, 0.0)]);
+    let field = sph(&data, 0.2);
+    let params = Params {
+        isovalue: 0.5,
+        grid_factor: 0.25,
+        ..Params::default()
+    };
+    let out = extract_sph(&field, &params, &mut Progress::none()).unwrap();
+    let at = |memory_budget| Params {
+        memory_budget,
+        ..params.clone()
+    };
+    let fits = extract_sph(&field, &at(out.stats.array_bytes), &mut Progress::none()).unwrap();
+    assert_eq!(fits.mesh.triangles, out.mesh.triangles);
+    let e = extract_sph(
+        &field,
+        &at(out.stats.array_bytes - 1),
+        &mut Progress::none(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(e, Error::OverBudget { .. }) && e.to_string().contains("arrays"),
+        "{e}"
+    );
+}

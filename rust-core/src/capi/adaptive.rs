@@ -178,12 +178,7 @@ pub extern "C" fn isobar_adaptive_extract(
             let field = SphField::build(&particles.data, &field_settings, sink)?;
             // A missing array is refused before the surface is made.
             let carried = Carried::new(&field, &particles.data, &sph_params.attributes)?;
-            let end = if carried.is_empty() { 1.0 } else { 0.95 };
-            sink.window(0.1, end);
-            let mut out = adaptive::extract_sph(&field, &params, sink)?;
-            sink.window(end, 1.0);
-            adaptive::carry(&field, &carried, &mut out, sink)?;
-            Ok(out)
+            adaptive::extract_sph_carrying(&field, &carried, &params, (0.1, 1.0), sink)
         })?;
         let s = &extraction.stats;
         if !stats.is_null() {

@@ -201,10 +201,15 @@ pub fn print_warnings(frame: &Path, warnings: &[String]) {
     }
 }
 
+/// Missing frames listed at most.
+const SHOWN: usize = 10;
+
 /// The frame numbers a sequence skips: with every step between its frames a multiple of
 /// the smallest (1, or 10 for a solver that saves every tenth step), the numbers of that
-/// stride that have no file. An irregular sequence has no gaps to name.
-pub fn missing_frames(frames: &[PathBuf]) -> Vec<u64> {
+/// stride that have no file. An irregular sequence has no gaps to name. Returns how many
+/// are missing and the first [`SHOWN`] of them: counted, not listed, so that a stray
+/// `frame_20240101` beside frames 0 and 1 costs nothing.
+pub fn missing_frames(frames: &[PathBuf]) -> (u64, Vec<u64>) {
     let numbers: Vec<u64> = frames.iter().filter_map(|f| frame_number(f)).collect();
     let Some(step) = numbers
         .windows(2)
@@ -212,32 +217,37 @@ pub fn missing_frames(frames: &[PathBuf]) -> Vec<u64> {
         .filter(|&d| d > 0)
         .min()
     else {
-        return Vec::new();
+        return (0, Vec::new());
     };
     if numbers.windows(2).any(|w| (w[1] - w[0]) % step != 0) {
-        return Vec::new();
+        return (0, Vec::new());
     }
-    numbers
+    let count = numbers
+        .windows(2)
+        .map(|w| ((w[1] - w[0]) / step).saturating_sub(1))
+        .sum();
+    let first = numbers
         .windows(2)
         .flat_map(|w| (1..(w[1] - w[0]) / step).map(move |k| w[0] + k * step))
-        .collect()
+        .take(SHOWN)
+        .collect();
+    (count, first)
 }
 
 /// Says on stderr which frames of the sequence `pattern` are missing, so a hole left by a
 /// failed solver step is not passed over in silence; the present frames still run.
 pub fn warn_if_gaps(pattern: &str, frames: &[PathBuf]) {
-    let missing = missing_frames(frames);
-    if missing.is_empty() {
+    let (count, first) = missing_frames(frames);
+    if count == 0 {
         return;
     }
-    const SHOWN: usize = 10;
-    let mut list: Vec<String> = missing.iter().take(SHOWN).map(u64::to_string).collect();
-    if missing.len() > SHOWN {
-        list.push(format!("... ({} in all)", missing.len()));
+    let mut list: Vec<String> = first.iter().map(u64::to_string).collect();
+    if count > first.len() as u64 {
+        list.push(format!("... ({count} in all)"));
     }
     eprintln!(
         "isobar: warning: '{pattern}': frame{} {} missing; going on with the {} present",
-        if missing.len() == 1 { "" } else { "s" },
+        if count == 1 { "" } else { "s" },
         list.join(", "),
         frames.len()
     );
@@ -407,12 +417,15 @@ mod tests {
                 .map(|n| PathBuf::from(format!("d/f_{n:04}.vtk")))
                 .collect()
         };
-        assert_eq!(missing_frames(&frames(&[1, 2, 3, 4])), Vec::<u64>::new());
-        assert_eq!(missing_frames(&frames(&[1, 2, 4, 7])), vec![3, 5, 6]);
-        assert_eq!(missing_frames(&frames(&[0, 10, 20, 50])), vec![30, 40]);
+        assert_eq!(missing_frames(&frames(&[1, 2, 3, 4])), (0, vec![]));
+        assert_eq!(missing_frames(&frames(&[1, 2, 4, 7])), (3, vec![3, 5, 6]));
+        assert_eq!(missing_frames(&frames(&[0, 10, 20, 50])), (2, vec![30, 40]));
+        // A stray far frame: counted, the first ten listed.
+        let (count, first) = missing_frames(&frames(&[0, 1, 20240101]));
+        assert_eq!((count, first.len(), first[9]), (20240099, 10, 11));
         // Irregular steps (0, 10, 25) have no stride to measure gaps by.
-        assert_eq!(missing_frames(&frames(&[0, 10, 25])), Vec::<u64>::new());
-        assert_eq!(missing_frames(&frames(&[5])), Vec::<u64>::new());
+        assert_eq!(missing_frames(&frames(&[0, 10, 25])), (0, vec![]));
+        assert_eq!(missing_frames(&frames(&[5])), (0, vec![]));
     }
 
     #[test]
