@@ -53,6 +53,8 @@ pub struct SeedSearch {
     positions: Vec<DVec3>,
     pairs: NeighbourGrid,
     smoothed: Vec<f64>,
+    /// (particle slot, probe point, field there) of every cavity probe, by slot.
+    probes: Vec<(u32, DVec3, f64)>,
     /// Bytes the seed lists may take ([`seed_cells_with`] counts four copies).
     memory_budget: u64,
 }
@@ -70,10 +72,12 @@ impl SeedSearch {
             .par_iter()
             .map(|&x| field.value_and_weight(x).0)
             .collect();
+        let probes = cavity_probes(field, &positions, &pairs);
         Ok(SeedSearch {
             positions,
             pairs,
             smoothed,
+            probes,
             memory_budget,
         })
     }
@@ -83,6 +87,58 @@ impl SeedSearch {
 /// empty cavity the neighbours lie along the wall, across the inward axis.
 const CONE_COS2: f64 = 0.25;
 const ALL_SIDES: u8 = 0b11_1111;
+
+/// The unit vector of half-axis `bit` (2a + s: axis a, side s, 0 negative, 1 positive).
+fn half_axis(bit: usize) -> DVec3 {
+    let mut dir = DVec3::ZERO;
+    dir[bit / 2] = if bit % 2 == 1 { 1.0 } else { -1.0 };
+    dir
+}
+
+/// The cavity probes: for each particle with neighbours on every side but none within
+/// 1.5 h and 60° of a half-axis, the point one h along it and the field there. They do
+/// not depend on the isovalue, so they are evaluated once per extraction.
+fn cavity_probes(
+    field: &SphField,
+    positions: &[DVec3],
+    pairs: &NeighbourGrid,
+) -> Vec<(u32, DVec3, f64)> {
+    let order = pairs.order();
+    (0..positions.len())
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let xi = positions[i];
+            let side_r2 = side_radius(field, i).powi(2);
+            let (mut sides, mut cones) = (0u8, 0u8);
+            pairs.for_each_candidate_range(xi, 1, |range| {
+                for &j in &order[range] {
+                    let d = positions[j as usize] - xi;
+                    let d2 = d.length_squared();
+                    if j as usize == i || d2 >= side_r2 {
+                        continue;
+                    }
+                    for a in 0..3 {
+                        let bit = match d[a] {
+                            v if v > 0.0 => 2 * a + 1,
+                            v if v < 0.0 => 2 * a,
+                            _ => continue,
+                        };
+                        sides |= 1 << bit;
+                        if d[a] * d[a] >= CONE_COS2 * d2 {
+                            cones |= 1 << bit;
+                        }
+                    }
+                }
+            });
+            (0..6)
+                .filter(move |&bit| sides == ALL_SIDES && cones >> bit & 1 == 0)
+                .map(move |bit| {
+                    let probe = xi + half_axis(bit) * field.h_unscaled(i);
+                    (i as u32, probe, field.value_and_weight(probe).0)
+                })
+        })
+        .collect()
+}
 
 /// Pairs are searched within h (the paper).
 fn pair_radius(field: &SphField, i: usize) -> f64 {
@@ -127,6 +183,7 @@ pub fn seed_cells_with(
     let SeedSearch {
         positions,
         smoothed,
+        probes,
         memory_budget,
         ..
     } = search;
@@ -163,10 +220,8 @@ pub fn seed_cells_with(
             let ci = class(i);
             let r2 = pair_radius(field, i).powi(2);
             let side_r2 = side_radius(field, i).powi(2);
-            // Bit 2a+s: a neighbour lies on side s (0: negative, 1: positive) of axis a;
-            // in `cones`, within CONE of that half-axis's direction.
+            // Bit 2a+s: a neighbour lies on side s (0: negative, 1: positive) of axis a.
             let mut sides = 0u8;
-            let mut cones = 0u8;
             candidates(i, &mut |row| {
                 for j in row.iter().map(|&j| j as usize) {
                     let d = positions[j] - xi;
@@ -175,16 +230,10 @@ pub fn seed_cells_with(
                         continue;
                     }
                     for a in 0..3 {
-                        let bit = if d[a] > 0.0 {
-                            2 * a + 1
+                        if d[a] > 0.0 {
+                            sides |= 1 << (2 * a + 1);
                         } else if d[a] < 0.0 {
-                            2 * a
-                        } else {
-                            continue;
-                        };
-                        sides |= 1 << bit;
-                        if d[a] * d[a] >= CONE_COS2 * d2 {
-                            cones |= 1 << bit;
+                            sides |= 1 << (2 * a);
                         }
                     }
                     if d2 >= r2 {
@@ -203,25 +252,20 @@ pub fn seed_cells_with(
                     }
                 }
             });
-            for bit in 0..6 {
-                let mut dir = DVec3::ZERO;
-                dir[bit / 2] = if bit % 2 == 1 { 1.0 } else { -1.0 };
-                if sides >> bit & 1 == 0 {
-                    if ci != outside {
-                        let far = xi + dir * field.support(i);
-                        let values =
-                            ends(ci, outside, (smoothed[i], 0.0), (field.raw_value(i), 0.0));
-                        let (a, b) = crossing_window(xi, far, values, iso, window);
-                        cells_on_segment(grid, a, b, out);
-                    }
-                } else if sides == ALL_SIDES && cones >> bit & 1 == 0 {
-                    // The wall of a cavity: neighbours on every side, but on this one all
-                    // along the wall (on the cloud's edge the pairs above seed the
-                    // surface). The field one h in tells whether the cavity crosses iso.
-                    let probe = xi + dir * field.h_unscaled(i);
-                    if (field.value_and_weight(probe).0 > iso) != (smoothed[i] > iso) {
-                        cells_on_segment(grid, xi, probe, out);
-                    }
+            if ci != outside {
+                for bit in (0..6).filter(|bit| sides >> bit & 1 == 0) {
+                    let far = xi + half_axis(bit) * field.support(i);
+                    let values = ends(ci, outside, (smoothed[i], 0.0), (field.raw_value(i), 0.0));
+                    let (a, b) = crossing_window(xi, far, values, iso, window);
+                    cells_on_segment(grid, a, b, out);
+                }
+            }
+            // The wall of a cavity (see `cavity_probes`): seeded where the field one h in
+            // lies on the other side of the isovalue.
+            let first = probes.partition_point(|p| (p.0 as usize) < i);
+            for &(_, probe, value) in probes[first..].iter().take_while(|p| p.0 as usize == i) {
+                if (value > iso) != (smoothed[i] > iso) {
+                    cells_on_segment(grid, xi, probe, out);
                 }
             }
             seeds.deduplicate_if_doubled();
