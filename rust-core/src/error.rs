@@ -101,9 +101,31 @@ fn needed_text(bytes: u64) -> String {
     }
 }
 
+/// `x` (positive, finite) to three significant digits in plain notation, rounded up (the
+/// "at least" of a remedy such as "a grid factor of at least 0.0352 fits" must hold): a
+/// factor such as 0.000412 must not print as 0.000.
+pub(crate) fn three_digits(x: f64) -> String {
+    let decimals = (2 - x.log10().floor() as i64).max(0) as usize;
+    let scale = 10f64.powi(decimals as i32);
+    // Less a hair, so that a value already on three digits (0.0349 is 349.00000000000006
+    // hundred-thousandths) is not raised by its representation error.
+    let up = (x * scale * (1.0 - 1e-12)).ceil() / scale;
+    format!("{up:.decimals$}")
+}
+
 #[cfg(test)]
 mod tests {
-    use super::Error;
+    use super::{three_digits, Error};
+
+    #[test]
+    fn factors_keep_three_significant_digits() {
+        assert_eq!(three_digits(0.0349), "0.0349");
+        assert_eq!(three_digits(0.000412), "0.000412");
+        assert_eq!(three_digits(0.5), "0.500");
+        assert_eq!(three_digits(12.34), "12.4");
+        assert_eq!(three_digits(0.10004), "0.101");
+        assert_eq!(three_digits(1234.0), "1234");
+    }
 
     #[test]
     fn a_saturated_byte_count_is_not_printed_as_a_number() {

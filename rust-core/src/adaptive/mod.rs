@@ -20,7 +20,7 @@ pub mod lattice;
 pub mod levels;
 pub mod refine;
 
-use crate::error::{Error, Result};
+use crate::error::{three_digits, Error, Result};
 use crate::field::sph::carried::Carried;
 use crate::field::sph::SphField;
 use crate::field::ScalarField;
@@ -240,7 +240,7 @@ fn levels_and_refined(
     params: &Params,
     progress: &mut Progress,
 ) -> Result<Levels> {
-    check_grid_budget(grid, params)?;
+    check_grid_budget(field, grid, params)?;
     let positions: Vec<_> = (0..field.len()).map(|i| field.position(i)).collect();
     let counts = grid::register(grid, &positions)?;
     progress.report(0.1)?;
@@ -257,29 +257,50 @@ fn level_step_bytes(grid: &CoarseGrid) -> u64 {
     grid.cell_count() as u64 * LEVEL_STEP_BYTES_PER_CELL
 }
 
-/// Refuses a coarse grid whose per-cell arrays, with the coarse-node values the error
-/// criterion evaluates, exceed the budget, or whose level arrays would even with every
-/// cell at level 1 (levels only rise): before minutes of work on a grid that cannot be
-/// contoured.
-fn check_grid_budget(grid: &CoarseGrid, params: &Params) -> Result<()> {
+/// Bytes the level step needs on `grid` before anything is allocated: the per-cell arrays
+/// with the coarse-node values the error criterion evaluates, or the level arrays with
+/// every cell at level 1 (levels only rise), whichever is more.
+fn grid_bytes(grid: &CoarseGrid, params: &Params) -> u64 {
     let corners = if params.max_error > 0.0 {
         Lattice::corner_bytes(grid)
     } else {
         0
     };
     let all_level_1 = grid.cell_count() as u64 * (levels::bytes_per_cell(1) + 5);
-    let needed = (level_step_bytes(grid) + corners).max(all_level_1);
-    if needed > params.memory_budget {
-        return Err(Error::OverBudget {
-            what: format!(
-                "a coarse grid of {}×{}×{} cells",
-                grid.cells[0], grid.cells[1], grid.cells[2]
-            ),
-            needed_bytes: needed,
-            budget_bytes: params.memory_budget,
-        });
+    (level_step_bytes(grid) + corners).max(all_level_1)
+}
+
+/// Refuses a coarse grid whose arrays ([`grid_bytes`]) exceed the budget, before minutes
+/// of work on a grid that cannot be contoured, naming the grid factor that fits.
+fn check_grid_budget(field: &SphField, grid: &CoarseGrid, params: &Params) -> Result<()> {
+    let needed = grid_bytes(grid, params);
+    if needed <= params.memory_budget {
+        return Ok(());
     }
-    Ok(())
+    // Cells scale with 1 / grid factor³, but the padding does not shrink with them and
+    // counts are whole: from the cube-root guess, coarser until the grid fits.
+    let mut factor = params.grid_factor * (needed as f64 / params.memory_budget as f64).cbrt();
+    for _ in 0..64 {
+        let coarser = Params {
+            grid_factor: factor,
+            ..params.clone()
+        };
+        match grid_for(field, &coarser) {
+            Ok(g) if grid_bytes(&g, &coarser) > params.memory_budget => factor *= 1.02,
+            _ => break,
+        }
+    }
+    Err(Error::OverBudget {
+        what: format!(
+            "a coarse grid of {}×{}×{} cells (a grid factor of at least {} fits)",
+            grid.cells[0],
+            grid.cells[1],
+            grid.cells[2],
+            three_digits(factor)
+        ),
+        needed_bytes: needed,
+        budget_bytes: params.memory_budget,
+    })
 }
 
 /// Steps 2–3 from step 1's particle counts per coarse cell: the splash criterion and its
@@ -427,7 +448,7 @@ fn extract_sph_gpu(
     progress: &mut Progress,
     start: Instant,
 ) -> Result<Extraction> {
-    check_grid_budget(grid, params)?;
+    check_grid_budget(field, grid, params)?;
     let gpu = crate::gpu::device::get()?;
     let on_device = crate::gpu::sph::GpuField::new(gpu, field, grid.origin)?;
     let registered = crate::gpu::register::register(gpu, &on_device, field, grid)?;

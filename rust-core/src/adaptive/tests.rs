@@ -431,6 +431,22 @@ fn bad_parameters_and_level_maps_are_refused() {
         "{e}"
     );
     assert_eq!(reports, 1, "refused at the start of the level step");
+    // The refusal names a grid factor, and at that factor the coarse grid fits.
+    let text = e.to_string();
+    let suggested: f64 = text
+        .split("a grid factor of at least ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|g| g.parse().ok())
+        .unwrap_or_else(|| panic!("no grid factor in: {text}"));
+    assert!(suggested > between.grid_factor, "{text}");
+    let coarser = Params {
+        grid_factor: suggested,
+        ..between.clone()
+    };
+    if let Err(e) = extract_sph(&field, &coarser, &mut Progress::none()) {
+        assert!(!e.to_string().contains("coarse grid"), "{e}");
+    }
 }
 
 /// The level step answers a cancel: every pass over the coarse grid reports (it ran for
