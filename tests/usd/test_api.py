@@ -254,6 +254,28 @@ def test_separate_writers_then_stitch(cli, tmp_path, dam_frames):
     assert validation_errors(stage) == [] and isobar_usd.check(out) == []
 
 
+def test_frames_rewritten_with_other_settings_are_named_by_stitch_and_check(cli, tmp_path, dam_frames):
+    """A --frames re-run with another isovalue and h (a typo on the farm) used to make a
+    mixed sequence that stitch and check both passed without a word."""
+    from conftest import CLI_DAM, run_cli
+
+    out = tmp_path / "mixed.usd"
+    run_cli(cli, "sph", dam_frames / "frame_####.vtk", *CLI_DAM, "-o", out, "-q")
+    assert isobar_usd.check(out) == []
+    other = ["--iso", "0.3", "--h", "0.06", "--grid-factor", "0.375"]
+    proc = run_cli(cli, "sph", dam_frames / "frame_####.vtk", *other, "-o", out, "--frames", "26", "-q")
+    assert "isobar-usd: warning: the frames were extracted with different settings: frame(s) 26 with" in proc.stderr
+    assert "iso [0.3] (not [0.6])" in proc.stderr and "h 0.06 (not 0.05)" in proc.stderr, proc.stderr
+    result = isobar_usd.stitch(out)
+    assert len(result.notes) == 1 and "against frame(s) 1" in result.notes[0], result.notes
+    problems = isobar_usd.check(out)
+    assert [(p.severity, p.check) for p in problems] == [("warning", "settings")], problems
+    assert "frame(s) 26 with" in problems[0].message
+    # The same settings again: nothing to say.
+    run_cli(cli, "sph", dam_frames / "frame_####.vtk", *CLI_DAM, "-o", out, "--frames", "26", "-q")
+    assert isobar_usd.stitch(out).notes == [] and isobar_usd.check(out) == []
+
+
 def test_parallel_jobs_write_the_same_bytes(tmp_path):
     frames = link_frames(tmp_path / "frames", {i: FRAME_01 if i % 2 else FRAME_26 for i in range(1, 7)})
     serial = isobar_usd.write_sequence(frames / "frame_####.vtk", tmp_path / "serial.usd", ISO, jobs=1, **DAM)

@@ -4,6 +4,7 @@ lack (usd-core 26.x has no topology validator)."""
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from dataclasses import dataclass
 from typing import List, Optional, Union
 
@@ -172,6 +173,33 @@ def _points_problems(points) -> List[Problem]:
     return problems
 
 
+def _clip_settings_problems(prim) -> List[Problem]:
+    """A warning when the value clips of `prim` are frame layers that isobar_usd extracted
+    with different settings (their records' ``extraction``): a re-run of some frames with
+    another isovalue, h or attributes."""
+    from pxr import Usd
+
+    from .errors import StitchError
+    from .layers import mixed_settings, read_record
+
+    clips = Usd.ClipsAPI(prim)
+    assets = clips.GetClipAssetPaths()
+    if not assets:
+        return []
+    anchor = prim.GetStage().GetRootLayer()
+    extractions = {}
+    for k, asset in enumerate(assets):
+        path = anchor.ComputeAbsolutePath(asset.path)
+        try:
+            record = read_record(Path(path))
+        except StitchError:  # not written by isobar_usd, or unreadable: nothing to compare
+            continue
+        frame = record.frames[0] if len(record.frames) == 1 else k
+        extractions[frame] = record.info.get("extraction")
+    mixed = mixed_settings(extractions)
+    return [Problem("warning", "settings", str(prim.GetPath()), None, mixed)] if mixed else []
+
+
 def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_frames: Optional[int] = None) -> List[Problem]:
     """Opens the stage at `path` and returns its problems (an empty list when it is sound).
 
@@ -199,6 +227,7 @@ def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_fra
     if not stage.HasAuthoredTimeCodeRange():
         problems.append(Problem("warning", "stage", "/", None, "no startTimeCode/endTimeCode"))
     for prim in stage.Traverse():
+        problems += _clip_settings_problems(prim)
         if prim.IsA(UsdGeom.Mesh):
             problems += _mesh_problems(UsdGeom.Mesh(prim), max_frames)
         elif prim.IsA(UsdGeom.Points):

@@ -258,6 +258,8 @@ def _run_sph(args) -> int:
         progress=progress,
         **options,
     )
+    for note in result.notes:  # a warning: printed even with --quiet
+        print(f"isobar-usd: warning: {note}", file=sys.stderr, flush=True)
     if not args.quiet:
         span = f"{result.frames[0]}..{result.frames[-1]}" if result.frames else "-"
         where = f", frame layers in {result.clips}" if result.clips else ""
@@ -310,6 +312,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             return _run_fe(args)
         if args.command == "stitch":
             result = stitch(args.output, fps=args.fps)
+            for note in result.notes:
+                print(f"isobar-usd: warning: {note}", file=sys.stderr, flush=True)
             if not args.quiet:
                 print(f"stitched {result.output}: {len(result.frames)} frame(s) ({result.frames[0]}..{result.frames[-1]})")
             return 0

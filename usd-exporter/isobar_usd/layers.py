@@ -339,6 +339,45 @@ def read_record(path: Path) -> LayerRecord:
     return LayerRecord(Path(path), frames, schema, settings, data)  # type: ignore[arg-type]
 
 
+def mixed_settings(extractions: Mapping[int, Optional[str]]) -> Optional[str]:
+    """A sentence naming the frames extracted with other settings than most frames were
+    (each frame's record's ``extraction``: isovalue and options), or None when they all
+    agree. Frames with no record of it (meshes given in memory) are left out. A re-run of
+    some frames with another isovalue, h or --attributes otherwise pops in the shot
+    without a word."""
+    groups: Dict[str, List[int]] = {}
+    for frame, text in sorted(extractions.items()):
+        if text:
+            groups.setdefault(text, []).append(frame)
+    if len(groups) < 2:
+        return None
+    ordered = sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[1][0]))
+    common_text, common_frames = ordered[0]
+
+    def parsed(text: str) -> Dict:
+        try:
+            value = json.loads(text)
+        except ValueError:
+            return {"settings": text}
+        return value if isinstance(value, dict) else {"settings": value}
+
+    def frames_of(frames: List[int]) -> str:
+        shown = ", ".join(map(str, frames[:10]))
+        return shown + (f" and {len(frames) - 10} more" if len(frames) > 10 else "")
+
+    common = parsed(common_text)
+    parts = []
+    for text, frames in ordered[1:]:
+        other = parsed(text)
+        keys = sorted(k for k in set(common) | set(other) if common.get(k) != other.get(k))
+        differences = ", ".join(f"{k} {other.get(k, '(not set)')!r} (not {common.get(k, '(not set)')!r})" for k in keys)
+        parts.append(f"frame(s) {frames_of(frames)} with {differences}")
+    return (
+        f"the frames were extracted with different settings: {'; '.join(parts)}, against frame(s) "
+        f"{frames_of(common_frames)}; rewrite them with the same settings if that was not meant"
+    )
+
+
 def write_manifest(path: Path, settings: StageSettings, schema: Sequence[SchemaEntry]) -> None:
     """The clip manifest: every attribute the clips hold samples for, with no values."""
     Sdf, _, _, _ = _pxr()

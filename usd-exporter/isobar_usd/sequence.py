@@ -26,6 +26,7 @@ from .layers import (
     check_output_path,
     check_writable_folder,
     merge_schema,
+    mixed_settings,
     read_record,
     write_clips_root,
     write_manifest,
@@ -563,6 +564,8 @@ class SequenceResult:
         seconds: wall time.
         warnings: frame number -> what its extraction warned about, for the frames
             written by this call that warned.
+        notes: what the stitch found about the sequence as a whole (frames extracted
+            with different settings).
     """
 
     output: Path
@@ -573,6 +576,7 @@ class SequenceResult:
     schema: List[SchemaEntry] = field(default_factory=list)
     seconds: float = 0.0
     warnings: Dict[int, List[str]] = field(default_factory=dict)
+    notes: List[str] = field(default_factory=list)
 
 
 # -- public API -----------------------------------------------------------------------
@@ -1001,10 +1005,12 @@ def _stitch_locked(
     chosen_from = "this run" if settings is not None else None
     # Point counts, for the holds between frames that differ (-1: not recorded, held).
     counts: Dict[int, int] = {}
+    extractions: Dict[int, Optional[str]] = {}
     for frame in sorted(clips):
         path = clips[frame]
         record = read_record(path)
         counts[frame] = int(record.info.get("points", -1))
+        extractions[frame] = record.info.get("extraction")
         if record.frames != [frame]:
             raise StitchError(f"{path} holds frame(s) {record.frames}, not frame {frame} (renamed by hand?)")
         merge_schema(schema, record.schema, f"frame {frame}", where)
@@ -1048,7 +1054,8 @@ def _stitch_locked(
         point_counts=counts,
     )
     frames = sorted(clips)
-    return SequenceResult(output, "clips", [], frames, folder, entries)
+    mixed = mixed_settings(extractions)
+    return SequenceResult(output, "clips", [], frames, folder, entries, notes=[mixed] if mixed else [])
 
 
 __all__ = [
