@@ -56,12 +56,13 @@ def to_vtk_ref(family, u, v, w):
     return (u, v, w)
 
 
-def build(kind, order):
+def build(kind, order, serendipity=False):
     """Replaces gmsh's models by a curved mesh of order `order`: "ball" (tetrahedra), "hex"
-    or "prism" (a cylinder); every cell valid."""
+    or "prism" (a cylinder); every cell valid. `serendipity`: gmsh's incomplete
+    second-order cells (20-node hexahedra, 15-node prisms)."""
     gmsh.clear()
     gmsh.model.add(kind)
-    gmsh.option.setNumber("Mesh.SecondOrderIncomplete", 0)
+    gmsh.option.setNumber("Mesh.SecondOrderIncomplete", int(serendipity))
     if kind == "ball":
         gmsh.model.occ.addSphere(0, 0, 0, 1)
         gmsh.model.occ.synchronize()

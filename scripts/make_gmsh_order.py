@@ -57,25 +57,33 @@ def main():
         print(f'    ({t}, "{name}", {dim}, {n}),')
     print("];")
     print()
-    print("/// A complete Lagrange volume type: its node k sits at lattice point `lattice[k]`")
+    print("/// A volume type the reader takes: its node k sits at lattice point `lattice[k]`")
     print("/// (reference coordinates times the order, VTK's reference domain).")
     print("pub(super) struct VolumeType {")
     print("    pub ty: u32,")
     print("    pub kind: Kind,")
     print("    pub order: usize,")
+    print("    /// gmsh's incomplete (serendipity) variant: VTK's 20-node hexahedron or 15-node")
+    print("    /// wedge, which the mesh reads as the order-2 Lagrange cell.")
+    print("    pub serendipity: bool,")
     print("    pub lattice: &'static [[u8; 3]],")
     print("}")
     print()
-    print("/// The Lagrange tetrahedra, hexahedra and prisms gmsh describes.")
+    print("/// The Lagrange tetrahedra, hexahedra and prisms gmsh describes, and its second-order")
+    print("/// incomplete hexahedron and prism (VTK has these as classic quadratic cells).")
     print("#[rustfmt::skip]")
     print("pub(super) const VOLUME_TYPES: &[VolumeType] = &[")
+    seen = set()
     for fam, kind in FAMILIES:
-        for order in range(1, MAX_ORDER + 1):
+        for order, serendip in [(o, False) for o in range(1, MAX_ORDER + 1)] + [(2, True)]:
             try:
-                t = gmsh.model.mesh.getElementType(fam, order)
+                t = gmsh.model.mesh.getElementType(fam, order, serendip)
                 _name, _dim, o, n, coords, _p = gmsh.model.mesh.getElementProperties(t)
             except Exception:
                 continue
+            if t in seen:  # the second-order tetrahedron is complete either way
+                continue
+            seen.add(t)
             assert o == order
             pts = lattice(kind, order, coords)
             assert len(pts) == n
@@ -83,6 +91,7 @@ def main():
             print(f"        ty: {t},")
             print(f"        kind: Kind::{kind},")
             print(f"        order: {order},")
+            print(f"        serendipity: {str(serendip).lower()},")
             print("        lattice: &[")
             for k in range(0, len(pts), 8):
                 print("            " + " ".join(f"[{a}, {b}, {c}]," for a, b, c in pts[k : k + 8]))

@@ -332,7 +332,11 @@ enum IsobarStatus isobar_adaptive_extract(const struct IsobarParticles *particle
 enum IsobarStatus isobar_fe_params_default(struct IsobarFeParams *out);
 
 // Builds a mesh from VTK-style arrays (copied): `point_count` xyz f64 triples; per cell a
-// VTK type (71 Lagrange tetrahedron, 72 hexahedron, 73 wedge); `offsets` (cell_count + 1
+// VTK type (71 Lagrange tetrahedron, 72 hexahedron, 73 wedge, or a linear or quadratic
+// cell: 10 tetra, 11 voxel, 12 hexahedron, 13 wedge, 24 quadratic tetra, 25 quadratic
+// hexahedron, 26 quadratic wedge, 29 triquadratic hexahedron, 31 quadratic-linear wedge,
+// 32 biquadratic-quadratic wedge, read as the Lagrange cell of the same functions);
+// `offsets` (cell_count + 1
 // entries, cell c's nodes are `connectivity[offsets[c]..offsets[c+1]]`, in VTK's node
 // order); `degrees` is NULL or cell_count × 3 orders (VTK's HigherOrderDegrees). Elements
 // that are inverted or degenerate are refused, naming the cell.

@@ -121,8 +121,13 @@ fn broken_files_are_named_errors() {
     let cases: Vec<(&str, String, &str)> = vec![
         (
             "type.vtu",
+            vtu(&pts, &[14], &[0, 27], &all, ""),
+            "VTK type 14 (a pyramid)",
+        ),
+        (
+            "linear.vtu",
             vtu(&pts, &[12], &[0, 27], &all, ""),
-            "VTK type 12",
+            "cell 0 (VTK hexahedron, type 12) has 27 nodes, not 8",
         ),
         (
             "count.vtu",

@@ -88,6 +88,30 @@ def test_the_pyvista_adaptor_and_the_file_round_trip_give_the_same_samples(tmp_p
     np.testing.assert_allclose(back.point_data["Radius"], samples.radii)
 
 
+def vtk_misses(grid, samples, values, iso):
+    """The largest distances, over the samples, between VTK's own evaluation of each
+    sample's cell at its reference coordinates (vtkCell.EvaluateLocation) and the sample:
+    (world position, |interpolated values − iso|)."""
+    degrees = grid.cell_data.get("HigherOrderDegrees")
+    worst_x = worst_f = 0.0
+    for c, u, x in zip(samples.arrays["Element"].astype(int), samples.arrays["Reference"], samples.points):
+        cell = grid.GetCell(int(c))
+        # VTK's GetCell does not apply HigherOrderDegrees (anisotropic orders); set them.
+        if degrees is not None:
+            d = np.asarray(degrees[c]).astype(int)
+            if grid.celltypes[c] == vtk.VTK_LAGRANGE_HEXAHEDRON:
+                cell.SetOrder(*map(int, d))
+            elif grid.celltypes[c] == vtk.VTK_LAGRANGE_WEDGE:
+                cell.SetOrder(*map(int, d), cell.GetNumberOfPoints())
+        weights = [0.0] * cell.GetNumberOfPoints()
+        where = [0.0, 0.0, 0.0]
+        cell.EvaluateLocation(vtk.reference(0), list(map(float, u)), where, weights)
+        ids = [cell.GetPointId(k) for k in range(cell.GetNumberOfPoints())]
+        worst_x = max(worst_x, float(np.abs(np.array(where) - x).max()))
+        worst_f = max(worst_f, abs(float(np.dot(weights, values[ids])) - iso))
+    return worst_x, worst_f
+
+
 def test_vtk_evaluates_the_same_point_and_value_at_every_sample_of_mixed_cells():
     """The committed fixture mixes a quadratic hexahedron, a cubic tetrahedron and a wedge
     (VTK-written, with HigherOrderDegrees). Each sample carries its cell and reference
@@ -100,22 +124,7 @@ def test_vtk_evaluates_the_same_point_and_value_at_every_sample_of_mixed_cells()
     assert len(samples) > 50
     cells = samples.arrays["Element"].astype(int)
     assert len(np.unique(cells)) >= 2, "the surface crosses several cells"
-    degrees = np.asarray(grid.cell_data["HigherOrderDegrees"]).astype(int)
-    worst_x = worst_f = 0.0
-    for c, u, x in zip(cells, samples.arrays["Reference"], samples.points):
-        cell = grid.GetCell(int(c))
-        # VTK's GetCell does not apply HigherOrderDegrees (anisotropic orders); set them.
-        d = degrees[c]
-        if grid.celltypes[c] == vtk.VTK_LAGRANGE_HEXAHEDRON:
-            cell.SetOrder(*map(int, d))
-        elif grid.celltypes[c] == vtk.VTK_LAGRANGE_WEDGE:
-            cell.SetOrder(*map(int, d), cell.GetNumberOfPoints())
-        weights = [0.0] * cell.GetNumberOfPoints()
-        where = [0.0, 0.0, 0.0]
-        cell.EvaluateLocation(vtk.reference(0), list(map(float, u)), where, weights)
-        ids = [cell.GetPointId(k) for k in range(cell.GetNumberOfPoints())]
-        worst_x = max(worst_x, float(np.abs(np.array(where) - x).max()))
-        worst_f = max(worst_f, abs(float(np.dot(weights, p_all[ids])) - iso))
+    worst_x, worst_f = vtk_misses(grid, samples, p_all, iso)
     assert worst_x <= 1e-9, worst_x
     assert worst_f <= 1e-8 * (1 + 1e-6), worst_f
 
@@ -226,3 +235,73 @@ def test_a_component_of_a_vector_array_is_sampled_and_probed_like_a_scalar_array
         isobar.sample_fe(mesh, "v:3", R * R)
     with pytest.raises(isobar.InvalidInputError, match="magnitude"):
         isobar.sample_fe(mesh, "v:mag", R * R)
+
+
+@pytest.mark.parametrize(
+    "cell_type",
+    [
+        vtk.VTK_TETRA,
+        vtk.VTK_HEXAHEDRON,
+        vtk.VTK_WEDGE,
+        vtk.VTK_QUADRATIC_TETRA,
+        vtk.VTK_QUADRATIC_HEXAHEDRON,
+        vtk.VTK_QUADRATIC_WEDGE,
+        vtk.VTK_TRIQUADRATIC_HEXAHEDRON,
+    ],
+)
+def test_linear_and_quadratic_cells_are_sampled_where_vtk_interpolates_them(cell_type):
+    """VTK's classic cells (what delaunay_3d, gmsh and most solvers give) read as Lagrange
+    cells: every sample's cell and reference coordinates, put into VTK's own basis of the
+    original cell (vtkCell.EvaluateLocation), give the sample's world point and the
+    isovalue. The 20-node hexahedron and 15-node wedge are serendipity cells whose missing
+    face and body nodes the core makes; the teardrop map curves the quadratic cells."""
+    src = vtk.vtkCellTypeSource()
+    src.SetCellType(cell_type)
+    src.SetBlocksDimensions(3, 3, 3)
+    src.Update()
+    grid = pv.wrap(src.GetOutput())
+    assert set(np.unique(grid.celltypes)) == {cell_type}
+    y = np.asarray(grid.points, dtype=np.float64) / 3 * 2.0 - 1.0
+    w = A + B * y[:, 2]
+    grid.points = np.stack([y[:, 0] * w, y[:, 1] * w, y[:, 2]], axis=1)
+    f_all = (y * y).sum(axis=1) + 0.3 * y[:, 0] * y[:, 1]
+    grid.point_data["f"] = f_all
+    mesh = isobar.pyvista.fe_mesh_from_dataset(grid)
+    # The host sees its own points, whatever the core made for serendipity cells.
+    assert (mesh.n_cells, mesh.n_points) == (grid.n_cells, grid.n_points)
+    np.testing.assert_array_equal(mesh.arrays["f"], f_all)
+    iso = 0.5
+    samples = isobar.sample_fe(mesh, "f", iso, spacing=0.08, tolerance=1e-9)
+    assert len(samples) > 100
+    worst_x, worst_f = vtk_misses(grid, samples, f_all, iso)
+    assert worst_x <= 1e-9, worst_x
+    assert worst_f <= 1e-9 * (1 + 1e-6), worst_f
+
+
+def test_image_data_is_sampled_through_its_voxels():
+    """A pyvista ImageData (VTK voxels once cast, x-fastest corner order) of the sphere
+    field |x|²: trilinear voxels hold it only at their corners, so the samples lie where
+    VTK's own trilinear interpolation of the voxels gives the isovalue."""
+    image = pv.ImageData(dimensions=(9, 9, 9), spacing=(0.25, 0.25, 0.25), origin=(-1, -1, -1))
+    image.point_data["r2"] = (np.asarray(image.points) ** 2).sum(axis=1)
+    cloud = isobar.pyvista.samples_from_unstructured_grid(image, "r2", 0.5, spacing=0.1, tolerance=1e-9)
+    assert cloud.n_points > 100
+    probed = pv.PolyData(np.asarray(cloud.points)).sample(image)
+    np.testing.assert_allclose(probed.point_data["r2"], 0.5, rtol=0, atol=1e-7)
+    # Trilinear interpolation of x² + y² + z² overestimates it by (x−x0)(x1−x) ≤ h²/4 per
+    # axis: the samples lie inside the sphere r² = 0.5 by at most 3h²/4 in r² (h = 0.25).
+    r2 = (np.asarray(cloud.points) ** 2).sum(axis=1)
+    assert (r2 <= 0.5 + 1e-9).all() and (r2 >= 0.5 - 3 * 0.25**2 / 4 - 1e-9).all()
+
+
+def test_connectivity_that_is_not_whole_numbers_is_refused():
+    grid = teardrop_grid(blocks=1)
+    conn = np.asarray(grid.cell_connectivity, dtype=np.float64) + 0.5
+    with pytest.raises(isobar.InvalidArgumentError, match=r"connectivity\[0\] is 0.5, not a whole number"):
+        isobar.FeMesh.from_arrays(grid.points, grid.celltypes, grid.cell_offsets, conn)
+    with pytest.raises(isobar.InvalidArgumentError, match=r"cell_types\[0\] is 300"):
+        isobar.FeMesh.from_arrays(grid.points, [300], grid.cell_offsets, grid.cell_connectivity)
+    # A pyramid is named as one.
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], dtype=float)
+    with pytest.raises(isobar.InvalidInputError, match=r"cell 0 has VTK type 14 \(a pyramid\)"):
+        isobar.FeMesh.from_arrays(points, [vtk.VTK_PYRAMID], [0, 5], np.arange(5))

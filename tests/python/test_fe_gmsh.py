@@ -1,8 +1,9 @@
 """High-order FE isosurfaces on real gmsh meshes above order 3, made at test time.
 
 gmsh (PyPI) builds curved meshes of a cylinder in fourth-order hexahedra (gmsh type 93,
-125 nodes) and of a ball in fourth- and fifth-order tetrahedra (types 30 and 31, 35 and 56
-nodes), sets the field p at every node from an analytic function, and writes .msh 4.1,
+125 nodes) and in gmsh's incomplete second-order hexahedra and prisms (types 17 and 18, 20
+and 15 nodes: serendipity cells), and of a ball in fourth- and fifth-order tetrahedra
+(types 30 and 31, 35 and 56 nodes), sets the field p at every node from an analytic function, and writes .msh 4.1,
 ASCII and binary. isobar reads them (the Python package and the command line `isobar fe`)
 and samples p = ISO. Every check is against gmsh's own evaluation, not isobar's:
 
@@ -47,6 +48,12 @@ MESHES = {
     "cylinder_hex4": dict(kind="hex", order=4, family="Hexahedron", gmsh_type=93, iso=0.7, spacing=0.08),
     "ball_tet4": dict(kind="ball", order=4, family="Tetrahedron", gmsh_type=30, iso=0.4, spacing=0.08),
     "ball_tet5": dict(kind="ball", order=5, family="Tetrahedron", gmsh_type=31, iso=0.4, spacing=0.08),
+    # Mesh.SecondOrderIncomplete: gmsh's serendipity cells, which isobar reads as VTK's
+    # 20-node hexahedron and 15-node wedge and completes with the face and body nodes.
+    "cylinder_hex20": dict(kind="hex", order=2, family="Hexahedron", gmsh_type=17, iso=0.7, spacing=0.08,
+                           serendipity=True),
+    "cylinder_prism15": dict(kind="prism", order=2, family="Prism", gmsh_type=18, iso=0.7, spacing=0.08,
+                             serendipity=True),
 }
 
 
@@ -57,15 +64,19 @@ def field(x):
 
 
 def to_gmsh_ref(family, u):
-    """VTK reference coordinates (n, 3) -> gmsh's."""
-    return 2.0 * u - 1.0 if family == "Hexahedron" else u
+    """VTK reference coordinates (n, 3) -> gmsh's (hexahedron [-1, 1]³, prism w in [-1, 1])."""
+    if family == "Hexahedron":
+        return 2.0 * u - 1.0
+    if family == "Prism":
+        return np.column_stack([u[:, 0], u[:, 1], 2.0 * u[:, 2] - 1.0])
+    return u
 
 
 class GmshMesh:
     """A gmsh model of one element type with the field at its nodes, kept in the gmsh
     session so that gmsh can evaluate it later."""
 
-    def __init__(self, name, kind, order, family, gmsh_type, iso, spacing):
+    def __init__(self, name, kind, order, family, gmsh_type, iso, spacing, serendipity=False):
         self.name, self.family, self.order = name, family, order
         self.iso, self.spacing = iso, spacing
         types, tags, nodes = gmsh.model.mesh.getElements(3)
@@ -127,6 +138,8 @@ class GmshMesh:
         u = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
         if self.family == "Tetrahedron":
             u = u[u.sum(axis=1) <= 1 + 1e-12]
+        elif self.family == "Prism":
+            u = u[u[:, 0] + u[:, 1] <= 1 + 1e-12]
         return u
 
     def lattice_values(self, u):
@@ -168,7 +181,7 @@ def gmsh_mesh(request, gmsh_session, tmp_path_factory):
     one mesh lives at a time: pytest runs every test of one mesh before building the next."""
     name = request.param
     spec = MESHES[name]
-    make_gmsh_fixture.build(spec["kind"], spec["order"])
+    make_gmsh_fixture.build(spec["kind"], spec["order"], spec.get("serendipity", False))
     mesh = GmshMesh(name, **spec)
     out = tmp_path_factory.mktemp(name)
     paths = {}

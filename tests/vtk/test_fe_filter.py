@@ -189,20 +189,23 @@ def test_bad_inputs_give_an_error_naming_the_problem_and_empty_output():
     f.Update()
     assert f.GetOutput().GetNumberOfPoints() == 0
     assert "cell 0" in f.GetErrorMessage(), f.GetErrorMessage()
-    # Linear cells are not Lagrange cells: the message names the cell and its type.
-    src = vtkCellTypeSource()
-    src.SetCellType(12)  # VTK_HEXAHEDRON
-    src.SetBlocksDimensions(1, 1, 1)
-    src.Update()
-    lin = vtkUnstructuredGrid()
-    lin.DeepCopy(src.GetOutput())
-    p = numpy_to_vtk(np.arange(lin.GetNumberOfPoints(), dtype=np.float64), deep=1)
-    p.SetName("p")
-    lin.GetPointData().AddArray(p)
-    f = samples_filter(lin, 1.0)
-    Errors(f)
-    f.Update()
-    assert "VTK type 12" in f.GetErrorMessage(), f.GetErrorMessage()
+    # Pyramids have no Lagrange form the core reads: the message names the cell and its
+    # type. Linear hexahedra (read as order-1 Lagrange cells) are sampled.
+    for cell_type, error in ((14, "cell 0 has VTK type 14 (a pyramid)"), (12, "")):
+        src = vtkCellTypeSource()
+        src.SetCellType(cell_type)
+        src.SetBlocksDimensions(1, 1, 1)
+        src.Update()
+        lin = vtkUnstructuredGrid()
+        lin.DeepCopy(src.GetOutput())
+        p = numpy_to_vtk(np.arange(lin.GetNumberOfPoints(), dtype=np.float64), deep=1)
+        p.SetName("p")
+        lin.GetPointData().AddArray(p)
+        f = samples_filter(lin, 1.5)
+        Errors(f)
+        f.Update()
+        assert error in f.GetErrorMessage(), f.GetErrorMessage()
+        assert (f.GetOutput().GetNumberOfPoints() > 0) == (error == ""), cell_type
 
 
 @test

@@ -314,6 +314,61 @@ def test_fe_samples_in_paraview_equal_the_cli_and_keep_the_mesh_across_isovalues
 
 
 @test
+def test_fe_samples_of_quadratic_hexahedra_equal_the_cli():
+    """VTK's 20-node (serendipity) hexahedra, as solvers write them, curved: ParaView's
+    High-Order Isosurface Samples reads them as the CLI reads the same .vtu, and VTK's own
+    basis of each original cell puts every sample on the isovalue."""
+    from paraview.simple import XMLUnstructuredGridReader
+    from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import reference
+    from vtkmodules.vtkCommonDataModel import VTK_QUADRATIC_HEXAHEDRON
+    from vtkmodules.vtkFiltersSources import vtkCellTypeSource
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+    src = vtkCellTypeSource()
+    src.SetCellType(VTK_QUADRATIC_HEXAHEDRON)
+    src.SetBlocksDimensions(2, 2, 2)
+    src.Update()
+    grid = src.GetOutput()
+    y = vtk_to_numpy(grid.GetPoints().GetData()).astype(np.float64) - 1.0
+    x = np.stack([y[:, 0] * (0.6 + 0.45 * y[:, 2]), y[:, 1] * (0.6 + 0.45 * y[:, 2]), y[:, 2]], axis=1)
+    grid.GetPoints().SetData(numpy_to_vtk(x, deep=1))
+    f = (y * y).sum(axis=1)
+    arr = numpy_to_vtk(f, deep=1)
+    arr.SetName("f")
+    grid.GetPointData().AddArray(arr)
+    path = os.path.join(TMP, "quadratic_hex.vtu")
+    w = vtkXMLUnstructuredGridWriter()
+    w.SetFileName(path)
+    w.SetInputData(grid)
+    assert w.Write() == 1
+    reader = XMLUnstructuredGridReader(FileName=[path])
+    samples = globals()["HighOrderIsosurfaceSamples"](Input=reader)
+    samples.Scalars = ["POINTS", "f"]
+    samples.Isovalue = 0.5
+    samples.Tolerance = 1e-9
+    out = output_at(samples)
+    ref = os.path.join(TMP, "quadratic_hex_cli.vtp")
+    subprocess.run([h.CLI, "fe", path, "--field", "f", "--iso", "0.5", "--tolerance", "1e-9", "-o", ref,
+                    "--quiet"], check=True, capture_output=True)
+    a, _ = h.arrays(out)
+    b, _ = h.arrays(h.read_vtp(ref))
+    assert len(a) > 100 and a.shape == b.shape, (a.shape, b.shape)
+    assert np.abs(a - b).max() <= 1e-12, np.abs(a - b).max()
+    cells = vtk_to_numpy(out.GetPointData().GetArray("Element")).astype(int)
+    refs = vtk_to_numpy(out.GetPointData().GetArray("Reference"))
+    worst = 0.0
+    for c, u in zip(cells, refs):
+        cell = grid.GetCell(int(c))
+        weights = [0.0] * 20
+        cell.EvaluateLocation(reference(0), list(map(float, u)), [0.0, 0.0, 0.0], weights)
+        ids = [cell.GetPointId(k) for k in range(20)]
+        worst = max(worst, abs(float(np.dot(weights, f[ids])) - 0.5))
+    assert worst <= 1e-9 * (1 + 1e-6), worst
+    Delete(samples)
+
+
+@test
 def test_filter_is_in_the_isobar_menu_category():
     r = LegacyVTKReader(FileNames=[h.FRAME_26])
     f = SPHIsosurface(Input=r)

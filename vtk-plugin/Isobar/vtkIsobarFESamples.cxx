@@ -230,7 +230,7 @@ int vtkIsobarFESamples::RequestData(
   std::string field;
   if (allCells == 0)
   {
-    failure = "the input has no cells: give an unstructured grid of Lagrange cells";
+    failure = "the input has no cells: give an unstructured grid of Lagrange, linear or quadratic volume cells";
   }
   else if (cells > 0)
   {

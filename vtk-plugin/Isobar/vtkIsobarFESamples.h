@@ -3,7 +3,9 @@
  * @brief   isosurface of a high-order finite-element field as oriented point samples
  *
  * The input is a vtkUnstructuredGrid of Lagrange cells (VTK_LAGRANGE_TETRAHEDRON,
- * _HEXAHEDRON, _WEDGE, any order, with HigherOrderDegrees when present) and a point
+ * _HEXAHEDRON, _WEDGE, any order, with HigherOrderDegrees when present) or of VTK's linear
+ * and quadratic tetrahedra, hexahedra, voxels and wedges (which the core reads as the
+ * Lagrange cells of the same functions), and a point
  * scalar array (SetInputArrayToProcess(0, ...), else the active scalars). The isosurface
  * Field = Isovalue of the elements' own polynomials is sampled by isobar's particle
  * system (Meyer et al. 2007): every sample lies on the level set to Tolerance, no grid

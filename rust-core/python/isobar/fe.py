@@ -1,7 +1,8 @@
 """Isosurfaces of high-order finite elements, sampled by a particle system.
 
 Meshes of Lagrange hexahedra, tetrahedra and wedges (VTK types 72, 71, 73, any order, in
-VTK's node order) come from a .vtu file or from arrays as VTK holds them; the isosurface of
+VTK's node order), or of VTK's linear and quadratic tetrahedra, hexahedra, voxels and wedges,
+come from a .vtu file or from arrays as VTK holds them; the isosurface of
 a scalar point array comes back as oriented point samples on the exact level set of the
 element's own polynomial (no resampling, no tessellation)::
 
@@ -36,6 +37,28 @@ def _contiguous(values, dtype, what: str) -> np.ndarray:
     if a.ndim == 0:
         raise InvalidArgumentError(f"{what} must be an array")
     return a
+
+
+def _integers(values, dtype, what: str) -> np.ndarray:
+    """`values` as a flat array of `dtype`, refusing numbers that are not whole or do not
+    fit (a cast would truncate 3.5 to 3, or wrap 300 to 44, without a word)."""
+    a = np.asarray(values)
+    if a.ndim == 0:
+        raise InvalidArgumentError(f"{what} must be an array")
+    a = a.ravel()
+    if a.dtype.kind not in "iub":
+        if a.dtype.kind != "f":
+            raise InvalidArgumentError(f"{what} must hold integers, not {a.dtype}")
+        bad = np.flatnonzero(~np.isfinite(a) | (a != np.round(a)))
+        if bad.size:
+            raise InvalidArgumentError(f"{what}[{bad[0]}] is {a[bad[0]]}, not a whole number")
+    if a.size:
+        info = np.iinfo(dtype)
+        lo, hi = a.min(), a.max()
+        if lo < info.min or hi > info.max:
+            i = int(np.argmin(a)) if lo < info.min else int(np.argmax(a))
+            raise InvalidArgumentError(f"{what}[{i}] is {a[i]}, outside {info.min}..{info.max}")
+    return np.ascontiguousarray(a, dtype=dtype)
 
 
 class FeMesh:
@@ -73,10 +96,15 @@ class FeMesh:
 
         Args:
             points: (n, 3) coordinates.
-            cell_types: (c,) VTK cell types (71, 72 or 73).
+            cell_types: (c,) VTK cell types: Lagrange tetrahedra, hexahedra and wedges
+                (71, 72, 73), or VTK's linear and quadratic cells, read as the Lagrange
+                cells of the same functions: tetra (10), voxel (11), hexahedron (12),
+                wedge (13), quadratic tetra (24), quadratic hexahedron (25, serendipity),
+                quadratic wedge (26, serendipity), triquadratic hexahedron (29),
+                quadratic-linear wedge (31), biquadratic-quadratic wedge (32).
             offsets: (c + 1,) cell c's nodes are ``connectivity[offsets[c]:offsets[c+1]]``
                 (VTK 9's offsets array).
-            connectivity: point indices in VTK's Lagrange node order.
+            connectivity: point indices in VTK's node order of each cell type.
             degrees: optional (c, 3) orders per cell (VTK's HigherOrderDegrees); without
                 it the order follows from each cell's node count.
             point_data: name -> (n,) or (n, k) arrays.
@@ -84,9 +112,9 @@ class FeMesh:
         xyz = _contiguous(points, np.float64, "points")
         if xyz.ndim != 2 or xyz.shape[1] != 3:
             raise InvalidArgumentError(f"points must have shape (n, 3), not {xyz.shape}")
-        types = _contiguous(cell_types, np.uint8, "cell_types").ravel()
-        offs = _contiguous(offsets, np.int64, "offsets").ravel()
-        conn = _contiguous(connectivity, np.int64, "connectivity").ravel()
+        types = _integers(cell_types, np.uint8, "cell_types")
+        offs = _integers(offsets, np.int64, "offsets")
+        conn = _integers(connectivity, np.int64, "connectivity")
         if offs.shape[0] != types.shape[0] + 1:
             raise InvalidArgumentError(f"offsets has {offs.shape[0]} entries for {types.shape[0]} cells; it needs cells + 1")
         deg_ptr = None

@@ -145,13 +145,18 @@ def _offsets(grid):
 
 def fe_mesh_from_dataset(grid, arrays: Optional[Iterable[str]] = None) -> FeMesh:
     """A :class:`isobar.FeMesh` from a ``pv.UnstructuredGrid`` of Lagrange cells (VTK types
-    71, 72, 73), with its ``HigherOrderDegrees`` cell array when present and its numeric
-    point arrays (or only `arrays`)."""
+    71, 72, 73) or of linear and quadratic tetrahedra, hexahedra, voxels and wedges (read as
+    the Lagrange cells of the same functions; see :meth:`isobar.FeMesh.from_arrays`), with
+    its ``HigherOrderDegrees`` cell array when present and its numeric point arrays (or
+    only `arrays`). An ``ImageData``, ``RectilinearGrid`` or ``StructuredGrid`` is taken as
+    the unstructured grid of its cells."""
     pv = _pyvista()
     if not isinstance(grid, pv.DataSet):
         grid = pv.wrap(grid)
+    if isinstance(grid, (pv.ImageData, pv.RectilinearGrid, pv.StructuredGrid)):
+        grid = grid.cast_to_unstructured_grid()
     if not isinstance(grid, pv.UnstructuredGrid):
-        raise TypeError(f"a high-order mesh must be a pyvista.UnstructuredGrid, not {type(grid).__name__}")
+        raise TypeError(f"a finite-element mesh must be a pyvista.UnstructuredGrid, not {type(grid).__name__}")
     degrees = grid.cell_data["HigherOrderDegrees"] if "HigherOrderDegrees" in grid.cell_data else None
     mesh = FeMesh.from_arrays(grid.points, grid.celltypes, _offsets(grid), grid.cell_connectivity, degrees=degrees)
     wanted = None if arrays is None else set(arrays)
@@ -179,7 +184,8 @@ def samples_to_pyvista(samples: Samples):
 
 
 def samples_from_unstructured_grid(grid, field: str, iso: float, **kw):
-    """Samples the isosurface ``field == iso`` of a Lagrange ``pv.UnstructuredGrid`` and
+    """Samples the isosurface ``field == iso`` of a ``pv.UnstructuredGrid`` (of the cells
+    :func:`fe_mesh_from_dataset` reads) and
     returns the points as ``pv.PolyData`` (see :func:`samples_to_pyvista`); `kw` are the
     options of :func:`isobar.sample_fe` (spacing, rho, tolerance, levels, seed, progress)."""
     with quiet_warnings():  # issued below, from the caller's line

@@ -149,7 +149,11 @@ pub extern "C" fn isobar_fe_params_default(out: *mut IsobarFeParams) -> IsobarSt
 }
 
 /// Builds a mesh from VTK-style arrays (copied): `point_count` xyz f64 triples; per cell a
-/// VTK type (71 Lagrange tetrahedron, 72 hexahedron, 73 wedge); `offsets` (cell_count + 1
+/// VTK type (71 Lagrange tetrahedron, 72 hexahedron, 73 wedge, or a linear or quadratic
+/// cell: 10 tetra, 11 voxel, 12 hexahedron, 13 wedge, 24 quadratic tetra, 25 quadratic
+/// hexahedron, 26 quadratic wedge, 29 triquadratic hexahedron, 31 quadratic-linear wedge,
+/// 32 biquadratic-quadratic wedge, read as the Lagrange cell of the same functions);
+/// `offsets` (cell_count + 1
 /// entries, cell c's nodes are `connectivity[offsets[c]..offsets[c+1]]`, in VTK's node
 /// order); `degrees` is NULL or cell_count × 3 orders (VTK's HigherOrderDegrees). Elements
 /// that are inverted or degenerate are refused, naming the cell.
@@ -249,15 +253,19 @@ pub extern "C" fn isobar_fe_mesh_add_array(
     guard(|| {
         // SAFETY: the caller promises a live handle not used by another thread meanwhile.
         let m = unsafe { mesh.as_mut() }.ok_or_else(|| invalid("mesh", "must not be NULL"))?;
-        let points = m.mesh.points.len();
+        let completions = &m.mesh.completions;
         add_array(
             &mut m.mesh.point_data,
-            points,
+            completions.given(),
             "points",
             name,
             count,
             components,
-            |len| Ok(slice(data, len, "data")?.to_vec()),
+            |len| {
+                let mut values = slice(data, len, "data")?.to_vec();
+                completions.complete(&mut values, components);
+                Ok(values)
+            },
         )?;
         m.names = names_of(&m.mesh.point_data);
         Ok(())
@@ -291,7 +299,7 @@ pub extern "C" fn isobar_fe_mesh_array(
 #[no_mangle]
 pub extern "C" fn isobar_fe_mesh_point_count(mesh: *const IsobarFeMesh) -> usize {
     // SAFETY: null or a live handle.
-    unsafe { mesh.as_ref() }.map_or(0, |m| m.mesh.points.len())
+    unsafe { mesh.as_ref() }.map_or(0, |m| m.mesh.given_points())
 }
 
 /// Number of cells of a mesh (0 for NULL).

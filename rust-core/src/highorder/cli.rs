@@ -13,8 +13,9 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 #[command(allow_negative_numbers = true)]
 pub struct FeArgs {
-    /// A .vtu with Lagrange hexahedra, tetrahedra or wedges (VTK types 72, 71, 73), or a
-    /// Gmsh .msh 4.1 with Lagrange tetrahedra, hexahedra or prisms and $NodeData.
+    /// A .vtu with Lagrange hexahedra, tetrahedra or wedges (VTK types 72, 71, 73) or
+    /// VTK's linear and quadratic tetrahedra, hexahedra, voxels and wedges, or a Gmsh .msh
+    /// 4.1 with Lagrange tetrahedra, hexahedra or prisms and $NodeData.
     pub input: PathBuf,
     /// The scalar point array to contour, or NAME:K for component K (from 0) of a vector
     /// point array.

@@ -221,7 +221,8 @@ pub fn write_samples(path: &Path, samples: &crate::samples::PointSamples) -> Res
 }
 
 /// Reads high-order finite elements: a `.vtu` UnstructuredGrid with Lagrange hexahedra,
-/// tetrahedra and wedges (VTK types 72, 71, 73) and its point arrays, or a Gmsh `.msh`
+/// tetrahedra and wedges (VTK types 72, 71, 73) or VTK's linear and quadratic volume cells
+/// (see `field::fe::classic`) and its point arrays, or a Gmsh `.msh`
 /// 4.1 file with Lagrange tetrahedra, hexahedra and prisms and its `$NodeData`. Every cell is checked
 /// (node count, point indices, det J > 0) and a failure names the cell.
 pub fn read_fe_mesh(path: &Path) -> Result<crate::field::fe::FeMesh> {

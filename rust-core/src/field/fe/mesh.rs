@@ -4,6 +4,7 @@
 
 use super::basis::{outer, BasisValues};
 use super::bernstein::control_map;
+use super::classic::{self, Completions};
 use super::search::PROBE_SLACK;
 use super::shape::{Kind, Shape};
 use crate::error::{Error, Result};
@@ -33,8 +34,14 @@ pub struct FeMesh {
     boxes: Vec<(DVec3, DVec3)>,
     /// The union of `boxes`.
     hull: (DVec3, DVec3),
-    /// Arrays given per point (the candidates for the field).
+    /// Arrays given per point (the candidates for the field), completed over the points
+    /// the mesh made itself (see `completions`).
     pub point_data: Vec<Attribute>,
+    /// The points made for VTK's serendipity cells (after the given ones), and how.
+    pub(crate) completions: Completions,
+    /// Each cell's VTK type as given, where some were linear or quadratic cells (else
+    /// empty: the types are the shapes').
+    given_types: Vec<u8>,
     /// What error messages call the data (the file name).
     name: String,
 }
@@ -73,16 +80,18 @@ impl FeMesh {
     /// Builds a mesh from VTK-style arrays: `points`, per-cell VTK `types`, `offsets`
     /// (cell c's nodes are `connectivity[offsets[c]..offsets[c+1]]`, offsets.len() = cells + 1),
     /// optional per-cell `degrees` (VTK's HigherOrderDegrees), and per-point arrays. `name`
-    /// is what error messages call the data. Checks indices, node counts and that no
-    /// element is inverted or degenerate (det J > 0 at every node).
+    /// is what error messages call the data. Lagrange cells are read as they are, VTK's
+    /// linear and quadratic cells as the Lagrange cells of the same functions (see
+    /// `classic.rs`). Checks indices, node counts and that no element is inverted or
+    /// degenerate (det J > 0 at every node).
     pub fn new(
         name: &str,
-        points: Vec<DVec3>,
+        mut points: Vec<DVec3>,
         types: &[u8],
         offsets: &[usize],
         connectivity: Vec<u32>,
         degrees: Option<&[[usize; 3]]>,
-        point_data: Vec<Attribute>,
+        mut point_data: Vec<Attribute>,
     ) -> Result<FeMesh> {
         let bad = |m: String| Error::InvalidInput(format!("{name}: {m}"));
         if offsets.len() != types.len() + 1 {
@@ -98,6 +107,15 @@ impl FeMesh {
         if let Some(p) = points.iter().position(|p| !p.is_finite()) {
             return Err(bad(format!("point {p} has a non-finite coordinate")));
         }
+        if let Some(d) = degrees {
+            if d.len() != types.len() {
+                return Err(bad(format!(
+                    "{} HigherOrderDegrees for {} cells",
+                    d.len(),
+                    types.len()
+                )));
+            }
+        }
         for a in &point_data {
             if a.data.len() != points.len() * a.components {
                 return Err(bad(format!(
@@ -108,12 +126,41 @@ impl FeMesh {
                 )));
             }
         }
+        let converted = classic::to_lagrange(types, offsets, &connectivity, degrees, &mut points)
+            .map_err(bad)?;
+        let given_types = match converted {
+            Some(_) => types.to_vec(),
+            None => Vec::new(),
+        };
+        let (types, offsets, connectivity, degrees, completions) = match converted {
+            Some((cells, completions)) => (
+                cells.types,
+                cells.offsets,
+                cells.connectivity,
+                Some(cells.degrees),
+                completions,
+            ),
+            None => (
+                types.to_vec(),
+                offsets.to_vec(),
+                connectivity,
+                degrees.map(<[_]>::to_vec),
+                Completions::none(points.len()),
+            ),
+        };
+        let degrees = degrees.as_deref();
+        for a in &mut point_data {
+            completions.complete(&mut a.data, a.components);
+        }
         let mut shapes: Vec<Shape> = Vec::new();
         let mut cell_shape = Vec::with_capacity(types.len());
         for (c, &ty) in types.iter().enumerate() {
             let kind = Kind::from_vtk(ty).ok_or_else(|| {
                 bad(format!(
-                    "cell {c} has VTK type {ty}, not a Lagrange hexahedron (72), tetrahedron (71) or wedge (73)"
+                    "cell {c} has VTK type {ty}{}, which isobar does not read: it reads \
+                     Lagrange hexahedra, tetrahedra and wedges (72, 71, 73), and tetra, voxel, \
+                     hexahedron, wedge and their quadratic forms (10–13, 24–26, 29, 31, 32)",
+                    unread_name(ty)
                 ))
             })?;
             let (start, end) = (offsets[c], offsets[c + 1]);
@@ -180,13 +227,15 @@ impl FeMesh {
             points,
             shapes,
             cell_shape,
-            offsets: offsets.to_vec(),
+            offsets,
             connectivity,
             neighbours: Vec::new(),
             weld: Vec::new(),
             boxes: Vec::new(),
             hull: (DVec3::ZERO, DVec3::ZERO),
             point_data,
+            completions,
+            given_types,
             name: name.to_string(),
         };
         mesh.check_elements(name)?;
@@ -198,6 +247,12 @@ impl FeMesh {
         mesh.weld = mesh.weld_corners();
         mesh.neighbours = mesh.face_adjacency();
         Ok(mesh)
+    }
+
+    /// The number of points the mesh was given (the points it made for serendipity cells
+    /// come after them, and hosts never see them).
+    pub fn given_points(&self) -> usize {
+        self.completions.given()
     }
 
     /// What error messages call the data (the file it was read from).
@@ -405,6 +460,21 @@ impl FeMesh {
             });
             let size = (hi - lo).max_element();
             let floor = 1e-12 * size * size * size;
+            let what = self.described(c);
+            // Two corners at one place (a collapsed edge, or the same point given twice)
+            // make det J vanish along it; say so rather than report the sign it rounds to.
+            let corners = shape.kind.corners().len();
+            for a in 0..corners {
+                for b in a + 1..corners {
+                    let (pa, pb) = (nodes[a] as usize, nodes[b] as usize);
+                    if self.points[pa].distance(self.points[pb]) <= 1e-12 * size {
+                        return Err(Error::InvalidInput(format!(
+                            "{name}: cell {c} ({what}) is degenerate: its corners {a} and {b} \
+                             (points {pa} and {pb}) are at the same place"
+                        )));
+                    }
+                }
+            }
             for (u, gradients) in &probes[self.cell_shape[c] as usize] {
                 // Summed in node order, as `map` does, so det J is the same to the bit.
                 let j = nodes
@@ -415,15 +485,13 @@ impl FeMesh {
                     });
                 let det = j.determinant();
                 if det <= floor || det.is_nan() {
-                    let what = if det < -floor {
+                    let how = if det < -floor {
                         "inverted"
                     } else {
                         "degenerate"
                     };
                     return Err(Error::InvalidInput(format!(
-                        "{name}: cell {c} ({} of order {}) is {what}: det J = {det:.3e} at reference point ({:.3}, {:.3}, {:.3})",
-                        shape.kind.name(),
-                        shape.order[0],
+                        "{name}: cell {c} ({what}) is {how}: det J = {det:.3e} at reference point ({:.3}, {:.3}, {:.3})",
                         u.x,
                         u.y,
                         u.z
@@ -432,6 +500,15 @@ impl FeMesh {
             }
         }
         Ok(())
+    }
+
+    /// What messages call cell `c`: the VTK type it was given as.
+    fn described(&self, c: usize) -> String {
+        let shape = self.shape(c);
+        match self.given_types.get(c).and_then(|&t| classic::name(t)) {
+            Some(name) => format!("VTK {name}"),
+            None => format!("{} of order {}", shape.kind.name(), shape.order[0]),
+        }
     }
 
     /// The representative of point `p` among the corners at the same place.
@@ -509,4 +586,23 @@ impl FeMesh {
         }
         out
     }
+}
+
+/// " (a pyramid)" and the like for VTK cell types people meet that isobar does not read, so
+/// the refusal says what the cell is.
+fn unread_name(ty: u8) -> String {
+    let name = match ty {
+        1 | 2 => "a vertex",
+        3 | 4 | 21 | 68 => "a line",
+        5 | 6 | 22 | 34 | 69 => "a triangle",
+        7 => "a polygon",
+        8 | 9 | 23 | 28 | 70 => "a quadrilateral",
+        14 | 27 | 74 => "a pyramid",
+        15 | 16 => "a prism of more sides",
+        33 => "a biquadratic-quadratic hexahedron",
+        42 => "a polyhedron",
+        75..=81 => "a Bézier cell",
+        _ => return String::new(),
+    };
+    format!(" ({name})")
 }

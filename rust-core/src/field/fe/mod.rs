@@ -2,7 +2,8 @@
 //! VTK's node ordering, used both for the geometry (the mapping T from reference to world
 //! space) and for the field, as VTK's Lagrange cells are.
 //!
-//! `shape` numbers the nodes, `basis` evaluates basis functions with first and second
+//! `shape` numbers the nodes, `classic` reads VTK's linear and quadratic cells as the
+//! Lagrange cells of the same functions, `basis` evaluates basis functions with first and second
 //! derivatives, `mesh` assembles T, J, ∂J, the world-space gradient and Hessian (the
 //! paper's eqs. 19–20), checks elements and pairs faces, `locate` carries a reference
 //! point across a face into the neighbouring cell, `bernstein` gives each cell a box that
@@ -14,6 +15,7 @@
 
 mod basis;
 mod bernstein;
+pub(crate) mod classic;
 pub mod curvature;
 mod locate;
 mod mesh;

@@ -1,13 +1,15 @@
 //! Gmsh `.msh` version 4.1 files (ASCII and binary) with high-order volume elements into an
 //! [`FeMesh`]: `$MeshFormat`, `$Nodes` (entity blocks, sparse tags), `$Elements` (complete
-//! Lagrange tetrahedra, hexahedra and prisms of any order gmsh describes; lower-dimensional
-//! elements are skipped) and `$NodeData` (one point array per field name, from its last
+//! Lagrange tetrahedra, hexahedra and prisms of any order gmsh describes, and the 20-node
+//! hexahedra and 15-node prisms of `Mesh.SecondOrderIncomplete`, handed to the mesh as VTK's
+//! serendipity cells; lower-dimensional elements are skipped) and `$NodeData` (one point array per field name, from its last
 //! time step). Other sections (`$Entities`, `$PhysicalNames`, ...) are skipped.
 //!
 //! Node order: gmsh numbers high-order nodes differently from VTK. The permutation is not
 //! transcribed: `order.rs` (generated from gmsh by `scripts/make_gmsh_order.py`) holds each
 //! gmsh node's reference lattice point, and each is matched to the VTK node at the same
-//! reference point (`Shape::node_coords`).
+//! reference point (`Shape::node_coords`, or the serendipity cell's table in
+//! `field::fe::classic`).
 //!
 //! Errors name the file, the section and the line (ASCII) or byte offset (binary), or the
 //! element / node tag; a file that ends inside a section is refused as truncated, and
@@ -18,7 +20,7 @@ mod order;
 mod tests;
 
 use crate::error::{Error, Result};
-use crate::field::fe::{FeMesh, Kind, Shape};
+use crate::field::fe::{classic, FeMesh, Kind, Shape};
 use crate::field::particles::Attribute;
 use glam::DVec3;
 use order::{ELEMENT_TYPES, GMSH_VERSION, UNDESCRIBED_TYPES, VOLUME_TYPES};
@@ -386,7 +388,8 @@ impl<'a> Reader<'a> {
                     return Err(self.err(format!(
                         "{block_at}: elements of type {ty} ({type_name}) are not supported; \
                          only complete Lagrange tetrahedra, hexahedra and prisms (orders gmsh \
-                         describes) are (for second order, set Mesh.SecondOrderIncomplete = 0)"
+                         describes) and the second-order incomplete hexahedra and prisms are \
+                         (for higher orders, set Mesh.SecondOrderIncomplete = 0)"
                     )));
                 }
                 out.skipped_lower += n;
@@ -521,11 +524,21 @@ fn short(s: &str) -> String {
 /// The VTK position of each gmsh node of a volume type (gmsh node k is VTK node perm[k]).
 fn permutation(ty: usize) -> Vec<usize> {
     let v = &VOLUME_TYPES[ty];
-    let shape = Shape::new(v.kind, [v.order; 3]);
-    let key = |u: DVec3| (u * v.order as f64).round().as_ivec3();
-    let vtk: FxHashMap<glam::IVec3, usize> = (0..shape.len())
-        .map(|n| (key(shape.node_coords(n)), n))
-        .collect();
+    let vtk: FxHashMap<glam::IVec3, usize> = match classic::serendipity(v.kind) {
+        // VTK's quadratic serendipity cell's own node order (the mesh completes it).
+        Some((_, nodes)) if v.serendipity => nodes
+            .iter()
+            .enumerate()
+            .map(|(n, g)| (glam::IVec3::new(g[0] as i32, g[1] as i32, g[2] as i32), n))
+            .collect(),
+        _ => {
+            let shape = Shape::new(v.kind, [v.order; 3]);
+            let key = |u: DVec3| (u * v.order as f64).round().as_ivec3();
+            (0..shape.len())
+                .map(|n| (key(shape.node_coords(n)), n))
+                .collect()
+        }
+    };
     v.lattice
         .iter()
         .map(|l| vtk[&glam::IVec3::new(l[0] as i32, l[1] as i32, l[2] as i32)])
@@ -586,7 +599,11 @@ fn assemble(name: &str, nodes: Nodes, elements: Elements, data: Vec<NodeData>) -
             vtk[perms[ty][k]] = used[index[&n] as usize];
         }
         connectivity.extend(vtk);
-        types.push(VOLUME_TYPES[ty].kind.vtk_type());
+        let v = &VOLUME_TYPES[ty];
+        types.push(match classic::serendipity(v.kind) {
+            Some((vtk, _)) if v.serendipity => vtk,
+            _ => v.kind.vtk_type(),
+        });
         offsets.push(connectivity.len());
     }
     // The last time step of each field name.

@@ -124,22 +124,27 @@ pub(super) const ELEMENT_TYPES: &[(u32, &str, u8, u16)] = &[
     (137, "Tetrahedron 16", 3, 16),
 ];
 
-/// A complete Lagrange volume type: its node k sits at lattice point `lattice[k]`
+/// A volume type the reader takes: its node k sits at lattice point `lattice[k]`
 /// (reference coordinates times the order, VTK's reference domain).
 pub(super) struct VolumeType {
     pub ty: u32,
     pub kind: Kind,
     pub order: usize,
+    /// gmsh's incomplete (serendipity) variant: VTK's 20-node hexahedron or 15-node
+    /// wedge, which the mesh reads as the order-2 Lagrange cell.
+    pub serendipity: bool,
     pub lattice: &'static [[u8; 3]],
 }
 
-/// The Lagrange tetrahedra, hexahedra and prisms gmsh describes.
+/// The Lagrange tetrahedra, hexahedra and prisms gmsh describes, and its second-order
+/// incomplete hexahedron and prism (VTK has these as classic quadratic cells).
 #[rustfmt::skip]
 pub(super) const VOLUME_TYPES: &[VolumeType] = &[
     VolumeType {
         ty: 4,
         kind: Kind::Tetrahedron,
         order: 1,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1],
         ],
@@ -148,6 +153,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 11,
         kind: Kind::Tetrahedron,
         order: 2,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1],
             [0, 1, 1], [1, 0, 1],
@@ -157,6 +163,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 29,
         kind: Kind::Tetrahedron,
         order: 3,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [3, 0, 0], [0, 3, 0], [0, 0, 3], [1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 2, 0],
             [0, 2, 0], [0, 1, 0], [0, 0, 2], [0, 0, 1], [0, 1, 2], [0, 2, 1], [1, 0, 2], [2, 0, 1],
@@ -167,6 +174,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 30,
         kind: Kind::Tetrahedron,
         order: 4,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [4, 0, 0], [0, 4, 0], [0, 0, 4], [1, 0, 0], [2, 0, 0], [3, 0, 0], [3, 1, 0],
             [2, 2, 0], [1, 3, 0], [0, 3, 0], [0, 2, 0], [0, 1, 0], [0, 0, 3], [0, 0, 2], [0, 0, 1],
@@ -179,6 +187,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 31,
         kind: Kind::Tetrahedron,
         order: 5,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [5, 0, 0], [0, 5, 0], [0, 0, 5], [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0],
             [4, 1, 0], [3, 2, 0], [2, 3, 0], [1, 4, 0], [0, 4, 0], [0, 3, 0], [0, 2, 0], [0, 1, 0],
@@ -193,6 +202,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 71,
         kind: Kind::Tetrahedron,
         order: 6,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [6, 0, 0], [0, 6, 0], [0, 0, 6], [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0],
             [5, 0, 0], [5, 1, 0], [4, 2, 0], [3, 3, 0], [2, 4, 0], [1, 5, 0], [0, 5, 0], [0, 4, 0],
@@ -211,6 +221,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 72,
         kind: Kind::Tetrahedron,
         order: 7,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [7, 0, 0], [0, 7, 0], [0, 0, 7], [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0],
             [5, 0, 0], [6, 0, 0], [6, 1, 0], [5, 2, 0], [4, 3, 0], [3, 4, 0], [2, 5, 0], [1, 6, 0],
@@ -233,6 +244,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 73,
         kind: Kind::Tetrahedron,
         order: 8,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [8, 0, 0], [0, 8, 0], [0, 0, 8], [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0],
             [5, 0, 0], [6, 0, 0], [7, 0, 0], [7, 1, 0], [6, 2, 0], [5, 3, 0], [4, 4, 0], [3, 5, 0],
@@ -261,6 +273,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 74,
         kind: Kind::Tetrahedron,
         order: 9,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [9, 0, 0], [0, 9, 0], [0, 0, 9], [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0],
             [5, 0, 0], [6, 0, 0], [7, 0, 0], [8, 0, 0], [8, 1, 0], [7, 2, 0], [6, 3, 0], [5, 4, 0],
@@ -296,6 +309,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 75,
         kind: Kind::Tetrahedron,
         order: 10,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10], [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0],
             [5, 0, 0], [6, 0, 0], [7, 0, 0], [8, 0, 0], [9, 0, 0], [9, 1, 0], [8, 2, 0], [7, 3, 0],
@@ -339,6 +353,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 5,
         kind: Kind::Hexahedron,
         order: 1,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
         ],
@@ -347,6 +362,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 12,
         kind: Kind::Hexahedron,
         order: 2,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [0, 0, 2], [2, 0, 2], [2, 2, 2], [0, 2, 2],
             [1, 0, 0], [0, 1, 0], [0, 0, 1], [2, 1, 0], [2, 0, 1], [1, 2, 0], [2, 2, 1], [0, 2, 1],
@@ -358,6 +374,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 92,
         kind: Kind::Hexahedron,
         order: 3,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [3, 0, 0], [3, 3, 0], [0, 3, 0], [0, 0, 3], [3, 0, 3], [3, 3, 3], [0, 3, 3],
             [1, 0, 0], [2, 0, 0], [0, 1, 0], [0, 2, 0], [0, 0, 1], [0, 0, 2], [3, 1, 0], [3, 2, 0],
@@ -373,6 +390,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 93,
         kind: Kind::Hexahedron,
         order: 4,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0], [0, 0, 4], [4, 0, 4], [4, 4, 4], [0, 4, 4],
             [1, 0, 0], [2, 0, 0], [3, 0, 0], [0, 1, 0], [0, 2, 0], [0, 3, 0], [0, 0, 1], [0, 0, 2],
@@ -396,6 +414,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 94,
         kind: Kind::Hexahedron,
         order: 5,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [5, 0, 0], [5, 5, 0], [0, 5, 0], [0, 0, 5], [5, 0, 5], [5, 5, 5], [0, 5, 5],
             [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0], [0, 1, 0], [0, 2, 0], [0, 3, 0], [0, 4, 0],
@@ -430,6 +449,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 95,
         kind: Kind::Hexahedron,
         order: 6,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [6, 0, 0], [6, 6, 0], [0, 6, 0], [0, 0, 6], [6, 0, 6], [6, 6, 6], [0, 6, 6],
             [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0], [5, 0, 0], [0, 1, 0], [0, 2, 0], [0, 3, 0],
@@ -480,6 +500,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 96,
         kind: Kind::Hexahedron,
         order: 7,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [7, 0, 0], [7, 7, 0], [0, 7, 0], [0, 0, 7], [7, 0, 7], [7, 7, 7], [0, 7, 7],
             [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0], [5, 0, 0], [6, 0, 0], [0, 1, 0], [0, 2, 0],
@@ -551,6 +572,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 97,
         kind: Kind::Hexahedron,
         order: 8,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [8, 0, 0], [8, 8, 0], [0, 8, 0], [0, 0, 8], [8, 0, 8], [8, 8, 8], [0, 8, 8],
             [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0], [5, 0, 0], [6, 0, 0], [7, 0, 0], [0, 1, 0],
@@ -650,6 +672,7 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 98,
         kind: Kind::Hexahedron,
         order: 9,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [9, 0, 0], [9, 9, 0], [0, 9, 0], [0, 0, 9], [9, 0, 9], [9, 9, 9], [0, 9, 9],
             [1, 0, 0], [2, 0, 0], [3, 0, 0], [4, 0, 0], [5, 0, 0], [6, 0, 0], [7, 0, 0], [8, 0, 0],
@@ -779,9 +802,21 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ],
     },
     VolumeType {
+        ty: 17,
+        kind: Kind::Hexahedron,
+        order: 2,
+        serendipity: true,
+        lattice: &[
+            [0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [0, 0, 2], [2, 0, 2], [2, 2, 2], [0, 2, 2],
+            [1, 0, 0], [0, 1, 0], [0, 0, 1], [2, 1, 0], [2, 0, 1], [1, 2, 0], [2, 2, 1], [0, 2, 1],
+            [1, 0, 2], [0, 1, 2], [2, 1, 2], [1, 2, 2],
+        ],
+    },
+    VolumeType {
         ty: 6,
         kind: Kind::Wedge,
         order: 1,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1],
         ],
@@ -790,10 +825,21 @@ pub(super) const VOLUME_TYPES: &[VolumeType] = &[
         ty: 13,
         kind: Kind::Wedge,
         order: 2,
+        serendipity: false,
         lattice: &[
             [0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2], [2, 0, 2], [0, 2, 2], [1, 0, 0], [0, 1, 0],
             [0, 0, 1], [1, 1, 0], [2, 0, 1], [0, 2, 1], [1, 0, 2], [0, 1, 2], [1, 1, 2], [1, 0, 1],
             [0, 1, 1], [1, 1, 1],
+        ],
+    },
+    VolumeType {
+        ty: 18,
+        kind: Kind::Wedge,
+        order: 2,
+        serendipity: true,
+        lattice: &[
+            [0, 0, 0], [2, 0, 0], [0, 2, 0], [0, 0, 2], [2, 0, 2], [0, 2, 2], [1, 0, 0], [0, 1, 0],
+            [0, 0, 1], [1, 1, 0], [2, 0, 1], [0, 2, 1], [1, 0, 2], [0, 1, 2], [1, 1, 2],
         ],
     },
 ];

@@ -1,5 +1,6 @@
-//! `.vtu` UnstructuredGrid files with Lagrange cells (VTK types 71, 72, 73) into an
-//! [`FeMesh`]: points, cells, `HigherOrderDegrees` cell data if present, point arrays.
+//! `.vtu` UnstructuredGrid files with Lagrange cells (VTK types 71, 72, 73), or linear and
+//! quadratic ones that `FeMesh` reads as Lagrange cells, into an [`FeMesh`]: points, cells,
+//! `HigherOrderDegrees` cell data if present, point arrays.
 
 use super::document::{DataArray, Document, Piece};
 use crate::error::{Error, Result};

@@ -1,0 +1,709 @@
+//! VTK's linear and quadratic cells read as the Lagrange cells that span the same functions.
+//!
+//! Most meshes people hold are made of VTK's classic cells (pyvista's `delaunay_3d` and
+//! `cast_to_unstructured_grid`, solvers' and gmsh's output, ParaView's Tessellate), not of
+//! its Lagrange cells. Each classic cell below interpolates with a space the Lagrange cell
+//! of some order spans as well:
+//!
+//! - tetra, voxel, hexahedron, wedge: order 1, the same nodes in the voxel's other order;
+//! - quadratic tetra, triquadratic hexahedron, biquadratic-quadratic wedge: order 2;
+//! - quadratic-linear wedge: order 2 on the triangle, 1 along t;
+//! - quadratic hexahedron (20 nodes) and quadratic wedge (15): serendipity cells, whose
+//!   functions are a subspace of the order-2 Lagrange cell's. The Lagrange cell's missing
+//!   face and body nodes are made here, each the serendipity interpolant at that node (a
+//!   weighted sum of the cell's nodes, kept in [`Completions`]), so geometry and every point
+//!   array interpolate exactly as VTK interpolates the classic cell.
+//!
+//! Nodes are matched by their parametric coordinates (VTK's `GetParametricCoords`, kept
+//! below in halves, checked against VTK's own in the tests), never by a hand-made
+//! permutation, so one table per type is all a type needs.
+
+use super::shape::{Kind, Shape};
+use glam::DVec3;
+use rustc_hash::FxHashMap;
+
+/// One classic VTK cell type and the Lagrange shape that spans its functions.
+struct Classic {
+    vtk: u8,
+    name: &'static str,
+    kind: Kind,
+    order: [usize; 3],
+    /// Parametric coordinates of the nodes in VTK order, times two (0, 1 or 2): the
+    /// first `count` of a table that types whose nodes begin alike share.
+    nodes: &'static [[u8; 3]],
+    count: usize,
+}
+
+const HEX_27: [[u8; 3]; 27] = [
+    [0, 0, 0],
+    [2, 0, 0],
+    [2, 2, 0],
+    [0, 2, 0],
+    [0, 0, 2],
+    [2, 0, 2],
+    [2, 2, 2],
+    [0, 2, 2],
+    [1, 0, 0],
+    [2, 1, 0],
+    [1, 2, 0],
+    [0, 1, 0],
+    [1, 0, 2],
+    [2, 1, 2],
+    [1, 2, 2],
+    [0, 1, 2],
+    [0, 0, 1],
+    [2, 0, 1],
+    [2, 2, 1],
+    [0, 2, 1],
+    [0, 1, 1],
+    [2, 1, 1],
+    [1, 0, 1],
+    [1, 2, 1],
+    [1, 1, 0],
+    [1, 1, 2],
+    [1, 1, 1],
+];
+
+const VOXEL: [[u8; 3]; 8] = [
+    [0, 0, 0],
+    [2, 0, 0],
+    [0, 2, 0],
+    [2, 2, 0],
+    [0, 0, 2],
+    [2, 0, 2],
+    [0, 2, 2],
+    [2, 2, 2],
+];
+
+const TETRA_10: [[u8; 3]; 10] = [
+    [0, 0, 0],
+    [2, 0, 0],
+    [0, 2, 0],
+    [0, 0, 2],
+    [1, 0, 0],
+    [1, 1, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 0, 1],
+    [0, 1, 1],
+];
+
+const WEDGE_18: [[u8; 3]; 18] = [
+    [0, 0, 0],
+    [2, 0, 0],
+    [0, 2, 0],
+    [0, 0, 2],
+    [2, 0, 2],
+    [0, 2, 2],
+    [1, 0, 0],
+    [1, 1, 0],
+    [0, 1, 0],
+    [1, 0, 2],
+    [1, 1, 2],
+    [0, 1, 2],
+    [0, 0, 1],
+    [2, 0, 1],
+    [0, 2, 1],
+    [1, 0, 1],
+    [1, 1, 1],
+    [0, 1, 1],
+];
+
+const CLASSIC: [Classic; 10] = [
+    Classic {
+        vtk: 10,
+        name: "tetra",
+        kind: Kind::Tetrahedron,
+        order: [1; 3],
+        nodes: &TETRA_10,
+        count: 4,
+    },
+    Classic {
+        vtk: 11,
+        name: "voxel",
+        kind: Kind::Hexahedron,
+        order: [1; 3],
+        nodes: &VOXEL,
+        count: 8,
+    },
+    Classic {
+        vtk: 12,
+        name: "hexahedron",
+        kind: Kind::Hexahedron,
+        order: [1; 3],
+        nodes: &HEX_27,
+        count: 8,
+    },
+    Classic {
+        vtk: 13,
+        name: "wedge",
+        kind: Kind::Wedge,
+        order: [1; 3],
+        nodes: &WEDGE_18,
+        count: 6,
+    },
+    Classic {
+        vtk: 24,
+        name: "quadratic tetra",
+        kind: Kind::Tetrahedron,
+        order: [2; 3],
+        nodes: &TETRA_10,
+        count: 10,
+    },
+    Classic {
+        vtk: 25,
+        name: "quadratic hexahedron",
+        kind: Kind::Hexahedron,
+        order: [2; 3],
+        nodes: &HEX_27,
+        count: 20,
+    },
+    Classic {
+        vtk: 26,
+        name: "quadratic wedge",
+        kind: Kind::Wedge,
+        order: [2; 3],
+        nodes: &WEDGE_18,
+        count: 15,
+    },
+    Classic {
+        vtk: 29,
+        name: "triquadratic hexahedron",
+        kind: Kind::Hexahedron,
+        order: [2; 3],
+        nodes: &HEX_27,
+        count: 27,
+    },
+    Classic {
+        vtk: 31,
+        name: "quadratic-linear wedge",
+        kind: Kind::Wedge,
+        order: [2, 2, 1],
+        nodes: &WEDGE_18,
+        count: 12,
+    },
+    Classic {
+        vtk: 32,
+        name: "biquadratic-quadratic wedge",
+        kind: Kind::Wedge,
+        order: [2; 3],
+        nodes: &WEDGE_18,
+        count: 18,
+    },
+];
+
+impl Classic {
+    /// The VTK nodes of this type.
+    fn vtk_nodes(&self) -> &'static [[u8; 3]] {
+        &self.nodes[..self.count]
+    }
+}
+
+/// The classic type `ty`, if it is one this module reads.
+fn classic(ty: u8) -> Option<&'static Classic> {
+    CLASSIC.iter().find(|c| c.vtk == ty)
+}
+
+/// The name of a VTK cell type this module reads ("quadratic hexahedron"), for messages.
+pub(crate) fn name(ty: u8) -> Option<&'static str> {
+    classic(ty).map(|c| c.name)
+}
+
+/// VTK's quadratic serendipity cell of `kind` (the 20-node hexahedron, the 15-node wedge):
+/// its type and its nodes' parametric coordinates times two, for readers of formats that
+/// number the same nodes otherwise.
+pub(crate) fn serendipity(kind: Kind) -> Option<(u8, &'static [[u8; 3]])> {
+    let ty = match kind {
+        Kind::Hexahedron => 25,
+        Kind::Wedge => 26,
+        Kind::Tetrahedron => return None,
+    };
+    classic(ty).map(|c| (ty, c.vtk_nodes()))
+}
+
+/// Where each Lagrange node of a classic type comes from.
+enum Source {
+    /// The classic cell's node at this position.
+    Node(usize),
+    /// The serendipity interpolant at the node: weights of the classic nodes (non-zero only).
+    Made(Vec<(usize, f64)>),
+}
+
+/// The Lagrange nodes of `c`, in VTK's Lagrange order, by where they come from.
+fn sources(c: &Classic) -> Vec<Source> {
+    let shape = Shape::new(c.kind, c.order);
+    let given = c.vtk_nodes();
+    (0..shape.len())
+        .map(|n| {
+            let u = shape.node_coords(n);
+            let halves = [0, 1, 2].map(|k| (u[k] * 2.0).round() as u8);
+            match given.iter().position(|&g| g == halves) {
+                Some(i) => Source::Node(i),
+                None => Source::Made(serendipity_weights(c.kind, given, u)),
+            }
+        })
+        .collect()
+}
+
+/// The weights of the serendipity interpolant of a 20-node hexahedron or a 15-node wedge
+/// at reference point `u`: the standard shape functions, written over the nodes'
+/// parametric coordinates so that they follow the table's order.
+fn serendipity_weights(kind: Kind, nodes: &[[u8; 3]], u: DVec3) -> Vec<(usize, f64)> {
+    let weight = |g: [u8; 3]| -> f64 {
+        match kind {
+            Kind::Hexahedron => {
+                // ξ ∈ [−1, 1]³; a node at ξ_i ∈ {−1, 0, 1}.
+                let x = 2.0 * u - DVec3::ONE;
+                let xi = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64) - DVec3::ONE;
+                match (0..3).find(|&a| xi[a] == 0.0) {
+                    // A corner: ⅛ Π(1 + ξ ξ_i) (ξ·ξ_i − 2).
+                    None => {
+                        (0..3).map(|a| 1.0 + x[a] * xi[a]).product::<f64>() / 8.0
+                            * (x.dot(xi) - 2.0)
+                    }
+                    // The middle of an edge along axis a: ¼ (1 − ξ_a²) Π_{b≠a} (1 + ξ_b ξ_ib).
+                    Some(a) => {
+                        (1.0 - x[a] * x[a])
+                            * (0..3)
+                                .filter(|&b| b != a)
+                                .map(|b| 1.0 + x[b] * xi[b])
+                                .product::<f64>()
+                            / 4.0
+                    }
+                }
+            }
+            Kind::Wedge => {
+                // Barycentric L on the triangle, ζ ∈ [−1, 1] along t.
+                let l = [1.0 - u.x - u.y, u.x, u.y];
+                let z = 2.0 * u.z - 1.0;
+                let zi = g[2] as f64 - 1.0;
+                // The triangle's vertices k (and l for an edge's middle) the node sits at.
+                let at = match (g[0], g[1]) {
+                    (0, 0) => (0, None),
+                    (2, 0) => (1, None),
+                    (0, 2) => (2, None),
+                    (1, 0) => (0, Some(1)),
+                    (1, 1) => (1, Some(2)),
+                    _ => (2, Some(0)),
+                };
+                match (at, zi == 0.0) {
+                    // A corner: ½ L_k (2 L_k − 1)(1 + ζ ζ_i) − ½ L_k (1 − ζ²).
+                    ((k, None), false) => {
+                        0.5 * l[k] * (2.0 * l[k] - 1.0) * (1.0 + z * zi)
+                            - 0.5 * l[k] * (1.0 - z * z)
+                    }
+                    // The middle of a vertical edge: L_k (1 − ζ²).
+                    ((k, None), true) => l[k] * (1.0 - z * z),
+                    // The middle of a triangle's edge: 2 L_k L_l (1 + ζ ζ_i).
+                    ((k, Some(m)), _) => 2.0 * l[k] * l[m] * (1.0 + z * zi),
+                }
+            }
+            Kind::Tetrahedron => unreachable!("every quadratic tetra node is a Lagrange node"),
+        }
+    };
+    let w: Vec<(usize, f64)> = nodes
+        .iter()
+        .enumerate()
+        .map(|(i, &g)| (i, weight(g)))
+        .filter(|&(_, w)| w != 0.0)
+        .collect();
+    debug_assert!((w.iter().map(|p| p.1).sum::<f64>() - 1.0).abs() < 1e-12);
+    w
+}
+
+/// Points the conversion made (a serendipity cell's face and body nodes), after the given
+/// ones: point `given + k` is the weighted sum `terms[offsets[k]..offsets[k + 1]]` of given
+/// points. Every point array is completed by the same sums.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Completions {
+    given: usize,
+    offsets: Vec<usize>,
+    terms: Vec<(u32, f64)>,
+}
+
+impl Completions {
+    /// No made points among `given`.
+    pub(crate) fn none(given: usize) -> Completions {
+        Completions {
+            given,
+            offsets: vec![0],
+            terms: Vec::new(),
+        }
+    }
+
+    /// The number of points the caller gave.
+    pub(crate) fn given(&self) -> usize {
+        self.given
+    }
+
+    /// Appends the made points' values to `data` (the given points' values, item-major).
+    pub(crate) fn complete(&self, data: &mut Vec<f64>, components: usize) {
+        debug_assert_eq!(data.len(), self.given * components);
+        data.reserve((self.offsets.len().saturating_sub(1)) * components);
+        for k in 0..self.offsets.len().saturating_sub(1) {
+            for j in 0..components {
+                let v = self.terms[self.offsets[k]..self.offsets[k + 1]]
+                    .iter()
+                    .map(|&(p, w)| w * data[p as usize * components + j])
+                    .sum();
+                data.push(v);
+            }
+        }
+    }
+}
+
+/// Cells in Lagrange form: the arrays `FeMesh::new` reads, with per-cell orders.
+pub(crate) struct LagrangeCells {
+    pub types: Vec<u8>,
+    pub offsets: Vec<usize>,
+    pub connectivity: Vec<u32>,
+    /// Per cell, its orders, or zeros where the node count decides (as VTK reads a
+    /// Lagrange cell without HigherOrderDegrees).
+    pub degrees: Vec<[usize; 3]>,
+}
+
+/// Rewrites the classic cells among `types` as Lagrange cells, appending the points that
+/// serendipity cells lack to `points`; `None` when every cell is already a Lagrange cell
+/// (or of a type nobody reads, which the caller refuses). Errors name the cell.
+pub(crate) fn to_lagrange(
+    types: &[u8],
+    offsets: &[usize],
+    connectivity: &[u32],
+    degrees: Option<&[[usize; 3]]>,
+    points: &mut Vec<DVec3>,
+) -> Result<Option<(LagrangeCells, Completions)>, String> {
+    if !types.iter().any(|&t| classic(t).is_some()) {
+        return Ok(None);
+    }
+    let given = points.len();
+    let mut table: FxHashMap<u8, Vec<Source>> = FxHashMap::default();
+    let mut cells = LagrangeCells {
+        types: Vec::with_capacity(types.len()),
+        offsets: Vec::with_capacity(types.len() + 1),
+        connectivity: Vec::with_capacity(connectivity.len()),
+        degrees: Vec::with_capacity(types.len()),
+    };
+    let mut made = Completions::none(given);
+    // A made point by the given points it sums (sorted): a face node is made once for the
+    // two cells that share the face, so their interpolants stay equal across it.
+    let mut made_at: FxHashMap<Vec<u32>, u32> = FxHashMap::default();
+    cells.offsets.push(0);
+    for (c, &ty) in types.iter().enumerate() {
+        let (start, end) = (offsets[c], offsets[c + 1]);
+        if end < start || end > connectivity.len() {
+            return Err(format!(
+                "cell {c}: offsets {start}..{end} out of order or range"
+            ));
+        }
+        let nodes = &connectivity[start..end];
+        let Some(k) = classic(ty) else {
+            cells.types.push(ty);
+            cells.connectivity.extend_from_slice(nodes);
+            cells.offsets.push(cells.connectivity.len());
+            cells.degrees.push(degrees.map_or([0; 3], |d| d[c]));
+            continue;
+        };
+        let want = k.vtk_nodes().len();
+        if nodes.len() != want {
+            return Err(format!(
+                "cell {c} (VTK {}, type {ty}) has {} nodes, not {want}",
+                k.name,
+                nodes.len()
+            ));
+        }
+        if let Some(&p) = nodes.iter().find(|&&p| p as usize >= given) {
+            return Err(format!(
+                "cell {c} refers to point {p}, but there are {given} points"
+            ));
+        }
+        for s in table.entry(ty).or_insert_with(|| sources(k)).iter() {
+            let p = match s {
+                Source::Node(i) => nodes[*i],
+                Source::Made(w) => {
+                    let mut key: Vec<u32> = w.iter().map(|&(i, _)| nodes[i]).collect();
+                    key.sort_unstable();
+                    *made_at.entry(key).or_insert_with(|| {
+                        let x = w.iter().map(|&(i, w)| w * points[nodes[i] as usize]).sum();
+                        points.push(x);
+                        made.terms.extend(w.iter().map(|&(i, w)| (nodes[i], w)));
+                        made.offsets.push(made.terms.len());
+                        (points.len() - 1) as u32
+                    })
+                }
+            };
+            cells.connectivity.push(p);
+        }
+        cells.types.push(k.kind.vtk_type());
+        cells.offsets.push(cells.connectivity.len());
+        cells.degrees.push(k.order);
+    }
+    Ok(Some((cells, made)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::fe::{FeMesh, Scratch};
+    use crate::field::particles::Attribute;
+
+    #[test]
+    fn tables_are_vtks_parametric_coordinates() {
+        let text = include_str!("../../../data/fe/vtk_classic_nodes.txt");
+        let mut seen = 0;
+        for line in text.lines().filter(|l| !l.starts_with('#')) {
+            let v: Vec<f64> = line
+                .split_whitespace()
+                .map(|x| x.parse().unwrap())
+                .collect();
+            let c = classic(v[0] as u8).expect("a type classic.rs reads");
+            let n = v[1] as usize;
+            assert_eq!(c.vtk_nodes().len(), n, "{}", c.name);
+            for (k, g) in c.vtk_nodes().iter().enumerate() {
+                let vtk = [0, 1, 2].map(|a| v[2 + 3 * k + a] * 2.0);
+                assert_eq!(g.map(f64::from), vtk, "{} node {k}", c.name);
+            }
+            seen += 1;
+        }
+        assert_eq!(seen, CLASSIC.len());
+    }
+
+    /// Every classic type's tables: its Lagrange shape has a node at each of the type's
+    /// positions, and a made node's weights reproduce every quadratic (the serendipity
+    /// space holds all of them).
+    #[test]
+    fn tables_fit_their_lagrange_shapes() {
+        for c in &CLASSIC {
+            let sources = sources(c);
+            let shape = Shape::new(c.kind, c.order);
+            assert_eq!(sources.len(), shape.len(), "{}", c.name);
+            let mut used = vec![false; c.vtk_nodes().len()];
+            for (n, s) in sources.iter().enumerate() {
+                let u = shape.node_coords(n);
+                match s {
+                    Source::Node(i) => {
+                        assert!(!std::mem::replace(&mut used[*i], true), "{}", c.name);
+                    }
+                    Source::Made(w) => {
+                        assert!(c.vtk == 25 || c.vtk == 26, "{} made a node", c.name);
+                        let at: f64 = w.iter().map(|&(i, w)| w * quadratic(reference(c, i))).sum();
+                        assert!(
+                            (at - quadratic(u)).abs() < 1e-13,
+                            "{}: {at} vs {}",
+                            c.name,
+                            quadratic(u)
+                        );
+                    }
+                }
+            }
+            assert!(used.iter().all(|&u| u), "{}: a VTK node is unused", c.name);
+        }
+    }
+
+    fn reference(c: &Classic, i: usize) -> DVec3 {
+        DVec3::from_array(c.vtk_nodes()[i].map(|h| h as f64 / 2.0))
+    }
+
+    fn quadratic(x: DVec3) -> f64 {
+        1.0 + x.x - 2.0 * x.y * x.z + x.x * x.x + 0.5 * x.z * x.z - 0.7 * x.x * x.y
+    }
+
+    fn linear(x: DVec3) -> f64 {
+        0.3 + x.x - 2.0 * x.y + 0.5 * x.z
+    }
+
+    /// A sheared, rotated, translated map, so no coordinate of a node equals its
+    /// parametric one.
+    fn affine(u: DVec3) -> DVec3 {
+        DVec3::new(
+            2.0 * u.x + 0.5 * u.y - 0.2 * u.z,
+            1.5 * u.y - 0.3 * u.z + 0.1 * u.x,
+            1.2 * u.z + 0.4 * u.x,
+        ) + DVec3::new(-0.5, 0.25, 3.0)
+    }
+
+    /// Inside the reference cell of `kind`, away from its faces.
+    fn inside(kind: Kind) -> Vec<DVec3> {
+        let mut out = Vec::new();
+        for a in [0.1, 0.3, 0.55] {
+            for b in [0.15, 0.4] {
+                for t in [0.05, 0.5, 0.9] {
+                    let u = DVec3::new(a, b * (1.0 - a), t);
+                    let ok = match kind {
+                        Kind::Hexahedron | Kind::Wedge => true,
+                        Kind::Tetrahedron => u.x + u.y + u.z < 1.0,
+                    };
+                    if ok {
+                        out.push(u);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// One cell of each classic type, its nodes the affine image of VTK's parametric
+    /// coordinates and its field a function of them in the type's space (linear for the
+    /// linear types, quadratic for the others, quadratic on the triangle times linear in t
+    /// for the quadratic-linear wedge): the Lagrange cell made of it reproduces both at
+    /// points inside, so a node put in the wrong place, or a made node's wrong weight,
+    /// shows.
+    #[test]
+    fn classic_cells_interpolate_what_vtk_interpolates() {
+        for c in &CLASSIC {
+            let f = |u: DVec3| match c.order {
+                [1, 1, 1] => linear(u),
+                [2, 2, 1] => quadratic(u.with_z(0.0)) * (1.0 + 0.5 * u.z),
+                _ => quadratic(u),
+            };
+            let points: Vec<DVec3> = (0..c.count).map(|i| affine(reference(c, i))).collect();
+            let values: Vec<f64> = (0..c.count).map(|i| f(reference(c, i))).collect();
+            let mesh = FeMesh::new(
+                c.name,
+                points,
+                &[c.vtk],
+                &[0, c.count],
+                (0..c.count as u32).collect(),
+                None,
+                vec![Attribute::scalar("f", values)],
+            )
+            .unwrap_or_else(|e| panic!("{}: {e}", c.name));
+            assert_eq!(mesh.given_points(), c.count, "{}", c.name);
+            assert_eq!(mesh.shape(0).kind, c.kind);
+            assert_eq!(mesh.shape(0).order, c.order);
+            let mut sc = Scratch::default();
+            let v = &mesh.point_data[0].data;
+            for u in inside(c.kind) {
+                let e = mesh.evaluate(v, 0, u, &mut sc);
+                assert!((e.x - affine(u)).length() < 1e-12, "{} at {u}", c.name);
+                assert!(
+                    (e.value - f(u)).abs() < 1e-12,
+                    "{} at {u}: {} vs {}",
+                    c.name,
+                    e.value,
+                    f(u)
+                );
+            }
+        }
+    }
+
+    /// Two 20-node hexahedra sharing a face: the face's made node is made once (one point,
+    /// in both cells), the faces pair, and arrays added later are completed with it.
+    #[test]
+    fn a_shared_face_node_is_made_once() {
+        let c = classic(25).unwrap();
+        let mut points: Vec<DVec3> = (0..20).map(|i| affine(reference(c, i))).collect();
+        // The second cell is the first moved by one along r: its face r = 0 is the first's
+        // face r = 1. Its other nodes are new points.
+        let shift = affine(DVec3::X) - affine(DVec3::ZERO);
+        let mut second = Vec::new();
+        for i in 0..20 {
+            let g = c.vtk_nodes()[i];
+            if g[0] == 0 {
+                let twin = c
+                    .vtk_nodes()
+                    .iter()
+                    .position(|h| *h == [2, g[1], g[2]])
+                    .unwrap();
+                second.push(twin as u32);
+            } else {
+                points.push(points[i] + shift);
+                second.push(points.len() as u32 - 1);
+            }
+        }
+        let given = points.len();
+        let mut connectivity: Vec<u32> = (0..20).collect();
+        connectivity.extend(&second);
+        let mesh = FeMesh::new(
+            "two",
+            points,
+            &[25, 25],
+            &[0, 20, 40],
+            connectivity,
+            None,
+            Vec::new(),
+        )
+        .unwrap();
+        // 6 faces and a body each, less the one face they share.
+        assert_eq!(mesh.points.len(), given + 2 * 7 - 1);
+        assert_eq!(mesh.given_points(), given);
+        assert!(mesh.neighbour(0, 1).is_some(), "the shared face pairs");
+        let mut values: Vec<f64> = mesh.points[..given].iter().map(|&x| quadratic(x)).collect();
+        mesh.completions.complete(&mut values, 1);
+        for (k, &x) in mesh.points.iter().enumerate() {
+            assert!((values[k] - quadratic(x)).abs() < 1e-12, "point {k}");
+        }
+    }
+
+    #[test]
+    fn a_classic_cell_with_the_wrong_node_count_is_named() {
+        let points: Vec<DVec3> = (0..10)
+            .map(|i| DVec3::new(i as f64, (i * i) as f64, 1.0))
+            .collect();
+        let e = FeMesh::new(
+            "m",
+            points,
+            &[12, 24],
+            &[0, 8, 17],
+            (0..17).map(|i| i % 10).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("cell 1 (VTK quadratic tetra, type 24) has 9 nodes, not 10"),
+            "{e}"
+        );
+        let e = FeMesh::new(
+            "m",
+            vec![DVec3::ZERO; 5],
+            &[14],
+            &[0, 5],
+            (0..5).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("cell 0 has VTK type 14 (a pyramid), which isobar does not read"),
+            "{e}"
+        );
+        // Checks name the cell as given.
+        let hex = classic(12).unwrap();
+        let cube: Vec<DVec3> = (0..8).map(|i| reference(hex, i)).collect();
+        let mirrored: Vec<DVec3> = cube
+            .iter()
+            .map(|p| p * DVec3::new(-1.0, 1.0, 1.0))
+            .collect();
+        let e = FeMesh::new(
+            "m",
+            mirrored,
+            &[12],
+            &[0, 8],
+            (0..8).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("cell 0 (VTK hexahedron) is inverted"), "{e}");
+        let mut collapsed = cube.clone();
+        collapsed[1] = collapsed[0];
+        let e = FeMesh::new(
+            "m",
+            collapsed,
+            &[12],
+            &[0, 8],
+            (0..8).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("cell 0 (VTK hexahedron) is degenerate: its corners 0 and 1 (points 0 and 1) are at the same place"),
+            "{e}"
+        );
+    }
+}
