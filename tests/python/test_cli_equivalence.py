@@ -1,6 +1,8 @@
 """The Python package and the command line give the same surface, bit for bit."""
 
+import os
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -142,3 +144,20 @@ def test_auto_backend_note_is_what_the_cli_says(cli, dam_break_path, tmp_path):
     particles = isobar.Particles.read(dam_break_path)
     _, stats = isobar.extract_adaptive(particles, 0.6, h=0.05, backend="auto")
     assert stats["backend"] == ("cpu" if note else "gpu")
+
+
+def test_the_gpu_probe_is_quiet_without_a_desktop_session():
+    """Mesa's device-select Vulkan layer connected to Wayland while listing devices, and
+    without XDG_RUNTIME_DIR (a server, a notebook kernel) libwayland printed an error line
+    twice on stderr at every first GPU probe, shown in red by Jupyter. The probe switches
+    the layer off for itself then and leaves the environment as it was."""
+    env = {k: v for k, v in os.environ.items() if k not in ("XDG_RUNTIME_DIR", "WAYLAND_DISPLAY", "NODEVICE_SELECT")}
+    code = (
+        "import os, isobar\n"
+        "isobar.auto_backend_note()\n"
+        "print('NODEVICE_SELECT' in os.environ)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert "XDG_RUNTIME_DIR" not in run.stderr, run.stderr
+    assert run.stdout.strip() == "False"

@@ -71,6 +71,7 @@ pub fn get() -> Result<&'static Gpu> {
 }
 
 fn create() -> std::result::Result<Gpu, String> {
+    let quiet = QuietDeviceSelect::new();
     // WGPU_BACKEND (e.g. vulkan) narrows the probe; without it every compiled backend.
     let instance =
         wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
@@ -81,6 +82,7 @@ fn create() -> std::result::Result<Gpu, String> {
         apply_limit_buckets: false,
     }))
     .map_err(|e| format!("{e} (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers)"))?;
+    drop(quiet);
     let info = adapter.get_info();
     let name = format!(
         "{} ({:?}, {:?}, {})",
@@ -101,6 +103,38 @@ fn create() -> std::result::Result<Gpu, String> {
         software,
         pipelines: Mutex::new(HashMap::new()),
     })
+}
+
+/// Mesa's implicit Vulkan layer VK_LAYER_MESA_device_select connects to a Wayland
+/// compositor while it lists the devices, to rank the one showing the desktop first.
+/// Without a session (a server, a notebook kernel, CI: no XDG_RUNTIME_DIR) libwayland
+/// prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." twice on
+/// stderr, which Jupyter shows in red although the run is fine. With no session there is
+/// no desktop to rank, so for the probe alone the layer is switched off the way its
+/// manifest offers (NODEVICE_SELECT=1), and the environment is put back after it. The
+/// probe runs once per process (`get`'s OnceLock).
+struct QuietDeviceSelect(bool);
+
+impl QuietDeviceSelect {
+    fn new() -> QuietDeviceSelect {
+        let session = ["XDG_RUNTIME_DIR", "WAYLAND_DISPLAY", "NODEVICE_SELECT"]
+            .iter()
+            .any(|v| std::env::var_os(v).is_some());
+        if cfg!(target_os = "linux") && !session {
+            std::env::set_var("NODEVICE_SELECT", "1");
+            QuietDeviceSelect(true)
+        } else {
+            QuietDeviceSelect(false)
+        }
+    }
+}
+
+impl Drop for QuietDeviceSelect {
+    fn drop(&mut self) {
+        if self.0 {
+            std::env::remove_var("NODEVICE_SELECT");
+        }
+    }
 }
 
 /// A failure while running a kernel, worded for the user.
