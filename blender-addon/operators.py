@@ -214,7 +214,9 @@ class ISOBAR_OT_import_volume(bpy.types.Operator, ImportHelper):
         stem = os.path.splitext(os.path.basename(path))[0] or "volume"
         obj = None
         try:
-            store, said = volume_slider.ensure_store(path, self.memory_budget)
+            # The cursor shows the store build (seconds for a 256³ volume).
+            with importer.live_progress() as progress:
+                store, said = volume_slider.ensure_store(path, self.memory_budget, progress=progress)
             obj = _new_surface_object(context, f"{stem}_isosurface")
             # The object's own slider: opening a store checks it whole, so open it once.
             lo, hi = volume_slider.slider_for(obj, store).value_range

@@ -49,13 +49,14 @@ def store_path_for(path: str) -> str:
     return path if path.endswith(STORE_EXTENSION) else path + STORE_EXTENSION
 
 
-def ensure_store(path: str, memory_budget_gib: float = 0.0) -> Tuple[str, List[str]]:
+def ensure_store(path: str, memory_budget_gib: float = 0.0, progress=None) -> Tuple[str, List[str]]:
     """Builds the store of the volume at `path` unless an up-to-date one exists; returns
     its path and what the build warned about (values wider than float32, float64 or 32/64-bit
     integers, that the store holds coarsely as float32), for the caller to show. `memory_budget_gib` bounds what the build holds
     besides the volume (0: the core's default; past about 29 bytes a node it sorts on
     disk, beside the store). Raises isobar.Error (naming the file) when the volume cannot
-    be read or the budget is too small."""
+    be read or the budget is too small. `progress` (fraction, phase) sees the build, which
+    takes seconds for a 256³ volume."""
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no such volume file: {path}")
     store = store_path_for(path)
@@ -65,7 +66,7 @@ def ensure_store(path: str, memory_budget_gib: float = 0.0) -> Tuple[str, List[s
         isobar = isobar_module()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", isobar.IsobarWarning)
-            isobar.Slider.build(path, store, memory_budget=budget)
+            isobar.Slider.build(path, store, memory_budget=budget, progress=progress)
         for w in caught:
             if issubclass(w.category, isobar.IsobarWarning):
                 said.append(f"{os.path.basename(path)}: {w.message}")

@@ -300,6 +300,46 @@ def test_volume_slider_slides_without_rebuilding_and_matches_flying_edges():
 
 
 @test
+def test_volume_slider_store_build_reports_progress_and_aborts():
+    """The store build (seconds for a 256³ volume) ran without progress and could not be
+    stopped: now it reports VTK progress, and an abort leaves an empty output with the
+    message "cancelled", no store, and the next update builds again."""
+    from isobar_vtk import vtkIsobarVolumeSlider
+
+    img, _ = blobs_image()
+    f = vtkIsobarVolumeSlider()
+    f.SetInputData(img)
+    f.SetIsovalue(0.5)
+    seen = []
+    f.AddObserver(vtkCommand.ProgressEvent, lambda o, e: seen.append(o.GetProgress()))
+    f.Update()
+    assert f.GetErrorMessage() == "", f.GetErrorMessage()
+    assert any(0.0 < p < 1.0 for p in seen) and seen[-1] == 1.0, seen
+    assert all(b >= a for a, b in zip(seen, seen[1:], strict=False)), "progress went backwards"
+
+    g = vtkIsobarVolumeSlider()
+    g.SetInputData(img)
+    g.SetIsovalue(0.5)
+    calls = []
+
+    def abort(o, e):
+        calls.append(o.GetProgress())
+        if o.GetProgress() > 0.0:
+            o.SetAbortExecute(1)
+
+    g.AddObserver(vtkCommand.ProgressEvent, abort)
+    g.Update()
+    assert g.GetErrorMessage() == "cancelled", g.GetErrorMessage()
+    assert g.GetOutput().GetNumberOfCells() == 0 and g.GetNumberOfStoreBuilds() == 0
+    g.RemoveAllObservers()
+    g.SetAbortExecute(0)
+    g.Modified()
+    g.Update()
+    assert g.GetErrorMessage() == "" and g.GetNumberOfStoreBuilds() == 1
+    assert g.GetOutput().GetNumberOfCells() == f.GetOutput().GetNumberOfCells()
+
+
+@test
 def test_volume_slider_narrows_doubles_in_the_core_and_says_what_that_loses():
     """The filter cast double scalars to float itself: a pressure of 101325 Pa plus
     small variations moved vertices by half a cell, a finite 1e300 became inf and was

@@ -60,6 +60,7 @@ vtkIsobarVolumeSlider::vtkIsobarVolumeSlider()
   , Slider(nullptr)
   , AtIsovalue(false)
   , AppliedIsovalue(0.0)
+  , LastProgress(-1.0)
 {
   this->SetInputArrayToProcess(
     0, 0, 0, vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
@@ -98,6 +99,27 @@ void vtkIsobarVolumeSlider::Fail(const std::string& message)
 {
   const std::string line = IsobarAddError(this, this->ErrorMessage, message);
   vtkErrorMacro(<< line);
+}
+
+/// The progress callback handed to the core's store build.
+struct vtkIsobarVolumeSliderProgress
+{
+  static int32_t Call(void* user, double fraction, const char* phase)
+  {
+    return static_cast<vtkIsobarVolumeSlider*>(user)->ReportProgress(fraction, phase) ? 1 : 0;
+  }
+};
+
+//------------------------------------------------------------------------------
+bool vtkIsobarVolumeSlider::ReportProgress(double fraction, const char* phase)
+{
+  if (fraction >= 1.0 || fraction - this->LastProgress >= 0.01 || fraction < this->LastProgress)
+  {
+    this->LastProgress = fraction;
+    this->SetProgressText(phase);
+    this->UpdateProgress(fraction);
+  }
+  return this->GetAbortExecute() != 0;
 }
 
 //------------------------------------------------------------------------------
@@ -198,6 +220,8 @@ int vtkIsobarVolumeSlider::RequestData(
     const bool exact = type == VTK_FLOAT || vtkDataArray::GetDataTypeSize(type) <= 2;
     IsobarStatus status;
     const char* call;
+    this->LastProgress = -1.0;
+    this->UpdateProgress(0.0);
     if (exact)
     {
       std::vector<float> scalars(static_cast<size_t>(n));
@@ -206,8 +230,8 @@ int vtkIsobarVolumeSlider::RequestData(
         scalars[static_cast<size_t>(i)] = static_cast<float>(values->GetComponent(i, 0));
       }
       call = "isobar_slider_build_f32";
-      status = isobar_slider_build_f32(
-        scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, budget, nullptr, nullptr);
+      status = isobar_slider_build_f32(scalars.data(), sizes, origin, spacing, path.c_str(), 0.0,
+        0, budget, &vtkIsobarVolumeSliderProgress::Call, this);
     }
     else
     {
@@ -217,8 +241,16 @@ int vtkIsobarVolumeSlider::RequestData(
         scalars[static_cast<size_t>(i)] = values->GetComponent(i, 0);
       }
       call = "isobar_slider_build_f64";
-      status = isobar_slider_build_f64(
-        scalars.data(), sizes, origin, spacing, path.c_str(), 0.0, 0, budget, nullptr, nullptr);
+      status = isobar_slider_build_f64(scalars.data(), sizes, origin, spacing, path.c_str(), 0.0,
+        0, budget, &vtkIsobarVolumeSliderProgress::Call, this);
+    }
+    if (status == ISOBAR_STATUS_CANCELLED)
+    {
+      // Aborted (the core left no store): empty output; the next update builds again.
+      output->Initialize();
+      this->ErrorMessage = "cancelled";
+      vtkDebugMacro(<< "Store build cancelled: empty output");
+      return 1;
     }
     if (status != ISOBAR_STATUS_OK)
     {

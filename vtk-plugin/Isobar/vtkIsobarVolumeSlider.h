@@ -93,6 +93,14 @@ private:
   void Fail(const std::string& message);
   void CloseStore();
 
+public:
+  /// The core's progress during the store build (the long step: seconds for a 256³
+  /// volume): reported to VTK's progress, and `false` stops it when AbortExecute is set.
+  bool ReportProgress(double fraction, const char* phase);
+
+private:
+  double LastProgress;
+
   double Isovalue;
   double LodErrorBound;
   int LodMaxLevel;
