@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CLI_DAM, DAM, FRAME_01, ISO, link_frames, run_cli
+from conftest import CLI_DAM, DAM, FRAME_01, FRAME_26, ISO, link_frames, mesh_at, open_stage, run_cli
 
 import isobar
 import isobar_usd
@@ -326,3 +327,33 @@ def test_parallel_write_from_an_unguarded_script_fails_clearly(tmp_path, dam_fra
     assert code == 0, (stdout, stderr)
     assert "wrote [1, 26]" in stdout, stdout
     assert out.is_file()
+
+
+@pytest.mark.parametrize("jobs, layout", [(1, "clips"), (2, "clips"), (1, "flat")])
+def test_keep_going_skips_a_truncated_frame_and_writes_the_others(cli, tmp_path, jobs, layout):
+    """One truncated cache file among good frames used to throw away every frame already
+    extracted. With --keep-going the bad frame is named on stderr and skipped, the others
+    are committed and stitched, and the exit status is 1; without it nothing is written."""
+    folder = link_frames(tmp_path / "in", {1: FRAME_01, 2: FRAME_26, 4: FRAME_26})
+    bad = folder / "frame_0003.vtk"
+    bad.write_bytes(Path(FRAME_01).read_bytes()[:5000])
+    out = tmp_path / f"fluid_{layout}.usd"
+    args = ["sph", folder / "frame_####.vtk", *CLI_DAM, "-o", out, "-j", str(jobs), "--layout", layout, "-q"]
+    plain = run_cli(cli, *args, check=False)
+    assert plain.returncode == 1 and "frame 3 (" in plain.stderr and not out.exists(), plain.stderr
+    proc = run_cli(cli, *args, "--keep-going", check=False)
+    assert proc.returncode == 1, proc.stderr
+    assert "isobar-usd: error: frame 3 (" in proc.stderr and "(skipped)" in proc.stderr, proc.stderr
+    stage = open_stage(out)
+    assert stage.GetStartTimeCode() == 1 and stage.GetEndTimeCode() == 4
+    assert [len(mesh_at(stage, t)["points"]) > 1000 for t in (1, 2, 4)] == [True] * 3
+    assert isobar_usd.check(out) == []
+    # The library says the same in the result.
+    result = isobar_usd.write_sequence(folder / "frame_####.vtk", tmp_path / "api.usd", 0.6, keep_going=True,
+                                       layout=layout, jobs=jobs, **DAM)
+    assert result.frames == [1, 2, 4] and list(result.failed) == [3], result
+    assert "frame_0003.vtk" in result.failed[3]
+    # Every frame bad: an error naming the first, nothing written.
+    with pytest.raises(isobar_usd.InputError, match=r"no frame could be written \(1 failed\); the first: frame 3"):
+        isobar_usd.write_sequence({3: bad}, tmp_path / "none.usd", 0.6, keep_going=True, **DAM)
+    assert not (tmp_path / "none.usd").exists()

@@ -91,6 +91,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="clips: one layer per frame joined by value clips; flat: every frame in one file "
                    "(all in memory); auto (default): flat for one frame, clips otherwise")
     u.add_argument("--no-stitch", action="store_true", help="write and commit the frame layers only; run `isobar-usd stitch` afterwards")
+    u.add_argument("--keep-going", action="store_true",
+                   help="skip a frame that cannot be read or extracted (named on stderr, exit status 1) and write the "
+                        "others; without it one bad frame stops the run and nothing is written")
     u.add_argument("--fps", type=float, default=24.0, help="timeCodesPerSecond and framesPerSecond (default 24); time code = frame number")
     u.add_argument("--meters-per-unit", type=float, default=1.0, help="metersPerUnit: the unit the positions are already in (default 1: metres); a label, the data is not scaled")
     u.add_argument("--up-axis", choices=["Y", "Z", "y", "z"], default="Y", help="upAxis (default Y: USD's fallback, SPlisHSPlasH/Houdini; Z for Blender); the data is not rotated")
@@ -256,10 +259,13 @@ def _run_sph(args) -> int:
         velocities=None if args.no_velocities else args.velocities,
         primvars="auto" if args.primvars is None else args.primvars,
         progress=progress,
+        keep_going=args.keep_going,
         **options,
     )
     for note in result.notes:  # a warning: printed even with --quiet
         print(f"isobar-usd: warning: {note}", file=sys.stderr, flush=True)
+    for frame, why in result.failed.items():  # skipped by --keep-going
+        print(f"isobar-usd: error: {why} (skipped)", file=sys.stderr, flush=True)
     if not args.quiet:
         span = f"{result.frames[0]}..{result.frames[-1]}" if result.frames else "-"
         where = f", frame layers in {result.clips}" if result.clips else ""
@@ -267,9 +273,12 @@ def _run_sph(args) -> int:
             print(f"committed {len(result.written)} frame layer(s) to {result.clips}; run `isobar-usd stitch {result.output}`")
         else:
             print(f"wrote {result.output}: {len(result.frames)} frame(s) ({span}), {result.layout} layout{where}, {result.seconds:.1f} s")
+    status = 1 if result.failed else 0
+    if result.failed and not args.quiet:
+        print(f"{len(result.failed)} frame(s) skipped: {', '.join(map(str, result.failed))}", file=sys.stderr)
     if args.check and not (result.layout == "clips" and args.no_stitch):
-        return _report_problems(check(result.output), args.quiet)
-    return 0
+        return max(status, _report_problems(check(result.output), args.quiet))
+    return status
 
 
 def _report_problems(problems, quiet: bool) -> int:

@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optio
 import numpy as np
 
 from . import _atomic
-from .errors import Error, InputError, StitchError, frame_error
+from .errors import Error, FrameError, InputError, StitchError, frame_error
 from .frames import expand_sequence, frame_number, is_pattern, parse_frame_selection
 from .layers import (
     MeshLayer,
@@ -566,6 +566,8 @@ class SequenceResult:
             written by this call that warned.
         notes: what the stitch found about the sequence as a whole (frames extracted
             with different settings).
+        failed: frame number -> why it could not be written, for the frames a
+            ``keep_going`` call skipped (empty otherwise: an error stops the call).
     """
 
     output: Path
@@ -577,6 +579,7 @@ class SequenceResult:
     seconds: float = 0.0
     warnings: Dict[int, List[str]] = field(default_factory=dict)
     notes: List[str] = field(default_factory=list)
+    failed: Dict[int, str] = field(default_factory=dict)
 
 
 # -- public API -----------------------------------------------------------------------
@@ -663,6 +666,7 @@ def write_sequence(
     velocities="auto",
     primvars="auto",
     progress: Optional[Callable[[FrameProgress], Any]] = None,
+    keep_going: bool = False,
     **extract_options,
 ) -> SequenceResult:
     """Writes a sequence of frames as one USD stage.
@@ -697,6 +701,10 @@ def write_sequence(
         fps, meters_per_unit, up_axis, prim, mesh: stage settings (see StageSettings).
         velocities, primvars: as in :func:`write_frame`.
         progress: called with a :class:`FrameProgress` after each frame; raise to stop.
+        keep_going: a frame that cannot be read or extracted (a truncated cache file)
+            is skipped and named in the result's ``failed`` instead of stopping the
+            call; the other frames are committed and stitched (a skipped frame shows
+            the frame before it, as any gap does). Without it, nothing is written.
         **extract_options: passed to :func:`isobar.extract` (field, h, h_array, kernel,
             h_scale, grid_factor, correct, tolerance, trim, attributes, ...).
 
@@ -731,10 +739,25 @@ def write_sequence(
     if layout == "flat":
         if jobs > 1:
             raise InputError("jobs > 1 needs the clips layout (a flat file is written by one process)")
-        return _write_flat(entries, total, output, job, progress, t0)
+        return _write_flat(entries, total, output, job, progress, t0, keep_going)
     if replace is None:
         replace = selected is None
-    return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0)
+    return _write_clips(entries, total, output, job, jobs, bool(replace), stitch, progress, t0, keep_going)
+
+
+def _skip_or_raise(failed: Dict[int, str], error: FrameError, keep_going: bool) -> None:
+    """Keeps `error` in `failed` when the call keeps going, else raises it."""
+    if not keep_going:
+        raise error
+    failed[error.frame] = str(error)
+
+
+def _nothing_written(failed: Dict[int, str]) -> Error:
+    """The error of a call that wrote no frame: the first failure when every frame failed."""
+    if failed:
+        first = min(failed)
+        return InputError(f"no frame could be written ({len(failed)} failed); the first: {failed[first]}")
+    return InputError("no frames to write")
 
 
 def _report(progress, warned: Dict[int, List[str]], done, total, frame, item, info, gap: Optional[str] = None) -> None:
@@ -759,11 +782,12 @@ def _report(progress, warned: Dict[int, List[str]], done, total, frame, item, in
         )
 
 
-def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> SequenceResult:
+def _write_flat(entries, total, output: Path, job: Job, progress, t0, keep_going: bool = False) -> SequenceResult:
     _atomic.sweep(output.parent if str(output.parent) else Path("."))
     layer = MeshLayer(job.settings, {"layout": "flat"})
     seen = set()
     warned: Dict[int, List[str]] = {}
+    failed: Dict[int, str] = {}
     try:
         for done, entry in enumerate(entries, 1):
             _check_stop()
@@ -773,6 +797,10 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
             t = time.perf_counter()
             try:
                 frame_mesh = produce(entry.item, job)
+            except Exception as e:
+                _skip_or_raise(failed, frame_error(entry.number, _label(entry.item), e), keep_going)
+                continue
+            try:
                 layer.add(frame_mesh, entry.number)
             except Exception as e:
                 raise frame_error(entry.number, _label(entry.item), e) from e
@@ -784,14 +812,17 @@ def _write_flat(entries, total, output: Path, job: Job, progress, t0) -> Sequenc
             del frame_mesh
             _report(progress, warned, done, total, entry.number, entry.item, info, entry.gap)
         if not layer.frames:
-            raise InputError("no frames to write")
+            raise _nothing_written(failed)
         _check_stop()
         layer.export(output)
         schema = sorted(layer.schema.values())
         frames = sorted(layer.frames)
     finally:
         layer.release()
-    return SequenceResult(output, "flat", frames, frames, None, schema, time.perf_counter() - t0, dict(sorted(warned.items())))
+    return SequenceResult(
+        output, "flat", frames, frames, None, schema, time.perf_counter() - t0, dict(sorted(warned.items())),
+        failed=dict(sorted(failed.items())),
+    )
 
 
 #: Root-file suffixes whose clips folders coincide for one stem (``fluid.clips/``).
@@ -868,7 +899,9 @@ def _check_workers(pool, pids: set, done: int) -> None:
             raise Error(f"a worker process ended while writing a frame{how}; killed for memory?") from None
 
 
-def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0) -> SequenceResult:
+def _write_clips(
+    entries, total, output: Path, job: Job, jobs: int, replace: bool, stitch_after: bool, progress, t0, keep_going: bool = False
+) -> SequenceResult:
     folder = _clips_folder_for_writing(output, replace)
     created = not folder.exists()
     try:
@@ -879,6 +912,13 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
     _atomic.sweep(output.parent if str(output.parent) else Path("."))
     staged: Dict[int, Tuple[Path, Path]] = {}
     warned: Dict[int, List[str]] = {}
+    failed: Dict[int, str] = {}
+
+    def skip(frame: int, error: FrameError) -> None:
+        _skip_or_raise(failed, error, keep_going)
+        tmp, _ = staged.pop(frame)
+        _atomic.discard(tmp)
+
     try:
         if jobs > 1:
             entries = list(entries)
@@ -910,7 +950,8 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                         break
                     _check_stop()
                     if err is not None:
-                        raise frame_error(frame, labels[frame], err)
+                        skip(frame, frame_error(frame, labels[frame], err))
+                        continue
                     done += 1
                     _report(progress, warned, done, total, frame, labels[frame], info, gaps.get(frame))
         else:
@@ -923,10 +964,11 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                 try:
                     info = write_clip(entry.number, entry.item, staged[entry.number][0], job)
                 except Exception as e:
-                    raise frame_error(entry.number, _label(entry.item), e) from e
+                    skip(entry.number, frame_error(entry.number, _label(entry.item), e))
+                    continue
                 _report(progress, warned, done, total, entry.number, entry.item, info, entry.gap)
         if not staged:
-            raise InputError("no frames to write")
+            raise _nothing_written(failed)
 
         _check_stop()
         # Commit: rename the staged frames into place and restitch, under the lock.
@@ -946,9 +988,13 @@ def _write_clips(entries, total, output: Path, job: Job, jobs: int, replace: boo
                 result.written = written
                 result.seconds = time.perf_counter() - t0
                 result.warnings = dict(sorted(warned.items()))
+                result.failed = dict(sorted(failed.items()))
                 return result
             committed = sorted(_committed_clips(output))
-            return SequenceResult(output, "clips", written, committed, folder, [], time.perf_counter() - t0, dict(sorted(warned.items())))
+            return SequenceResult(
+                output, "clips", written, committed, folder, [], time.perf_counter() - t0, dict(sorted(warned.items())),
+                failed=dict(sorted(failed.items())),
+            )
     except BaseException:
         for tmp, _ in staged.values():
             _atomic.discard(tmp)
