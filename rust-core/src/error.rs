@@ -105,6 +105,9 @@ fn needed_text(bytes: u64) -> String {
 /// "at least" of a remedy such as "a grid factor of at least 0.0352 fits" must hold): a
 /// factor such as 0.000412 must not print as 0.000.
 pub(crate) fn three_digits(x: f64) -> String {
+    if !(x > 0.0 && x.is_finite()) {
+        return format!("{x}");
+    }
     let decimals = (2 - x.log10().floor() as i64).max(0) as usize;
     let scale = 10f64.powi(decimals as i32);
     // Less a hair, so that a value already on three digits (0.0349 is 349.00000000000006
@@ -124,6 +127,8 @@ mod tests {
         assert_eq!(three_digits(0.5), "0.500");
         assert_eq!(three_digits(12.34), "12.4");
         assert_eq!(three_digits(0.10004), "0.101");
+        assert_eq!(three_digits(0.0), "0");
+        assert_eq!(three_digits(f64::INFINITY), "inf");
         assert_eq!(three_digits(1234.0), "1234");
     }
 

@@ -301,6 +301,9 @@ def test_connectivity_that_is_not_whole_numbers_is_refused():
         isobar.FeMesh.from_arrays(grid.points, grid.celltypes, grid.cell_offsets, conn)
     with pytest.raises(isobar.InvalidArgumentError, match=r"cell_types\[0\] is 300"):
         isobar.FeMesh.from_arrays(grid.points, [300], grid.cell_offsets, grid.cell_connectivity)
+    with pytest.raises(isobar.InvalidArgumentError, match=r"degrees\[0\] is -1, outside 0\.\.4294967295"):
+        isobar.FeMesh.from_arrays(grid.points, grid.celltypes, grid.cell_offsets, grid.cell_connectivity,
+                                  degrees=[[-1, 2, 2]])
     # A pyramid is named as one.
     points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], dtype=float)
     with pytest.raises(isobar.InvalidInputError, match=r"cell 0 has VTK type 14 \(a pyramid\)"):

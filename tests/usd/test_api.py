@@ -271,9 +271,16 @@ def test_frames_rewritten_with_other_settings_are_named_by_stitch_and_check(cli,
     problems = isobar_usd.check(out)
     assert [(p.severity, p.check) for p in problems] == [("warning", "settings")], problems
     assert "frame(s) 26 with" in problems[0].message
-    # The same settings again: nothing to say.
+    # The same settings again, or with only a larger memory budget (what an over-budget
+    # error asks for), or through Python with a default spelled out: nothing to say.
     run_cli(cli, "sph", dam_frames / "frame_####.vtk", *CLI_DAM, "-o", out, "--frames", "26", "-q")
     assert isobar_usd.stitch(out).notes == [] and isobar_usd.check(out) == []
+    proc = run_cli(cli, "sph", dam_frames / "frame_####.vtk", *CLI_DAM, "--memory-budget", "2", "-o", out,
+                   "--frames", "26", "-q")
+    assert "warning" not in proc.stderr and isobar_usd.check(out) == [], proc.stderr
+    result = isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, 0.6, frames="26", kernel="cubic",
+                                       method="correctors", **DAM)
+    assert result.notes == [] and isobar_usd.check(out) == []
 
 
 def test_parallel_jobs_write_the_same_bytes(tmp_path):
@@ -454,3 +461,12 @@ def test_an_isovalue_the_field_never_crosses_is_a_warning(cli, tmp_path, dam_fra
     assert sorted(result.warnings) == [1, 26]
     assert all(len(texts) == 1 and texts[0].startswith("no surface at isovalue") for texts in result.warnings.values())
     assert {p.frame: p.warnings for p in progress} == result.warnings
+
+
+def test_check_reports_a_corrupt_frame_layer_instead_of_raising(tmp_path, dam_frames):
+    out = tmp_path / "broken.usd"
+    isobar_usd.write_sequence(dam_frames / "frame_####.vtk", out, 0.6, **DAM)
+    isobar_usd.clip_path(out, 26).write_bytes(b"PXR-USDC" + b"\0" * 64)
+    problems = isobar_usd.check(out)
+    assert any(p.severity == "error" and p.check == "clips" and "broken.0026.usdc cannot be read" in p.message
+               for p in problems), problems

@@ -179,25 +179,35 @@ def _clip_settings_problems(prim) -> List[Problem]:
     another isovalue, h or attributes."""
     from pxr import Usd
 
-    from .errors import StitchError
     from .layers import mixed_settings, read_record
+    from .sequence import extraction_defaults
 
     clips = Usd.ClipsAPI(prim)
     assets = clips.GetClipAssetPaths()
     if not assets:
         return []
+    from .errors import StitchError
+
     anchor = prim.GetStage().GetRootLayer()
+    where = str(prim.GetPath())
+    problems = []
     extractions = {}
     for k, asset in enumerate(assets):
         path = anchor.ComputeAbsolutePath(asset.path)
         try:
             record = read_record(Path(path))
-        except StitchError:  # not written by isobar_usd, or unreadable: nothing to compare
+        except StitchError:  # another writer's layer: nothing to compare
+            continue
+        except Exception as e:  # noqa: BLE001 - Tf.ErrorException: a truncated or foreign file
+            first = next((line.strip() for line in str(e).splitlines() if line.strip()), type(e).__name__)
+            problems.append(Problem("error", "clips", where, None, f"frame layer {path} cannot be read: {first}"))
             continue
         frame = record.frames[0] if len(record.frames) == 1 else k
         extractions[frame] = record.info.get("extraction")
-    mixed = mixed_settings(extractions)
-    return [Problem("warning", "settings", str(prim.GetPath()), None, mixed)] if mixed else []
+    mixed = mixed_settings(extractions, extraction_defaults)
+    if mixed:
+        problems.append(Problem("warning", "settings", where, None, mixed))
+    return problems
 
 
 def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_frames: Optional[int] = None) -> List[Problem]:
@@ -222,16 +232,30 @@ def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_fra
     if stage is None:
         return [Problem("error", "open", os.fspath(path), None, "USD could not open the stage")]
     problems: List[Problem] = []
+
+    def unreadable(check: str, where: str, e: Exception) -> Problem:
+        # USD raises (Tf.ErrorException) where a layer it composes cannot be read, e.g.
+        # a truncated frame layer of the clips: a finding, not a crash of the check.
+        first = next((line.strip() for line in str(e).splitlines() if line.strip()), type(e).__name__)
+        return Problem("error", check, where, None, f"USD could not read a layer: {first}")
+
     if validators:
-        problems += _validator_problems(stage)
+        try:
+            problems += _validator_problems(stage)
+        except Exception as e:  # noqa: BLE001
+            problems.append(unreadable("validators", "/", e))
     if not stage.HasAuthoredTimeCodeRange():
         problems.append(Problem("warning", "stage", "/", None, "no startTimeCode/endTimeCode"))
     for prim in stage.Traverse():
-        problems += _clip_settings_problems(prim)
-        if prim.IsA(UsdGeom.Mesh):
-            problems += _mesh_problems(UsdGeom.Mesh(prim), max_frames)
-        elif prim.IsA(UsdGeom.Points):
-            problems += _points_problems(UsdGeom.Points(prim))
+        where = str(prim.GetPath())
+        try:
+            problems += _clip_settings_problems(prim)
+            if prim.IsA(UsdGeom.Mesh):
+                problems += _mesh_problems(UsdGeom.Mesh(prim), max_frames)
+            elif prim.IsA(UsdGeom.Points):
+                problems += _points_problems(UsdGeom.Points(prim))
+        except Exception as e:  # noqa: BLE001
+            problems.append(unreadable("mesh", where, e))
     return problems
 
 

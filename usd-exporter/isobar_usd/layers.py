@@ -8,7 +8,7 @@ import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -339,27 +339,41 @@ def read_record(path: Path) -> LayerRecord:
     return LayerRecord(Path(path), frames, schema, settings, data)  # type: ignore[arg-type]
 
 
-def mixed_settings(extractions: Mapping[int, Optional[str]]) -> Optional[str]:
+#: Extraction options that do not change the surface: frames differing only in them are
+#: not mixed (a re-run with a larger memory budget is what an over-budget error asks for).
+SURFACE_NEUTRAL_OPTIONS = ("memory_budget", "backend")
+
+
+def mixed_settings(
+    extractions: Mapping[int, Optional[str]], defaults: Optional[Callable[[str], Mapping[str, Any]]] = None
+) -> Optional[str]:
     """A sentence naming the frames extracted with other settings than most frames were
     (each frame's record's ``extraction``: isovalue and options), or None when they all
     agree. Frames with no record of it (meshes given in memory) are left out. A re-run of
     some frames with another isovalue, h or --attributes otherwise pops in the shot
-    without a word."""
-    groups: Dict[str, List[int]] = {}
-    for frame, text in sorted(extractions.items()):
-        if text:
-            groups.setdefault(text, []).append(frame)
-    if len(groups) < 2:
-        return None
-    ordered = sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[1][0]))
-    common_text, common_frames = ordered[0]
+    without a word. `defaults(method)` fills the options a frame left out, so a default
+    spelled out and one left out agree; options that do not change the surface
+    (:data:`SURFACE_NEUTRAL_OPTIONS`) are not compared."""
 
     def parsed(text: str) -> Dict:
         try:
             value = json.loads(text)
         except ValueError:
             return {"settings": text}
-        return value if isinstance(value, dict) else {"settings": value}
+        if not isinstance(value, dict):
+            return {"settings": value}
+        if defaults is not None:
+            value = {**defaults(str(value.get("method", "correctors"))), **value}
+        return {k: v for k, v in value.items() if k not in SURFACE_NEUTRAL_OPTIONS}
+
+    groups: Dict[str, List[int]] = {}
+    for frame, text in sorted(extractions.items()):
+        if text:
+            groups.setdefault(json.dumps(parsed(text), sort_keys=True, default=str), []).append(frame)
+    if len(groups) < 2:
+        return None
+    ordered = sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[1][0]))
+    common_text, common_frames = ordered[0]
 
     def frames_of(frames: List[int]) -> str:
         shown = ", ".join(map(str, frames[:10]))

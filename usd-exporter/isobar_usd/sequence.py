@@ -120,6 +120,22 @@ def _extract_parameters() -> List[str]:
     return ["method"] + _signature(isobar.extract) + adaptive_only
 
 
+def extraction_defaults(method: str) -> Dict[str, Any]:
+    """The options `method` ("correctors" or "adaptive") takes when not given, as a
+    frame record's ``extraction`` holds them (JSON), so that a frame written with a
+    default left out compares equal to one that spelled it."""
+    import isobar
+
+    function = isobar.extract_adaptive if method == "adaptive" else isobar.extract
+    defaults = {
+        name: p.default
+        for name, p in inspect.signature(function).parameters.items()
+        if name in _signature(function) and p.default is not inspect.Parameter.empty
+    }
+    defaults["method"] = method
+    return json.loads(json.dumps(defaults, default=str))
+
+
 def check_extract_options(options: Mapping[str, Any]) -> Dict[str, Any]:
     """The options for :func:`isobar.extract` (or, with ``method="adaptive"``,
     :func:`isobar.extract_adaptive`); unknown names raise InputError."""
@@ -1100,7 +1116,7 @@ def _stitch_locked(
         point_counts=counts,
     )
     frames = sorted(clips)
-    mixed = mixed_settings(extractions)
+    mixed = mixed_settings(extractions, extraction_defaults)
     return SequenceResult(output, "clips", [], frames, folder, entries, notes=[mixed] if mixed else [])
 
 

@@ -119,7 +119,7 @@ class FeMesh:
             raise InvalidArgumentError(f"offsets has {offs.shape[0]} entries for {types.shape[0]} cells; it needs cells + 1")
         deg_ptr = None
         if degrees is not None:
-            deg = _contiguous(degrees, np.uint32, "degrees").reshape(-1)
+            deg = _integers(degrees, np.uint32, "degrees")
             if deg.shape[0] != 3 * types.shape[0]:
                 raise InvalidArgumentError(f"degrees has {deg.shape[0]} values for {types.shape[0]} cells; it needs 3 a cell")
             deg_ptr = deg.ctypes.data_as(POINTER(c_uint32))

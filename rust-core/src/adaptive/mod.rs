@@ -278,25 +278,27 @@ fn check_grid_budget(field: &SphField, grid: &CoarseGrid, params: &Params) -> Re
         return Ok(());
     }
     // Cells scale with 1 / grid factor³, but the padding does not shrink with them and
-    // counts are whole: from the cube-root guess, coarser until the grid fits.
-    let mut factor = params.grid_factor * (needed as f64 / params.memory_budget as f64).cbrt();
-    for _ in 0..64 {
+    // counts are whole: from the cube-root guess, coarser until the grid fits. The
+    // coarsest grids keep a few cells a side, so a budget below theirs fits none.
+    let fits = |factor: f64| {
         let coarser = Params {
             grid_factor: factor,
             ..params.clone()
         };
-        match grid_for(field, &coarser) {
-            Ok(g) if grid_bytes(&g, &coarser) > params.memory_budget => factor *= 1.02,
-            _ => break,
-        }
-    }
+        grid_for(field, &coarser).is_ok_and(|g| grid_bytes(&g, &coarser) <= params.memory_budget)
+    };
+    let guess = params.grid_factor * (needed as f64 / params.memory_budget.max(1) as f64).cbrt();
+    let remedy = (0..200)
+        .map(|k| guess * 1.02f64.powi(k))
+        .find(|&factor| fits(factor))
+        .map_or_else(
+            || "no grid factor fits this budget".to_string(),
+            |factor| format!("a grid factor of at least {} fits", three_digits(factor)),
+        );
     Err(Error::OverBudget {
         what: format!(
-            "a coarse grid of {}×{}×{} cells (a grid factor of at least {} fits)",
-            grid.cells[0],
-            grid.cells[1],
-            grid.cells[2],
-            three_digits(factor)
+            "a coarse grid of {}×{}×{} cells ({remedy})",
+            grid.cells[0], grid.cells[1], grid.cells[2]
         ),
         needed_bytes: needed,
         budget_bytes: params.memory_budget,

@@ -410,6 +410,11 @@ fn bad_parameters_and_level_maps_are_refused() {
     };
     let e = extract_sph(&field, &tiny, &mut Progress::none()).unwrap_err();
     assert!(matches!(e, Error::OverBudget { .. }), "{e}");
+    // No grid is that small (a few coarse cells a side remain): said so, not a factor.
+    assert!(
+        e.to_string().contains("no grid factor fits this budget"),
+        "{e}"
+    );
     // A budget that holds the level step's arrays but not the level arrays of every cell
     // at level 1 (levels only rise) is refused before the level step, which took minutes
     // on a fine grid before the same refusal.

@@ -253,20 +253,20 @@ pub extern "C" fn isobar_fe_mesh_add_array(
     guard(|| {
         // SAFETY: the caller promises a live handle not used by another thread meanwhile.
         let m = unsafe { mesh.as_mut() }.ok_or_else(|| invalid("mesh", "must not be NULL"))?;
-        let completions = &m.mesh.completions;
+        // Checked and read as every host array is, then completed by the mesh over the
+        // points it made for serendipity cells.
+        let mut read = Vec::new();
         add_array(
-            &mut m.mesh.point_data,
-            completions.given(),
+            &mut read,
+            m.mesh.given_points(),
             "points",
             name,
             count,
             components,
-            |len| {
-                let mut values = slice(data, len, "data")?.to_vec();
-                completions.complete(&mut values, components);
-                Ok(values)
-            },
+            |len| Ok(slice(data, len, "data")?.to_vec()),
         )?;
+        m.mesh
+            .add_point_array(read.pop().expect("add_array adds one array"))?;
         m.names = names_of(&m.mesh.point_data);
         Ok(())
     })

@@ -75,7 +75,11 @@ pub(super) fn check_surface_size(
             "a grid factor of at least {}",
             three_digits(fitting_cell / field.min_h())
         ),
-        Some(_) => format!("a cell size of at least {fitting_cell:.3e}"),
+        // Four significant digits, rounded up ("at least").
+        Some(_) => format!(
+            "a cell size of at least {:.3e}",
+            fitting_cell * (1.0 + 5e-4)
+        ),
     };
     Err(Error::OverBudget {
         what: format!(

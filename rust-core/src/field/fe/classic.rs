@@ -396,6 +396,13 @@ pub(crate) fn to_lagrange(
             ));
         }
         let nodes = &connectivity[start..end];
+        // Against the points the caller gave: a made point must not stand in for an
+        // index out of range (the mesh checks again, against every point).
+        if let Some(&p) = nodes.iter().find(|&&p| p as usize >= given) {
+            return Err(format!(
+                "cell {c} refers to point {p}, but there are {given} points"
+            ));
+        }
         let Some(k) = classic(ty) else {
             cells.types.push(ty);
             cells.connectivity.extend_from_slice(nodes);
@@ -411,17 +418,18 @@ pub(crate) fn to_lagrange(
                 nodes.len()
             ));
         }
-        if let Some(&p) = nodes.iter().find(|&&p| p as usize >= given) {
-            return Err(format!(
-                "cell {c} refers to point {p}, but there are {given} points"
-            ));
-        }
         for s in table.entry(ty).or_insert_with(|| sources(k)).iter() {
             let p = match s {
                 Source::Node(i) => nodes[*i],
                 Source::Made(w) => {
                     let mut key: Vec<u32> = w.iter().map(|&(i, _)| nodes[i]).collect();
                     key.sort_unstable();
+                    if points.len() >= u32::MAX as usize {
+                        return Err(format!(
+                            "cell {c}: the face and body nodes made for the serendipity \
+                             cells take the points past 2^32"
+                        ));
+                    }
                     *made_at.entry(key).or_insert_with(|| {
                         let x = w.iter().map(|&(i, w)| w * points[nodes[i] as usize]).sum();
                         points.push(x);
@@ -613,7 +621,7 @@ mod tests {
         let given = points.len();
         let mut connectivity: Vec<u32> = (0..20).collect();
         connectivity.extend(&second);
-        let mesh = FeMesh::new(
+        let mut mesh = FeMesh::new(
             "two",
             points,
             &[25, 25],
@@ -626,12 +634,16 @@ mod tests {
         // 6 faces and a body each, less the one face they share.
         assert_eq!(mesh.points.len(), given + 2 * 7 - 1);
         assert_eq!(mesh.given_points(), given);
-        assert!(mesh.neighbour(0, 1).is_some(), "the shared face pairs");
-        let mut values: Vec<f64> = mesh.points[..given].iter().map(|&x| quadratic(x)).collect();
-        mesh.completions.complete(&mut values, 1);
+        // An array added later at the given points is completed like the geometry.
+        let q: Vec<f64> = mesh.points[..given].iter().map(|&x| quadratic(x)).collect();
+        mesh.add_point_array(Attribute::scalar("q", q)).unwrap();
+        let added = &mesh.point_data[0].data;
         for (k, &x) in mesh.points.iter().enumerate() {
-            assert!((values[k] - quadratic(x)).abs() < 1e-12, "point {k}");
+            assert!((added[k] - quadratic(x)).abs() < 1e-12, "point {k}");
         }
+        let short = Attribute::scalar("short", vec![0.0; given - 1]);
+        assert!(mesh.add_point_array(short).is_err());
+        assert!(mesh.neighbour(0, 1).is_some(), "the shared face pairs");
     }
 
     #[test]
@@ -667,6 +679,46 @@ mod tests {
         .to_string();
         assert!(
             e.contains("cell 0 has VTK type 14 (a pyramid), which isobar does not read"),
+            "{e}"
+        );
+        // A Lagrange cell beside a serendipity one may not reach the points made for it.
+        let hex20 = classic(25).unwrap();
+        let mut points: Vec<DVec3> = (0..20).map(|i| reference(hex20, i)).collect();
+        points.push(DVec3::new(3.0, 0.0, 0.0));
+        let e = FeMesh::new(
+            "m",
+            points,
+            &[25, 71],
+            &[0, 20, 24],
+            (0..20).chain([20, 1, 3, 21]).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("cell 1 refers to point 21, but there are 21 points"),
+            "{e}"
+        );
+        // A wedge whose triangles run the other way: the hint says how to mend it.
+        let wedge = classic(13).unwrap();
+        let mut flipped: Vec<DVec3> = (0..6).map(|i| reference(wedge, i)).collect();
+        flipped.swap(1, 2);
+        flipped.swap(4, 5);
+        let e = FeMesh::new(
+            "m",
+            flipped,
+            &[13],
+            &[0, 6],
+            (0..6).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("(VTK wedge) is inverted")
+                && e.contains("swap its second and third corners"),
             "{e}"
         );
         // Checks name the cell as given.

@@ -35,10 +35,11 @@ pub struct FeMesh {
     /// The union of `boxes`.
     hull: (DVec3, DVec3),
     /// Arrays given per point (the candidates for the field), completed over the points
-    /// the mesh made itself (see `completions`).
+    /// the mesh made itself (see `completions`): add one with
+    /// [`FeMesh::add_point_array`], which completes it.
     pub point_data: Vec<Attribute>,
     /// The points made for VTK's serendipity cells (after the given ones), and how.
-    pub(crate) completions: Completions,
+    completions: Completions,
     /// Each cell's VTK type as given, where some were linear or quadratic cells (else
     /// empty: the types are the shapes').
     given_types: Vec<u8>,
@@ -253,6 +254,25 @@ impl FeMesh {
     /// come after them, and hosts never see them).
     pub fn given_points(&self) -> usize {
         self.completions.given()
+    }
+
+    /// Adds (or replaces) a point array given at the [`FeMesh::given_points`] points,
+    /// completed over the points the mesh made.
+    pub fn add_point_array(&mut self, mut array: Attribute) -> Result<()> {
+        let given = self.given_points();
+        if array.components == 0 || array.data.len() != given * array.components {
+            return Err(Error::InvalidInput(format!(
+                "{}: point array '{}' has {} values for {given} points × {} components",
+                self.name,
+                array.name,
+                array.data.len(),
+                array.components
+            )));
+        }
+        self.completions.complete(&mut array.data, array.components);
+        self.point_data.retain(|a| a.name != array.name);
+        self.point_data.push(array);
+        Ok(())
     }
 
     /// What error messages call the data (the file it was read from).
@@ -490,8 +510,16 @@ impl FeMesh {
                     } else {
                         "degenerate"
                     };
+                    // Some writers (older meshio versions, some solvers) order a wedge's
+                    // triangles the other way round from VTK 9.
+                    let hint = if det < -floor && shape.kind == Kind::Wedge {
+                        "; a wedge written for VTK's older orientation has each triangle's \
+                         corners the other way round (swap its second and third corners)"
+                    } else {
+                        ""
+                    };
                     return Err(Error::InvalidInput(format!(
-                        "{name}: cell {c} ({what}) is {how}: det J = {det:.3e} at reference point ({:.3}, {:.3}, {:.3})",
+                        "{name}: cell {c} ({what}) is {how}: det J = {det:.3e} at reference point ({:.3}, {:.3}, {:.3}){hint}",
                         u.x,
                         u.y,
                         u.z
