@@ -245,6 +245,48 @@ fn sources(c: &Classic) -> Vec<Source> {
         .collect()
 }
 
+/// How a classic type becomes its Lagrange cell, worked out once per type.
+struct Plan {
+    /// For each Lagrange node, the classic node it is (None: made).
+    given_at: Vec<Option<usize>>,
+    /// The made nodes: Lagrange node index, and weights of the Lagrange nodes (positions
+    /// in the cell's node list) that hold the classic nodes it sums.
+    made: Vec<(usize, Vec<(usize, f64)>)>,
+}
+
+/// The plan of classic type `ty` (cached: built from the shapes once per process).
+fn plan(ty: u8) -> Option<&'static Plan> {
+    static PLANS: std::sync::OnceLock<Vec<Plan>> = std::sync::OnceLock::new();
+    let plans = PLANS.get_or_init(|| {
+        CLASSIC
+            .iter()
+            .map(|c| {
+                let sources = sources(c);
+                let given_at: Vec<Option<usize>> = sources
+                    .iter()
+                    .map(|s| match s {
+                        Source::Node(i) => Some(*i),
+                        Source::Made(_) => None,
+                    })
+                    .collect();
+                let position = |i: usize| given_at.iter().position(|&g| g == Some(i)).unwrap();
+                let made = sources
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(n, s)| match s {
+                        Source::Made(w) => {
+                            Some((n, w.iter().map(|&(i, w)| (position(i), w)).collect()))
+                        }
+                        Source::Node(_) => None,
+                    })
+                    .collect();
+                Plan { given_at, made }
+            })
+            .collect()
+    });
+    CLASSIC.iter().position(|c| c.vtk == ty).map(|k| &plans[k])
+}
+
 /// The weights of the serendipity interpolant of a 20-node hexahedron or a 15-node wedge
 /// at reference point `u`: the standard shape functions, written over the nodes'
 /// parametric coordinates so that they follow the table's order.
@@ -312,13 +354,13 @@ fn serendipity_weights(kind: Kind, nodes: &[[u8; 3]], u: DVec3) -> Vec<(usize, f
 }
 
 /// Points the conversion made (a serendipity cell's face and body nodes), after the given
-/// ones: point `given + k` is the weighted sum `terms[offsets[k]..offsets[k + 1]]` of given
-/// points. Every point array is completed by the same sums.
+/// ones: point `given + k` is made node `m` of cell `c` for `made[k] = (c, m)`, the
+/// weighted sum its type's [`Plan`] names of the cell's nodes. Every point array is
+/// completed by the same sums. Eight bytes a made point, however many nodes it sums.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Completions {
     given: usize,
-    offsets: Vec<usize>,
-    terms: Vec<(u32, f64)>,
+    made: Vec<(u32, u16)>,
 }
 
 impl Completions {
@@ -326,8 +368,7 @@ impl Completions {
     pub(crate) fn none(given: usize) -> Completions {
         Completions {
             given,
-            offsets: vec![0],
-            terms: Vec::new(),
+            made: Vec::new(),
         }
     }
 
@@ -336,15 +377,25 @@ impl Completions {
         self.given
     }
 
-    /// Appends the made points' values to `data` (the given points' values, item-major).
-    pub(crate) fn complete(&self, data: &mut Vec<f64>, components: usize) {
+    /// Appends the made points' values to `data` (the given points' values, item-major),
+    /// reading each cell's Lagrange nodes from `nodes` and its given VTK type from `ty`.
+    pub(crate) fn complete<'a>(
+        &self,
+        data: &mut Vec<f64>,
+        components: usize,
+        nodes: impl Fn(usize) -> &'a [u32],
+        ty: impl Fn(usize) -> u8,
+    ) {
         debug_assert_eq!(data.len(), self.given * components);
-        data.reserve((self.offsets.len().saturating_sub(1)) * components);
-        for k in 0..self.offsets.len().saturating_sub(1) {
+        data.reserve(self.made.len() * components);
+        for &(c, m) in &self.made {
+            let plan = plan(ty(c as usize)).expect("made in a classic cell");
+            let cell = nodes(c as usize);
             for j in 0..components {
-                let v = self.terms[self.offsets[k]..self.offsets[k + 1]]
+                let v = plan.made[m as usize]
+                    .1
                     .iter()
-                    .map(|&(p, w)| w * data[p as usize * components + j])
+                    .map(|&(at, w)| w * data[cell[at] as usize * components + j])
                     .sum();
                 data.push(v);
             }
@@ -376,7 +427,6 @@ pub(crate) fn to_lagrange(
         return Ok(None);
     }
     let given = points.len();
-    let mut table: FxHashMap<u8, Vec<Source>> = FxHashMap::default();
     let mut cells = LagrangeCells {
         types: Vec::with_capacity(types.len()),
         offsets: Vec::with_capacity(types.len() + 1),
@@ -384,9 +434,10 @@ pub(crate) fn to_lagrange(
         degrees: Vec::with_capacity(types.len()),
     };
     let mut made = Completions::none(given);
-    // A made point by the given points it sums (sorted): a face node is made once for the
-    // two cells that share the face, so their interpolants stay equal across it.
-    let mut made_at: FxHashMap<Vec<u32>, u32> = FxHashMap::default();
+    // A face's made node by the points of that face (sorted; a hexahedron's and a wedge's
+    // quadrilateral faces sum eight): made once for the two cells that share the face, so
+    // their interpolants stay equal across it. Body nodes belong to one cell.
+    let mut on_face: FxHashMap<[u32; 8], u32> = FxHashMap::default();
     cells.offsets.push(0);
     for (c, &ty) in types.iter().enumerate() {
         let (start, end) = (offsets[c], offsets[c + 1]);
@@ -403,7 +454,7 @@ pub(crate) fn to_lagrange(
                 "cell {c} refers to point {p}, but there are {given} points"
             ));
         }
-        let Some(k) = classic(ty) else {
+        let (Some(k), Some(plan)) = (classic(ty), plan(ty)) else {
             cells.types.push(ty);
             cells.connectivity.extend_from_slice(nodes);
             cells.offsets.push(cells.connectivity.len());
@@ -418,28 +469,47 @@ pub(crate) fn to_lagrange(
                 nodes.len()
             ));
         }
-        for s in table.entry(ty).or_insert_with(|| sources(k)).iter() {
-            let p = match s {
-                Source::Node(i) => nodes[*i],
-                Source::Made(w) => {
-                    let mut key: Vec<u32> = w.iter().map(|&(i, _)| nodes[i]).collect();
-                    key.sort_unstable();
-                    if points.len() >= u32::MAX as usize {
-                        return Err(format!(
-                            "cell {c}: the face and body nodes made for the serendipity \
-                             cells take the points past 2^32"
-                        ));
-                    }
-                    *made_at.entry(key).or_insert_with(|| {
-                        let x = w.iter().map(|&(i, w)| w * points[nodes[i] as usize]).sum();
-                        points.push(x);
-                        made.terms.extend(w.iter().map(|&(i, w)| (nodes[i], w)));
-                        made.offsets.push(made.terms.len());
-                        (points.len() - 1) as u32
-                    })
+        let first = cells.connectivity.len();
+        cells.connectivity.extend(
+            plan.given_at
+                .iter()
+                .map(|g| g.map_or(u32::MAX, |i| nodes[i])),
+        );
+        for (m, (n, weights)) in plan.made.iter().enumerate() {
+            let cell = &cells.connectivity[first..];
+            let mut make = || -> Result<u32, String> {
+                if points.len() >= u32::MAX as usize {
+                    return Err(format!(
+                        "cell {c}: the face and body nodes made for the serendipity cells \
+                         take the points past 2^32"
+                    ));
                 }
+                let x = weights
+                    .iter()
+                    .map(|&(at, w)| w * points[cell[at] as usize])
+                    .sum();
+                points.push(x);
+                made.made.push((c as u32, m as u16));
+                Ok((points.len() - 1) as u32)
             };
-            cells.connectivity.push(p);
+            let p = if weights.len() <= 8 {
+                let mut key = [u32::MAX; 8];
+                for (slot, &(at, _)) in key.iter_mut().zip(weights) {
+                    *slot = cell[at];
+                }
+                key.sort_unstable();
+                match on_face.get(&key) {
+                    Some(&p) => p,
+                    None => {
+                        let p = make()?;
+                        on_face.insert(key, p);
+                        p
+                    }
+                }
+            } else {
+                make()?
+            };
+            cells.connectivity[first + n] = p;
         }
         cells.types.push(k.kind.vtk_type());
         cells.offsets.push(cells.connectivity.len());

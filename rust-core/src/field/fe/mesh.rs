@@ -150,9 +150,6 @@ impl FeMesh {
             ),
         };
         let degrees = degrees.as_deref();
-        for a in &mut point_data {
-            completions.complete(&mut a.data, a.components);
-        }
         let mut shapes: Vec<Shape> = Vec::new();
         let mut cell_shape = Vec::with_capacity(types.len());
         for (c, &ty) in types.iter().enumerate() {
@@ -234,11 +231,15 @@ impl FeMesh {
             weld: Vec::new(),
             boxes: Vec::new(),
             hull: (DVec3::ZERO, DVec3::ZERO),
-            point_data,
+            point_data: Vec::new(),
             completions,
             given_types,
             name: name.to_string(),
         };
+        for a in &mut point_data {
+            mesh.complete(&mut a.data, a.components);
+        }
+        mesh.point_data = point_data;
         mesh.check_elements(name)?;
         mesh.boxes = mesh.cell_boxes();
         mesh.hull = mesh
@@ -269,10 +270,16 @@ impl FeMesh {
                 array.components
             )));
         }
-        self.completions.complete(&mut array.data, array.components);
+        self.complete(&mut array.data, array.components);
         self.point_data.retain(|a| a.name != array.name);
         self.point_data.push(array);
         Ok(())
+    }
+
+    /// Appends to `data` (values at the given points) those at the points the mesh made.
+    fn complete(&self, data: &mut Vec<f64>, components: usize) {
+        self.completions
+            .complete(data, components, |c| self.nodes(c), |c| self.given_types[c]);
     }
 
     /// What error messages call the data (the file it was read from).
