@@ -22,6 +22,7 @@
 #include "IsobarBlock.h"
 #include "IsobarLines.h"
 #include "IsobarRanks.h"
+#include "IsobarProgress.h"
 #include "IsobarSettings.h"
 #include "isobar.h"
 
@@ -189,13 +190,7 @@ void vtkIsobarFESamples::Fail(const std::string& message)
 //------------------------------------------------------------------------------
 bool vtkIsobarFESamples::ReportProgress(double fraction, const char* phase)
 {
-  if (fraction >= 1.0 || fraction - this->LastProgress >= 0.01 || fraction < this->LastProgress)
-  {
-    this->LastProgress = fraction;
-    this->SetProgressText(phase);
-    this->UpdateProgress(fraction);
-  }
-  return this->GetAbortExecute() != 0;
+  return IsobarReportProgress(this, this->LastProgress, fraction, phase);
 }
 
 //------------------------------------------------------------------------------

@@ -27,6 +27,7 @@
 #include "IsobarBlock.h"
 #include "IsobarLines.h"
 #include "IsobarRanks.h"
+#include "IsobarProgress.h"
 #include "IsobarSettings.h"
 #include "isobar.h"
 
@@ -799,14 +800,7 @@ void vtkIsobarSPHIsosurface::Fail(const std::string& message)
 //------------------------------------------------------------------------------
 bool vtkIsobarSPHIsosurface::ReportProgress(double fraction, const char* phase)
 {
-  // The core reports often; VTK observers only need percent steps and phase changes.
-  if (fraction >= 1.0 || fraction - this->LastProgress >= 0.01 || fraction < this->LastProgress)
-  {
-    this->LastProgress = fraction;
-    this->SetProgressText(phase);
-    this->UpdateProgress(fraction);
-  }
-  return this->GetAbortExecute() != 0;
+  return IsobarReportProgress(this, this->LastProgress, fraction, phase);
 }
 
 //------------------------------------------------------------------------------

@@ -14,6 +14,7 @@
 #include "vtkPolyData.h"
 
 #include "IsobarBlock.h"
+#include "IsobarProgress.h"
 #include "IsobarSettings.h"
 #include "isobar.h"
 
@@ -113,13 +114,7 @@ struct vtkIsobarVolumeSliderProgress
 //------------------------------------------------------------------------------
 bool vtkIsobarVolumeSlider::ReportProgress(double fraction, const char* phase)
 {
-  if (fraction >= 1.0 || fraction - this->LastProgress >= 0.01 || fraction < this->LastProgress)
-  {
-    this->LastProgress = fraction;
-    this->SetProgressText(phase);
-    this->UpdateProgress(fraction);
-  }
-  return this->GetAbortExecute() != 0;
+  return IsobarReportProgress(this, this->LastProgress, fraction, phase);
 }
 
 //------------------------------------------------------------------------------
