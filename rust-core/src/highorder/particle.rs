@@ -1,8 +1,10 @@
 //! One particle: its reference-space position in a cell and what the field says there;
-//! projection onto F = C (eq. 1, in reference space) and moves across cells.
+//! projection onto F = C (eq. 1, in reference space) and moves across cells. Where the
+//! surface meets the mesh's boundary, projections and moves that would leave the mesh are
+//! held on the boundary faces instead, so the surface is sampled up to its edge.
 
 use crate::field::fe::curvature::curvature_magnitude;
-use crate::field::fe::{FeMesh, Scratch};
+use crate::field::fe::{FeMesh, Kind, Scratch, INSIDE_SLACK};
 use glam::{DMat3, DVec3};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -84,13 +86,22 @@ impl Surface<'_> {
                     energy: 0.0,
                 });
             }
-            let mut du = -r * e.grad_ref / g2;
-            // A Newton step longer than half a cell is not to be trusted.
-            let len = du.length();
-            if len > 0.5 {
-                du *= 0.5 / len;
-            }
-            (cell, u) = self.mesh.relocate(cell, u + du, sc)?;
+            let du = newton_step(r, e.grad_ref, e.grad_ref.length_squared());
+            (cell, u) = match self.mesh.relocate(cell, u + du, sc) {
+                Some(next) => next,
+                // The step leaves the mesh: the surface meets the mesh's boundary here,
+                // and is followed on the faces the step would cross (Newton on the
+                // field restricted to them) instead of being lost.
+                None => {
+                    let kind = self.mesh.shape(cell).kind;
+                    let step = within(kind, u, |held| {
+                        let g = held.along(e.grad_ref);
+                        let g2 = g.length_squared();
+                        (g2 > 1e-12 * e.grad_ref.length_squared()).then(|| newton_step(r, g, g2))
+                    })?;
+                    (cell, u + step)
+                }
+            };
         }
         None
     }
@@ -105,6 +116,75 @@ impl Surface<'_> {
     /// The particle moved by the world displacement `dx` (mapped to reference space by K,
     /// eq. 21) and projected back.
     pub fn moved(&self, p: &Particle, dx: DVec3, sc: &mut Scratch) -> Option<Particle> {
-        self.project(p.cell as usize, p.u + p.k * dx, p.lambda, sc)
+        let du = p.k * dx;
+        let cell = p.cell as usize;
+        let (cell, u) = match self.mesh.relocate(cell, p.u + du, sc) {
+            Some(next) => next,
+            // A particle pushed out of the mesh slides along its boundary.
+            None => {
+                let kind = self.mesh.shape(cell).kind;
+                (cell, p.u + within(kind, p.u, |held| Some(held.along(du)))?)
+            }
+        };
+        self.project(cell, u, p.lambda, sc)
+    }
+}
+
+/// The Newton step −r g/|g|² (`g2` = |g|²), no longer than half a cell: a longer one is not
+/// to be trusted.
+fn newton_step(r: f64, g: DVec3, g2: f64) -> DVec3 {
+    let du = -r * g / g2;
+    let len = du.length();
+    if len > 0.5 {
+        du * (0.5 / len)
+    } else {
+        du
+    }
+}
+
+/// The faces of a reference domain a step is held on: their orthonormalised inward
+/// normals.
+#[derive(Default)]
+struct Held {
+    normals: [DVec3; 3],
+    count: usize,
+}
+
+impl Held {
+    /// `v` without its components along the held faces' normals.
+    fn along(&self, v: DVec3) -> DVec3 {
+        self.normals[..self.count]
+            .iter()
+            .fold(v, |v, n| v - v.dot(*n) * *n)
+    }
+
+    /// Holds the step on one more face; false when its normal is already spanned.
+    fn hold(&mut self, normal: DVec3) -> bool {
+        let t = self.along(normal);
+        if self.count == 3 || t.length_squared() < 1e-18 {
+            return false;
+        }
+        self.normals[self.count] = t.normalize();
+        self.count += 1;
+        true
+    }
+}
+
+/// A step from `u` that stays in the reference domain of `kind` (an active-set method):
+/// `step(held)` proposes one with the held faces' normal components removed; each face the
+/// proposal crosses is held in turn, until one stays inside. `None` when `step` gives up
+/// or the faces leave no direction (a corner).
+fn within(kind: Kind, u: DVec3, step: impl Fn(&Held) -> Option<DVec3>) -> Option<DVec3> {
+    let mut held = Held::default();
+    loop {
+        let du = step(&held)?;
+        match kind.crossed_face(u, du, INSIDE_SLACK) {
+            None => return Some(du),
+            Some(f) => {
+                if !held.hold(kind.face_normal(f)) {
+                    return None;
+                }
+            }
+        }
     }
 }

@@ -26,6 +26,7 @@ mod shape;
 mod tests;
 
 pub use basis::BasisValues;
+pub(crate) use locate::INSIDE_SLACK;
 pub use mesh::{Evaluation, FeMesh, Scratch};
 pub use probe::{probe, Hit};
 pub use search::CellIndex;

@@ -135,6 +135,43 @@ impl Kind {
         }
     }
 
+    /// The unit inward normal of face `f` (the gradient of its [`Kind::face_distances`]
+    /// entry, normalised).
+    pub fn face_normal(self, f: usize) -> DVec3 {
+        let third = 1.0 / 3.0_f64.sqrt();
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        match (self, f) {
+            (Kind::Hexahedron, _) => {
+                let sign = if f.is_multiple_of(2) { 1.0 } else { -1.0 };
+                let mut n = DVec3::ZERO;
+                n[f / 2] = sign;
+                n
+            }
+            (Kind::Tetrahedron, 0) => DVec3::Y,
+            (Kind::Tetrahedron, 1) => DVec3::splat(-third),
+            (Kind::Tetrahedron, 2) => DVec3::X,
+            (Kind::Tetrahedron, _) => DVec3::Z,
+            (Kind::Wedge, 0) => DVec3::Z,
+            (Kind::Wedge, 1) => DVec3::NEG_Z,
+            (Kind::Wedge, 2) => DVec3::Y,
+            (Kind::Wedge, 3) => DVec3::new(-half, -half, 0.0),
+            (Kind::Wedge, _) => DVec3::X,
+        }
+    }
+
+    /// The first face the step from `u` to `u + du` leaves the reference domain through
+    /// (by more than `slack`), if any. Faces the step does not move away from are not
+    /// counted: a point held on a face may sit a rounding error outside it.
+    pub fn crossed_face(self, u: DVec3, du: DVec3, slack: f64) -> Option<usize> {
+        let (before, nf) = self.face_distances(u);
+        let (after, _) = self.face_distances(u + du);
+        (0..nf)
+            .filter(|&f| after[f] < -slack && after[f] < before[f])
+            .map(|f| (f, before[f].max(0.0) / (before[f].max(0.0) - after[f])))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(f, _)| f)
+    }
+
     /// The reference centroid.
     pub fn centroid(self) -> DVec3 {
         match self {
