@@ -145,17 +145,19 @@ fn broken_files_are_named_errors() {
             "point 99",
         ),
         (
+            // A mirrored cell beside an upright one (a mesh mirrored as a whole is read).
             "inverted.vtu",
             vtu(
                 &pts.iter()
-                    .map(|p| DVec3::new(-p.x, p.y, p.z))
+                    .copied()
+                    .chain(pts.iter().map(|p| DVec3::new(-p.x - 1.0, p.y, p.z)))
                     .collect::<Vec<_>>(),
-                &[72],
-                &[0, 27],
-                &all,
+                &[72, 72],
+                &[0, 27, 54],
+                &(0..54).collect::<Vec<_>>(),
                 "",
             ),
-            "inverted",
+            "cell 1 (Lagrange hexahedron of order 2) is inverted",
         ),
     ];
     for (name, text, want) in cases {

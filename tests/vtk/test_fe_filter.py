@@ -19,6 +19,7 @@ from harness import Errors, test  # noqa: E402
 from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
 from vtkmodules.vtkCommonCore import vtkCommand  # noqa: E402
 from vtkmodules.vtkCommonDataModel import vtkUnstructuredGrid  # noqa: E402
+from vtkmodules.vtkFiltersCore import vtkAppendFilter  # noqa: E402
 from vtkmodules.vtkFiltersSources import vtkCellTypeSource  # noqa: E402
 from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader  # noqa: E402
 
@@ -178,17 +179,28 @@ def test_bad_inputs_give_an_error_naming_the_problem_and_empty_output():
     f.Update()
     assert f.GetOutput().GetNumberOfPoints() == 0
     assert "array 'arrow' has 3 components" in f.GetErrorMessage(), f.GetErrorMessage()
-    # Mirrored points: every element inverted; the core names cell 0.
-    bad = vtkUnstructuredGrid()
-    bad.DeepCopy(grid)
-    x = vtk_to_numpy(bad.GetPoints().GetData()).astype(np.float64).copy()
-    x[:, 0] *= -1
-    bad.GetPoints().SetData(numpy_to_vtk(x, deep=1))
-    f = samples_filter(bad, median_p(grid))
+    # Mirrored points: every element mirrored, which is read; after the upright cells, the
+    # core names the first mirrored one.
+    mirrored = vtkUnstructuredGrid()
+    mirrored.DeepCopy(grid)
+    x = vtk_to_numpy(mirrored.GetPoints().GetData()).astype(np.float64).copy()
+    x[:, 0] = 10.0 - x[:, 0]
+    mirrored.GetPoints().SetData(numpy_to_vtk(x, deep=1))
+    f = samples_filter(mirrored, median_p(grid))
+    Errors(f)
+    f.Update()
+    assert f.GetOutput().GetNumberOfPoints() > 0, f.GetErrorMessage()
+    append = vtkAppendFilter()
+    append.AddInputData(grid)
+    append.AddInputData(mirrored)
+    append.Update()
+    f = samples_filter(append.GetOutput(), median_p(grid))
     Errors(f)
     f.Update()
     assert f.GetOutput().GetNumberOfPoints() == 0
-    assert "cell 0" in f.GetErrorMessage(), f.GetErrorMessage()
+    first = f"cell {grid.GetNumberOfCells()} "
+    message = f.GetErrorMessage()
+    assert first in message and "inverted" in message and "while cell 0 is not" in message, message
     # Pyramids have no Lagrange form the core reads: the message names the cell and its
     # type. Linear hexahedra (read as order-1 Lagrange cells) are sampled.
     for cell_type, error in ((14, "cell 0 has VTK type 14 (a pyramid)"), (12, "")):

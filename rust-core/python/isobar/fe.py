@@ -64,8 +64,9 @@ def _integers(values, dtype, what: str) -> np.ndarray:
 class FeMesh:
     """A mesh of Lagrange cells with named per-point arrays, held by the core.
 
-    The core checks every element when the mesh is made (an inverted or degenerate cell
-    is refused, naming it) and builds the face adjacency the particle system walks.
+    The core checks every element when the mesh is made (a degenerate cell, one inverted
+    in part, or a mirrored cell among upright ones is refused, naming it; a mesh mirrored
+    as a whole is read) and builds the face adjacency the particle system walks.
     """
 
     __slots__ = ("_handle", "_finalizer", "__weakref__")

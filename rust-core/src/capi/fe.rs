@@ -948,16 +948,32 @@ mod tests {
         let good = arrays(&mesh);
         let mut handle = std::ptr::null_mut();
 
-        // Mirror the cell in x: every Jacobian turns negative.
+        // Pull the body node through the top face: along z the mapping runs back near it,
+        // so det J is negative there and positive below (a mesh mirrored as a whole, with
+        // det J negative throughout, is read).
         let mut inverted = arrays(&mesh);
-        for p in inverted.points.chunks_exact_mut(3) {
-            p[0] = -p[0];
-        }
+        let body = inverted
+            .points
+            .chunks_exact_mut(3)
+            .find(|p| p.iter().all(|c| c.abs() < 1e-12))
+            .unwrap();
+        body[2] = 5.0;
         assert_eq!(
             create(&inverted, &mut handle),
             IsobarStatus::ErrInvalidInput
         );
-        assert!(message().contains("cell 0"), "{}", message());
+        assert!(
+            message().contains("cell 0") && message().contains("inverted"),
+            "{}",
+            message()
+        );
+        let mut mirrored = arrays(&mesh);
+        for p in mirrored.points.chunks_exact_mut(3) {
+            p[0] = -p[0];
+        }
+        assert_eq!(create(&mirrored, &mut handle), IsobarStatus::Ok);
+        isobar_fe_mesh_free(handle);
+        handle = std::ptr::null_mut();
 
         let mut out_of_range = arrays(&mesh);
         out_of_range.connectivity[3] = 1_000;

@@ -119,7 +119,8 @@ pub fn sample(
     progress: &mut Progress,
 ) -> Result<(PointSamples, Stats)> {
     check(params)?;
-    let values = field_values(mesh, field)?;
+    let values = field_array(mesh, field)?;
+    let gaps = values.iter().filter(|v| !v.is_finite()).count();
     let spacing = if params.spacing > 0.0 {
         params.spacing
     } else {
@@ -135,6 +136,18 @@ pub fn sample(
         evaluations: AtomicU64::new(0),
     };
     let (mut particles, mut stats) = system::run(&surface, params, spacing, progress)?;
+    if gaps > 0 {
+        let first = values.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        stats.warnings.insert(
+            0,
+            format!(
+                "{}: field '{field}' has {gaps} non-finite {} (the first at point {first}): \
+                 the cells that touch one are left out",
+                mesh.name(),
+                if gaps == 1 { "value" } else { "values" }
+            ),
+        );
+    }
     if !surface.curvature_in_projection {
         particles
             .par_iter_mut()
@@ -146,9 +159,6 @@ pub fn sample(
     stats.particles = particles.len();
     stats.evaluations = surface.evaluations.into_inner();
     stats.max_residual = particles.iter().map(|p| p.residual).fold(0.0, f64::max);
-    if particles.is_empty() {
-        stats.warnings.push(crate::mesh::no_surface(params.iso));
-    }
     Ok((to_samples(&particles, params, spacing), stats))
 }
 
@@ -190,8 +200,22 @@ fn check(p: &Params) -> Result<()> {
 /// point array with several components, parsed as `isobar sph --field` parses it
 /// ([`Quantity::parse`]); an array whose whole name is `name` wins. A magnitude
 /// ("NAME:mag") is refused: |v| of the element's vector polynomial is not a polynomial of
-/// the element, and interpolating the nodes' magnitudes would be another field.
+/// the element, and interpolating the nodes' magnitudes would be another field. Every
+/// value must be finite (see [`field_array`] for a field with gaps).
 pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<Cow<'m, [f64]>> {
+    let values = field_array(mesh, name)?;
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "{}: field '{name}' has a non-finite value at point {i}",
+            mesh.name()
+        )));
+    }
+    Ok(values)
+}
+
+/// [`field_values`], non-finite values allowed: solvers write NaN where a region is
+/// masked, and the sampler leaves out the cells that touch one.
+pub(crate) fn field_array<'m>(mesh: &'m FeMesh, name: &str) -> Result<Cow<'m, [f64]>> {
     let missing = |wanted: &str| {
         let available = mesh
             .point_data
@@ -244,12 +268,6 @@ pub(crate) fn field_values<'m>(mesh: &'m FeMesh, name: &str) -> Result<Cow<'m, [
         }
         Some(k) => a.data.iter().skip(k).step_by(a.components).copied().collect(),
     };
-    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-        return Err(Error::InvalidInput(format!(
-            "{}: field '{name}' has a non-finite value at point {i}",
-            mesh.name()
-        )));
-    }
     Ok(values)
 }
 

@@ -1,54 +1,117 @@
-//! Initial particles: in every cell whose nodal values straddle C, a small reference-space
+//! Initial particles: in every cell the field may cross C, a small reference-space
 //! lattice is scanned for sign changes along its axes (the lattice of the cell's nodes
 //! when that one finds none) and each crossing is projected onto the surface. Cells are
 //! visited in parallel and their seeds joined in cell order.
+//!
+//! A cell may cross C when its nodal values straddle it, or, with every node on one side,
+//! when the field's Bernstein coefficients do (a sphere's cap through a face, between the
+//! nodes). Such a cell with no lattice crossing is searched by projecting its lattice point
+//! nearest in value; a cell whose coefficients lie on one side provably holds no surface.
 
 use super::particle::{Particle, Surface};
 use crate::field::fe::{Kind, Scratch};
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Projected seeds of every cell, in cell order, with initial step `lambda`.
-pub(crate) fn seeds(surface: &Surface, lambda: f64) -> Vec<Particle> {
-    let mesh = surface.mesh;
-    let per_cell: Vec<Vec<Particle>> = (0..mesh.cell_count())
-        .into_par_iter()
-        .map_init(Scratch::default, |sc, c| cell_seeds(surface, c, lambda, sc))
-        .collect();
-    per_cell.into_iter().flatten().collect()
+/// The seeds, and where the surface may be.
+pub(crate) struct Seeds {
+    /// Projected seeds of every cell, in cell order.
+    pub particles: Vec<Particle>,
+    /// How many cells the field may cross (0 proves that it never crosses C).
+    pub cells: usize,
+    /// The largest side of the box of those cells: the surface's extent, where the seeds
+    /// may be bunched in a corner of it.
+    pub extent: f64,
 }
 
-fn cell_seeds(surface: &Surface, c: usize, lambda: f64, sc: &mut Scratch) -> Vec<Particle> {
+/// The seeds of every cell, with initial step `lambda`.
+pub(crate) fn seeds(surface: &Surface, lambda: f64) -> Seeds {
+    let mesh = surface.mesh;
+    let per_cell: Vec<(usize, Vec<Particle>)> = (0..mesh.cell_count())
+        .into_par_iter()
+        .map_init(Scratch::default, |sc, c| {
+            Some((c, cell_seeds(surface, c, lambda, sc)?))
+        })
+        .flatten()
+        .collect();
+    let (lo, hi) = per_cell.iter().fold(
+        (DVec3::INFINITY, DVec3::NEG_INFINITY),
+        |(lo, hi), &(c, _)| {
+            let (a, b) = mesh.cell_box(c);
+            (lo.min(a), hi.max(b))
+        },
+    );
+    Seeds {
+        cells: per_cell.len(),
+        extent: if per_cell.is_empty() {
+            0.0
+        } else {
+            (hi - lo).max_element()
+        },
+        particles: per_cell.into_iter().flat_map(|(_, s)| s).collect(),
+    }
+}
+
+/// The seeds of cell `c`; `None` when the field provably does not cross C in it.
+fn cell_seeds(surface: &Surface, c: usize, lambda: f64, sc: &mut Scratch) -> Option<Vec<Particle>> {
     let nodes = surface.mesh.nodes(c);
+    // A cell touching a non-finite value (a masked region) holds no surface; its field
+    // is NaN throughout, so nothing moves into it either.
+    if nodes
+        .iter()
+        .any(|&n| !surface.values[n as usize].is_finite())
+    {
+        return None;
+    }
     let below = nodes
         .iter()
         .filter(|&&n| surface.values[n as usize] < surface.iso)
         .count();
-    if below == 0 || below == nodes.len() {
-        return Vec::new();
+    let straddles = below != 0 && below != nodes.len();
+    if !straddles {
+        let (lo, hi) = surface.mesh.field_range(surface.values, c, sc);
+        if !(lo < surface.iso && surface.iso <= hi) {
+            return None;
+        }
     }
     let order = surface.mesh.shape(c).order;
     let probe = (order.iter().max().copied().unwrap_or(1) + 1).max(3);
-    let seeds = lattice_seeds(surface, c, probe, lambda, sc);
+    let (seeds, nearest) = lattice_seeds(surface, c, probe, lambda, sc);
+    if !seeds.is_empty() {
+        return Some(seeds);
+    }
+    if !straddles {
+        // Every lattice point on one side: Newton from the one nearest in value walks
+        // towards C (held on the boundary faces it meets) and finds the surface if the
+        // field reaches C there. The coefficients' range may be wider than the field's,
+        // so finding none is no error.
+        return Some(
+            surface
+                .project(c, nearest, lambda, sc)
+                .into_iter()
+                .collect(),
+        );
+    }
     let nodal = node_lattice(order);
-    if !seeds.is_empty() || probe % nodal == 0 {
-        return seeds;
+    if probe % nodal == 0 {
+        return Some(seeds);
     }
     // The nodes straddle C but no probe edge crosses it: a small surface around a node
     // the probe lattice misses (a sphere about the body node of one quadratic cell). The
     // node lattice holds every node, so one of its edges crosses.
-    lattice_seeds(surface, c, nodal, lambda, sc)
+    Some(lattice_seeds(surface, c, nodal, lambda, sc).0)
 }
 
 /// Seeds from the sign changes of F* − C along the axes of an m-per-axis lattice of
-/// reference points of cell `c`, each crossing projected onto the surface.
+/// reference points of cell `c`, each crossing projected onto the surface, and the
+/// lattice point where |F* − C| is least.
 fn lattice_seeds(
     surface: &Surface,
     c: usize,
     m: usize,
     lambda: f64,
     sc: &mut Scratch,
-) -> Vec<Particle> {
+) -> (Vec<Particle>, DVec3) {
     let iso = surface.iso;
     let shape = surface.mesh.shape(c);
     let m = m as i32;
@@ -76,6 +139,17 @@ fn lattice_seeds(
             }
         }
     }
+    let nearest = value
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| !v.is_nan())
+        .min_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .map(|(n, _)| {
+            let n = n as i32;
+            let side = side as i32;
+            at(n % side, (n / side) % side, n / (side * side))
+        })
+        .unwrap_or_else(|| shape.kind.centroid());
     let mut out = Vec::new();
     for k in 0..=m {
         for j in 0..=m {
@@ -102,7 +176,7 @@ fn lattice_seeds(
             }
         }
     }
-    out
+    (out, nearest)
 }
 
 impl Surface<'_> {

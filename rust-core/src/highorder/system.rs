@@ -79,15 +79,26 @@ pub(crate) fn run(
     let mut stats = Stats::default();
     progress.phase("seeding", 0.0, 0.1)?;
     let lambda0 = 0.1 * spacing * spacing;
-    let seeds = seed::seeds(surface, lambda0);
+    let seed::Seeds {
+        particles: seeds,
+        cells,
+        extent,
+    } = seed::seeds(surface, lambda0);
     stats.seeds = seeds.len();
     if seeds.is_empty() {
+        stats.warnings.push(if cells == 0 {
+            crate::mesh::no_surface(surface.iso)
+        } else {
+            format!(
+                "no sample at isovalue {}: the field may cross it in {cells} {}, but no \
+                 projection onto it reached the tolerance {:e}",
+                surface.iso,
+                if cells == 1 { "cell" } else { "cells" },
+                surface.tolerance
+            )
+        });
         return Ok((seeds, stats));
     }
-    let (lo, hi) = seeds.iter().fold((seeds[0].x, seeds[0].x), |(a, b), p| {
-        (a.min(p.x), b.max(p.x))
-    });
-    let extent = (hi - lo).max_element();
     let top = coarsest_level(params.levels, spacing, extent, seeds.len());
     let mut particles = thin(seeds, spacing * 2f64.powi(top as i32));
     let mut sc = Scratch::default();
@@ -140,7 +151,8 @@ const MAX_SAMPLES: usize = 1 << 24;
 /// population about one spacing a round, so from seeds far apart at a fine coarsest level
 /// it never covers the surface (a plane through one cell at s = 1/100 of it was sampled in
 /// patches around its 16 seeds). `gap` guesses the seeds' distance as if they were spread
-/// evenly over a square of the extent's side.
+/// evenly over a square of the extent's side. The extent is that of the cells the field may
+/// cross, not of the seeds: a cap through one face of one cell was seeded at one end only.
 fn coarsest_level(levels: usize, spacing: f64, extent: f64, seeds: usize) -> usize {
     let gap = extent / (seeds as f64).sqrt();
     let at = |level: usize| spacing * 2f64.powi(level as i32);

@@ -477,3 +477,166 @@ fn a_small_sphere_inside_one_cell_is_found() {
         }
     }
 }
+
+/// A sphere that leaves the mesh through its faces is sampled up to its edge: one
+/// quadratic cell over [-1, 1]³ (every lattice crossing lies on a boundary face, where
+/// the first Newton step used to leave the mesh and drop the seed) and 2³ cells (the
+/// samples next to the boundary used to be pushed out).
+#[test]
+fn a_surface_cut_by_the_mesh_boundary_is_covered_to_its_edge() {
+    let r = 1.2;
+    let mut next = crate::test_rng::unit(5);
+    let points: Vec<DVec3> = std::iter::from_fn(|| {
+        let z = 2.0 * next() - 1.0;
+        let a = 2.0 * std::f64::consts::PI * next();
+        let ring = (1.0 - z * z).sqrt();
+        Some(r * DVec3::new(ring * a.cos(), ring * a.sin(), z))
+    })
+    .filter(|q| q.abs().max_element() <= 1.0)
+    .take(5_000)
+    .collect();
+    for n in [1, 2] {
+        let mesh = grid_mesh(n, 2, |y| y, |y| y.length_squared());
+        let params = Params {
+            iso: r * r,
+            spacing: 0.08,
+            ..Params::default()
+        };
+        let (s, stats) = run(&mesh, &params);
+        assert!(stats.warnings.is_empty(), "{n}³ cells: {stats:?}");
+        for x in &s.positions {
+            let x = DVec3::from(*x);
+            assert!(
+                x.abs().max_element() <= 1.0 + 1e-8,
+                "{n}³ cells: {x} outside"
+            );
+            let d2 = x.length_squared();
+            assert!((d2 - r * r).abs() <= params.tolerance * (1.0 + 1e-9), "{x}");
+        }
+        let share = uncovered(&s, &points);
+        assert_eq!(
+            share,
+            0.0,
+            "{n}³ cells: {share} uncovered of {} samples",
+            s.len()
+        );
+    }
+}
+
+/// A sphere's cap through a face between the nodes: every node of the quadratic cell over
+/// [-1, 1]³ lies outside the sphere of radius 0.6 about (1.5, 0.5, 0.5) (the nearest are
+/// √0.75 away), but the field's Bernstein coefficients straddle C, so the cell is searched
+/// and the cap is sampled to its edge. Below the field's least value the warning says it
+/// never crosses, which the coefficients prove.
+#[test]
+fn a_cap_between_the_nodes_is_found() {
+    let (c, r) = (DVec3::new(1.5, 0.5, 0.5), 0.6);
+    let mesh = grid_mesh(1, 2, |y| y, |y| y.distance_squared(c));
+    let params = Params {
+        iso: r * r,
+        spacing: 0.03,
+        ..Params::default()
+    };
+    let (s, stats) = run(&mesh, &params);
+    assert!(stats.warnings.is_empty(), "{stats:?}");
+    for x in &s.positions {
+        let x = DVec3::from(*x);
+        // Held points may lie the reference slack (1e-9, 2e-9 here) outside.
+        assert!(x.x <= 1.0 + 1e-8, "{x} outside the cell");
+        assert!((x.distance_squared(c) - r * r).abs() <= params.tolerance * (1.0 + 1e-9));
+    }
+    let mut next = crate::test_rng::unit(9);
+    let cap: Vec<DVec3> = std::iter::from_fn(|| {
+        let z = 2.0 * next() - 1.0;
+        let a = 2.0 * std::f64::consts::PI * next();
+        let ring = (1.0 - z * z).sqrt();
+        Some(c + r * DVec3::new(ring * a.cos(), ring * a.sin(), z))
+    })
+    .filter(|q| q.x <= 1.0)
+    .take(2_000)
+    .collect();
+    let share = uncovered(&s, &cap);
+    assert_eq!(
+        share,
+        0.0,
+        "{share} of the cap uncovered by {} samples",
+        s.len()
+    );
+
+    // Below the least value 0.25 the coefficients (down to -1.25 here: the range of
+    // (y - 0.5)² over [-1, 1] is bounded by -0.75 per axis) still admit a crossing, so the
+    // warning says no projection reached one; below them, that the field never crosses.
+    for (iso, warning) in [
+        (
+            0.2,
+            "no sample at isovalue 0.2: the field may cross it in 1 cell,".to_string(),
+        ),
+        (-2.0, crate::mesh::no_surface(-2.0)),
+    ] {
+        let (s, stats) = run(&mesh, &Params { iso, ..params });
+        assert_eq!(s.len(), 0);
+        assert_eq!(stats.warnings.len(), 1);
+        assert!(stats.warnings[0].starts_with(&warning), "{stats:?}");
+    }
+}
+
+/// A NaN in the field (a masked region) leaves out the cells that touch it, with a
+/// warning: with the NaN at a corner of the box far from the sphere, the samples are those
+/// of the whole field; with it on the sphere's cells, no sample lies in a cell touching it.
+#[test]
+fn a_non_finite_value_leaves_out_the_cells_that_touch_it() {
+    let r = 0.7;
+    let params = Params {
+        iso: r * r,
+        spacing: 0.08,
+        ..Params::default()
+    };
+    let whole = grid_mesh(4, 2, |y| y, |y| y.length_squared());
+    let (reference, _) = run(&whole, &params);
+    let masked = |at: DVec3| {
+        grid_mesh(
+            4,
+            2,
+            |y| y,
+            move |y| {
+                if y.distance(at) < 1e-9 {
+                    f64::NAN
+                } else {
+                    y.length_squared()
+                }
+            },
+        )
+    };
+    let corner = masked(DVec3::ONE);
+    let (s, stats) = run(&corner, &params);
+    assert_eq!(s.positions, reference.positions);
+    assert_eq!(stats.warnings.len(), 1, "{stats:?}");
+    assert!(
+        stats.warnings[0].contains("field 'f' has 1 non-finite value (the first at point")
+            && stats.warnings[0].contains("left out"),
+        "{stats:?}"
+    );
+    // A node on the sphere's path: (0.5, 0, 0) is shared by the cells around x = 0.5.
+    let on = masked(DVec3::new(0.5, 0.0, 0.0));
+    let nan_point = on
+        .points
+        .iter()
+        .position(|p| p.distance(DVec3::new(0.5, 0.0, 0.0)) < 1e-9)
+        .unwrap() as u32;
+    let (s, _) = run(&on, &params);
+    assert!(s.len() > 100);
+    let element = &s
+        .attributes
+        .iter()
+        .find(|a| a.name == "Element")
+        .unwrap()
+        .data;
+    for (x, &c) in s.positions.iter().zip(element) {
+        assert!(
+            !on.nodes(c as usize).contains(&nan_point),
+            "sample {x:?} in cell {c}"
+        );
+        let d = DVec3::from(*x).length();
+        assert!((d * d - r * r).abs() <= params.tolerance * (1.0 + 1e-9));
+    }
+}

@@ -388,16 +388,20 @@ impl Completions {
     ) {
         debug_assert_eq!(data.len(), self.given * components);
         data.reserve(self.made.len() * components);
-        for &(c, m) in &self.made {
-            let plan = plan(ty(c as usize)).expect("made in a classic cell");
-            let cell = nodes(c as usize);
-            for j in 0..components {
-                let v = plan.made[m as usize]
-                    .1
-                    .iter()
-                    .map(|&(at, w)| w * data[cell[at] as usize * components + j])
-                    .sum();
-                data.push(v);
+        // The points one cell made are listed together: its plan is looked up once.
+        for run in self.made.chunk_by(|a, b| a.0 == b.0) {
+            let c = run[0].0 as usize;
+            let plan = plan(ty(c)).expect("made in a classic cell");
+            let cell = nodes(c);
+            for &(_, m) in run {
+                for j in 0..components {
+                    let v = plan.made[m as usize]
+                        .1
+                        .iter()
+                        .map(|&(at, w)| w * data[cell[at] as usize * components + j])
+                        .sum();
+                    data.push(v);
+                }
             }
         }
     }
@@ -751,6 +755,23 @@ mod tests {
             e.contains("cell 0 has VTK type 14 (a pyramid), which isobar does not read"),
             "{e}"
         );
+        assert!(!e.contains("Extract Cells By Type"), "{e}");
+        // A boundary triangle beside the volume cells: the message says how to drop it.
+        let e = FeMesh::new(
+            "m",
+            vec![DVec3::ZERO, DVec3::X, DVec3::Y],
+            &[5],
+            &[0, 3],
+            (0..3).collect(),
+            None,
+            Vec::new(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("cell 0 has VTK type 5 (a triangle)") && e.contains("Extract Cells By Type"),
+            "{e}"
+        );
         // A Lagrange cell beside a serendipity one may not reach the points made for it.
         let hex20 = classic(25).unwrap();
         let mut points: Vec<DVec3> = (0..20).map(|i| reference(hex20, i)).collect();
@@ -770,17 +791,19 @@ mod tests {
             e.contains("cell 1 refers to point 21, but there are 21 points"),
             "{e}"
         );
-        // A wedge whose triangles run the other way: the hint says how to mend it.
+        // A wedge whose triangles run the other way, beside an upright one: the hint says
+        // how to mend it.
         let wedge = classic(13).unwrap();
-        let mut flipped: Vec<DVec3> = (0..6).map(|i| reference(wedge, i)).collect();
+        let upright: Vec<DVec3> = (0..6).map(|i| reference(wedge, i)).collect();
+        let mut flipped: Vec<DVec3> = upright.iter().map(|p| *p + DVec3::X * 2.0).collect();
         flipped.swap(1, 2);
         flipped.swap(4, 5);
         let e = FeMesh::new(
             "m",
-            flipped,
-            &[13],
-            &[0, 6],
-            (0..6).collect(),
+            [upright, flipped].concat(),
+            &[13, 13],
+            &[0, 6, 12],
+            (0..12).collect(),
             None,
             Vec::new(),
         )
@@ -791,25 +814,39 @@ mod tests {
                 && e.contains("swap its second and third corners"),
             "{e}"
         );
-        // Checks name the cell as given.
+        // Checks name the cell as given. A mirrored hexahedron alone is a mesh mirrored
+        // as a whole, and is read; after an upright one, it is refused.
         let hex = classic(12).unwrap();
         let cube: Vec<DVec3> = (0..8).map(|i| reference(hex, i)).collect();
         let mirrored: Vec<DVec3> = cube
             .iter()
             .map(|p| p * DVec3::new(-1.0, 1.0, 1.0))
             .collect();
-        let e = FeMesh::new(
+        let alone = FeMesh::new(
             "m",
-            mirrored,
+            mirrored.clone(),
             &[12],
             &[0, 8],
             (0..8).collect(),
             None,
             Vec::new(),
+        );
+        assert!(alone.is_ok(), "{:?}", alone.err());
+        let e = FeMesh::new(
+            "m",
+            [cube.clone(), mirrored].concat(),
+            &[12, 12],
+            &[0, 8, 16],
+            (0..16).collect(),
+            None,
+            Vec::new(),
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("cell 0 (VTK hexahedron) is inverted"), "{e}");
+        assert!(
+            e.contains("cell 1 (VTK hexahedron) is inverted") && e.contains("while cell 0 is not"),
+            "{e}"
+        );
         let mut collapsed = cube.clone();
         collapsed[1] = collapsed[0];
         let e = FeMesh::new(

@@ -3,7 +3,7 @@
 //! eqs. 19–20), element validity and face adjacency.
 
 use super::basis::{outer, BasisValues};
-use super::bernstein::control_map;
+use super::bernstein::{control_map, ControlMap};
 use super::classic::{self, Completions};
 use super::search::PROBE_SLACK;
 use super::shape::{Kind, Shape};
@@ -11,6 +11,8 @@ use crate::error::{Error, Result};
 use crate::field::particles::Attribute;
 use glam::{DMat3, DVec3};
 use rustc_hash::FxHashMap;
+use std::borrow::Cow;
+use std::sync::Arc;
 
 /// No neighbour across a face (the domain boundary).
 pub(crate) const NO_NEIGHBOUR: u32 = u32::MAX;
@@ -21,6 +23,8 @@ pub struct FeMesh {
     pub points: Vec<DVec3>,
     /// Distinct (kind, order) shapes; cells refer to them by index.
     shapes: Vec<Shape>,
+    /// Each shape's Lagrange-to-Bernstein conversion (see `bernstein.rs`).
+    controls: Vec<Arc<ControlMap>>,
     cell_shape: Vec<u16>,
     /// Cell c's nodes are `connectivity[offsets[c]..offsets[c + 1]]`, in VTK order.
     offsets: Vec<usize>,
@@ -75,6 +79,9 @@ impl Evaluation {
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
     basis: BasisValues,
+    /// Control values and a row buffer for [`FeMesh::field_range`].
+    control: Vec<DVec3>,
+    row: Vec<DVec3>,
 }
 
 impl FeMesh {
@@ -133,19 +140,20 @@ impl FeMesh {
             Some(_) => types.to_vec(),
             None => Vec::new(),
         };
+        // The caller's types and degrees are borrowed where no cell was converted.
         let (types, offsets, connectivity, degrees, completions) = match converted {
             Some((cells, completions)) => (
-                cells.types,
+                Cow::Owned(cells.types),
                 cells.offsets,
                 cells.connectivity,
-                Some(cells.degrees),
+                Some(Cow::Owned(cells.degrees)),
                 completions,
             ),
             None => (
-                types.to_vec(),
+                Cow::Borrowed(types),
                 offsets.to_vec(),
                 connectivity,
-                degrees.map(<[_]>::to_vec),
+                degrees.map(Cow::Borrowed),
                 Completions::none(points.len()),
             ),
         };
@@ -157,8 +165,15 @@ impl FeMesh {
                 bad(format!(
                     "cell {c} has VTK type {ty}{}, which isobar does not read: it reads \
                      Lagrange hexahedra, tetrahedra and wedges (72, 71, 73), and tetra, voxel, \
-                     hexahedron, wedge and their quadratic forms (10–13, 24–26, 29, 31, 32)",
-                    unread_name(ty)
+                     hexahedron, wedge and their quadratic forms (10–13, 24–26, 29, 31, 32){}",
+                    unread_name(ty),
+                    if below_3d(ty) {
+                        "; the boundary faces, edges and vertices a mesher writes beside the \
+                         volume cells can be dropped first (ParaView: Extract Cells By Type; \
+                         pyvista: grid.extract_cells_by_type), and a .msh reader skips them"
+                    } else {
+                        ""
+                    }
                 ))
             })?;
             let (start, end) = (offsets[c], offsets[c + 1]);
@@ -223,6 +238,7 @@ impl FeMesh {
         }
         let mut mesh = FeMesh {
             points,
+            controls: shapes.iter().map(control_map).collect(),
             shapes,
             cell_shape,
             offsets,
@@ -316,13 +332,39 @@ impl FeMesh {
         self.boxes[c]
     }
 
+    /// An interval that provably holds the point array `values` over cell `c`: its
+    /// Bernstein coefficients' range (the field is their convex combination, as the cell's
+    /// points are of its control points; see `bernstein.rs`), widened for rounding. The
+    /// nodal values alone do not bound it: a quadratic cell's field dips between nodes.
+    pub fn field_range(&self, values: &[f64], c: usize, scratch: &mut Scratch) -> (f64, f64) {
+        let map = &self.controls[self.cell_shape[c] as usize];
+        let nodes = self.nodes(c);
+        // Relative to the first node's value, as the boxes are relative to its position.
+        let origin = values[nodes[0] as usize];
+        let x = &mut scratch.control;
+        x.clear();
+        x.extend(
+            nodes
+                .iter()
+                .map(|&n| DVec3::new(values[n as usize] - origin, 0.0, 0.0)),
+        );
+        let reach = x.iter().fold(0.0_f64, |r, v| r.max(v.x.abs()));
+        map.control_points(x, &mut scratch.row);
+        let (lo, hi) = x
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v.x), b.max(v.x))
+            });
+        let pad = reach * map.rounding() + (origin.abs() + reach) * (4.0 * f64::EPSILON);
+        (origin + lo - pad, origin + hi + pad)
+    }
+
     /// [`FeMesh::cell_box`] of every cell.
     fn cell_boxes(&self) -> Vec<(DVec3, DVec3)> {
-        let maps: Vec<_> = self.shapes.iter().map(control_map).collect();
         let (mut x, mut row) = (Vec::new(), Vec::new());
         (0..self.cell_count())
             .map(|c| {
-                let map = &maps[self.cell_shape[c] as usize];
+                let map = &self.controls[self.cell_shape[c] as usize];
                 let nodes = self.nodes(c);
                 // Relative to the first node, so rounding scales with the cell's size, not
                 // with its distance from the origin (the Bernstein functions sum to one, so
@@ -456,8 +498,13 @@ impl FeMesh {
         }
     }
 
-    /// Fails naming the first cell whose Jacobian determinant is not positive at one of its
-    /// nodes or its centroid (inverted, flat or collapsed).
+    /// Fails naming the first cell whose Jacobian determinant is not of one sign at its
+    /// nodes and centroid (inverted in part, flat or collapsed). A cell whose determinant is
+    /// negative throughout is mirrored: its node order has the other handedness, which
+    /// nothing here depends on (normals come from the field's gradient), so a mesh whose
+    /// cells are all mirrored is read (pyvista's `load_tetbeam`, a grid with a decreasing
+    /// axis). One with both orientations is refused: a cell turned inside out among
+    /// upright ones is how a bad mesh motion or a wrong node order shows.
     fn check_elements(&self, name: &str) -> Result<()> {
         // The probe points and the basis gradients there depend only on the shape: evaluate
         // them once per shape, so each cell costs only its J = Σ_k x_k ⊗ ∇φ_k sums.
@@ -476,6 +523,28 @@ impl FeMesh {
                     .collect()
             })
             .collect();
+        let inverted = |c: usize, det: f64, u: DVec3, why: &str| {
+            // Some writers (older meshio versions, some solvers) order a wedge's triangles
+            // the other way round from VTK 9.
+            let hint = if self.shape(c).kind == Kind::Wedge {
+                "; a wedge written for VTK's older orientation has each triangle's corners \
+                 the other way round (swap its second and third corners)"
+            } else {
+                ""
+            };
+            Error::InvalidInput(format!(
+                "{name}: cell {c} ({}) is inverted: det J = {det:.3e} at reference point \
+                 ({:.3}, {:.3}, {:.3}){why}{hint}",
+                self.described(c),
+                u.x,
+                u.y,
+                u.z
+            ))
+        };
+        // The first mirrored cell (with its first probe), and the first upright one.
+        let mut mirrored: Option<(usize, f64, DVec3)> = None;
+        let mut upright: Option<usize> = None;
+        let mut dets = Vec::new();
         for c in 0..self.cell_count() {
             let shape = self.shape(c);
             let nodes = self.nodes(c);
@@ -502,37 +571,43 @@ impl FeMesh {
                     }
                 }
             }
-            for (u, gradients) in &probes[self.cell_shape[c] as usize] {
-                // Summed in node order, as `map` does, so det J is the same to the bit.
-                let j = nodes
+            dets.clear();
+            dets.extend(
+                probes[self.cell_shape[c] as usize]
                     .iter()
-                    .zip(gradients)
-                    .fold(DMat3::ZERO, |j, (&n, &g)| {
-                        j + outer(self.points[n as usize], g)
-                    });
-                let det = j.determinant();
-                if det <= floor || det.is_nan() {
-                    let how = if det < -floor {
-                        "inverted"
-                    } else {
-                        "degenerate"
-                    };
-                    // Some writers (older meshio versions, some solvers) order a wedge's
-                    // triangles the other way round from VTK 9.
-                    let hint = if det < -floor && shape.kind == Kind::Wedge {
-                        "; a wedge written for VTK's older orientation has each triangle's \
-                         corners the other way round (swap its second and third corners)"
-                    } else {
-                        ""
-                    };
-                    return Err(Error::InvalidInput(format!(
-                        "{name}: cell {c} ({what}) is {how}: det J = {det:.3e} at reference point ({:.3}, {:.3}, {:.3}){hint}",
-                        u.x,
-                        u.y,
-                        u.z
-                    )));
-                }
+                    .map(|(u, gradients)| {
+                        // Summed in node order, as `map` does, so det J is the same to the bit.
+                        let j = nodes
+                            .iter()
+                            .zip(gradients)
+                            .fold(DMat3::ZERO, |j, (&n, &g)| {
+                                j + outer(self.points[n as usize], g)
+                            });
+                        (j.determinant(), *u)
+                    }),
+            );
+            if dets.iter().all(|&(det, _)| det < -floor) {
+                mirrored.get_or_insert((c, dets[0].0, dets[0].1));
+                continue;
             }
+            upright.get_or_insert(c);
+            if let Some(&(det, u)) = dets.iter().find(|&&(det, _)| det <= floor || det.is_nan()) {
+                if det < -floor {
+                    return Err(inverted(c, det, u, ""));
+                }
+                return Err(Error::InvalidInput(format!(
+                    "{name}: cell {c} ({what}) is degenerate: det J = {det:.3e} at reference \
+                     point ({:.3}, {:.3}, {:.3})",
+                    u.x, u.y, u.z
+                )));
+            }
+        }
+        if let (Some((c, det, u)), Some(up)) = (mirrored, upright) {
+            let why = format!(
+                ", mirrored throughout, while cell {up} is not (a mesh mirrored as a whole is \
+                 read, one with both orientations is not)"
+            );
+            return Err(inverted(c, det, u, &why));
         }
         Ok(())
     }
@@ -625,6 +700,11 @@ impl FeMesh {
 
 /// " (a pyramid)" and the like for VTK cell types people meet that isobar does not read, so
 /// the refusal says what the cell is.
+/// Whether VTK type `ty` is a vertex, line or surface cell.
+fn below_3d(ty: u8) -> bool {
+    matches!(ty, 1..=9 | 21..=23 | 28 | 30 | 34..=36 | 68..=70 | 75..=77)
+}
+
 fn unread_name(ty: u8) -> String {
     let name = match ty {
         1 | 2 => "a vertex",
