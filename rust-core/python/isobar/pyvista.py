@@ -148,12 +148,13 @@ def fe_mesh_from_dataset(grid, arrays: Optional[Iterable[str]] = None) -> FeMesh
     71, 72, 73) or of linear and quadratic tetrahedra, hexahedra, voxels and wedges (read as
     the Lagrange cells of the same functions; see :meth:`isobar.FeMesh.from_arrays`), with
     its ``HigherOrderDegrees`` cell array when present and its numeric point arrays (or
-    only `arrays`). An ``ImageData``, ``RectilinearGrid`` or ``StructuredGrid`` is taken as
-    the unstructured grid of its cells."""
+    only `arrays`). An ``ImageData``, ``RectilinearGrid``, ``StructuredGrid`` or
+    ``ExplicitStructuredGrid`` is taken as the unstructured grid of its cells."""
     pv = _pyvista()
     if not isinstance(grid, pv.DataSet):
         grid = pv.wrap(grid)
-    if isinstance(grid, (pv.ImageData, pv.RectilinearGrid, pv.StructuredGrid)):
+    structured = (pv.ImageData, pv.RectilinearGrid, pv.StructuredGrid, pv.ExplicitStructuredGrid)
+    if isinstance(grid, structured):
         grid = grid.cast_to_unstructured_grid()
     if not isinstance(grid, pv.UnstructuredGrid):
         raise TypeError(f"a finite-element mesh must be a pyvista.UnstructuredGrid, not {type(grid).__name__}")
@@ -188,8 +189,19 @@ def samples_from_unstructured_grid(grid, field: str, iso: float, **kw):
     :func:`fe_mesh_from_dataset` reads) and
     returns the points as ``pv.PolyData`` (see :func:`samples_to_pyvista`); `kw` are the
     options of :func:`isobar.sample_fe` (spacing, rho, tolerance, levels, seed, progress)."""
+    pv = _pyvista()
+    if not isinstance(grid, pv.DataSet):
+        grid = pv.wrap(grid)
+    names = _field_arrays(field)
+    if not any(n in grid.point_data for n in names):
+        cell_array = next((n for n in names if n in grid.cell_data), None)
+        if cell_array is not None:
+            raise InvalidArgumentError(
+                f"field {field!r}: {cell_array!r} is a cell array, and the isosurface needs values "
+                f"at the points; grid.cell_data_to_point_data() interpolates them")
+        names = None  # every point array, so the error lists them
     with quiet_warnings():  # issued below, from the caller's line
-        samples = sample_fe(fe_mesh_from_dataset(grid, arrays=[field]), field, iso, **kw)
+        samples = sample_fe(fe_mesh_from_dataset(grid, arrays=names), field, iso, **kw)
     issue(samples.warnings, stacklevel=2)  # the line that called samples_from_unstructured_grid()
     samples.release()
     return samples_to_pyvista(samples)

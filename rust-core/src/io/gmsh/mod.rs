@@ -385,11 +385,18 @@ impl<'a> Reader<'a> {
             let volume = VOLUME_TYPES.iter().position(|v| v.ty == ty as u32);
             if volume.is_none() {
                 if type_dim == 3 || dim == 3 {
+                    // The incomplete cells' remedy is a gmsh option; a pyramid has none.
+                    let remedy = if type_name.contains("Pyramid") {
+                        "pyramids are not read: mesh without them (no recombination into \
+                         hexahedra next to tetrahedra)"
+                    } else {
+                        "for higher orders, set Mesh.SecondOrderIncomplete = 0"
+                    };
                     return Err(self.err(format!(
                         "{block_at}: elements of type {ty} ({type_name}) are not supported; \
                          only complete Lagrange tetrahedra, hexahedra and prisms (orders gmsh \
                          describes) and the second-order incomplete hexahedra and prisms are \
-                         (for higher orders, set Mesh.SecondOrderIncomplete = 0)"
+                         ({remedy})"
                     )));
                 }
                 out.skipped_lower += n;

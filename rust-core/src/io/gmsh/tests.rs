@@ -261,6 +261,11 @@ fn bad_files_name_the_problem() {
     }
     let e = read_err(text.replacen("\n3 1 29 ", "\n3 1 111 ", 1).as_bytes());
     assert!(e.contains("(incomplete prisms of order 3)"), "{e}");
+    // A pyramid is refused without the advice for incomplete cells, which cannot help it.
+    let e = read_err(text.replacen("\n3 1 29 ", "\n3 1 7 ", 1).as_bytes());
+    assert!(e.contains("type 7 (Pyramid 5)"), "{e}");
+    assert!(e.contains("pyramids are not read"), "{e}");
+    assert!(!e.contains("SecondOrderIncomplete"), "{e}");
 }
 
 /// gmsh orders a hexahedron's nodes recursively: the 8 vertices, the nodes inside each of
