@@ -199,8 +199,7 @@ def _clip_settings_problems(prim) -> List[Problem]:
         except StitchError:  # another writer's layer: nothing to compare
             continue
         except Exception as e:  # noqa: BLE001 - Tf.ErrorException: a truncated or foreign file
-            first = next((line.strip() for line in str(e).splitlines() if line.strip()), type(e).__name__)
-            problems.append(Problem("error", "clips", where, None, f"frame layer {path} cannot be read: {first}"))
+            problems.append(Problem("error", "clips", where, None, f"frame layer {path} cannot be read: {_first_line(e)}"))
             continue
         frame = record.frames[0] if len(record.frames) == 1 else k
         extractions[frame] = record.info.get("extraction")
@@ -208,6 +207,12 @@ def _clip_settings_problems(prim) -> List[Problem]:
     if mixed:
         problems.append(Problem("warning", "settings", where, None, mixed))
     return problems
+
+
+def _first_line(e: Exception) -> str:
+    """The first non-blank line of a USD error (Tf.ErrorException's text runs on with the
+    C++ call site), or the exception's type where it says nothing."""
+    return next((line.strip() for line in str(e).splitlines() if line.strip()), type(e).__name__)
 
 
 def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_frames: Optional[int] = None) -> List[Problem]:
@@ -236,8 +241,7 @@ def check(path: Union[str, "os.PathLike[str]"], validators: bool = True, max_fra
     def unreadable(check: str, where: str, e: Exception) -> Problem:
         # USD raises (Tf.ErrorException) where a layer it composes cannot be read, e.g.
         # a truncated frame layer of the clips: a finding, not a crash of the check.
-        first = next((line.strip() for line in str(e).splitlines() if line.strip()), type(e).__name__)
-        return Problem("error", check, where, None, f"USD could not read a layer: {first}")
+        return Problem("error", check, where, None, f"USD could not read a layer: {_first_line(e)}")
 
     if validators:
         try:
