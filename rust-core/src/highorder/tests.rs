@@ -140,6 +140,18 @@ fn teardrop_samples_lie_on_the_analytic_surface_and_adapt_to_curvature() {
     );
 }
 
+/// Random points uniform on the sphere of radius `r` about `c` (z uniform in [-1, 1], the
+/// angle uniform), from `seed`.
+fn sphere_points(c: DVec3, r: f64, seed: u64) -> impl Iterator<Item = DVec3> {
+    let mut next = crate::test_rng::unit(seed);
+    std::iter::from_fn(move || {
+        let z = 2.0 * next() - 1.0;
+        let a = 2.0 * std::f64::consts::PI * next();
+        let ring = (1.0 - z * z).sqrt();
+        Some(c + r * DVec3::new(ring * a.cos(), ring * a.sin(), z))
+    })
+}
+
 /// The share of `points` (on the surface) outside every sample's disk: farther from
 /// each sample than its radius.
 fn uncovered(s: &PointSamples, points: &[DVec3]) -> f64 {
@@ -170,16 +182,7 @@ fn sample_disks_cover_the_sphere() {
             ..Params::default()
         };
         let (s, _) = run(&mesh, &params);
-        let mut next = crate::test_rng::unit(11);
-        let points: Vec<DVec3> = (0..20_000)
-            .map(|_| {
-                // Uniform on the sphere: z uniform in [-1, 1], angle uniform.
-                let z = 2.0 * next() - 1.0;
-                let a = 2.0 * std::f64::consts::PI * next();
-                let ring = (1.0 - z * z).sqrt();
-                r * DVec3::new(ring * a.cos(), ring * a.sin(), z)
-            })
-            .collect();
+        let points: Vec<DVec3> = sphere_points(DVec3::ZERO, r, 11).take(20_000).collect();
         let share = uncovered(&s, &points);
         assert_eq!(share, 0.0, "spacing {spacing} rho {rho}: {share} uncovered");
         let even = 0.577_350_269_189_625_8 * spacing;
@@ -485,16 +488,10 @@ fn a_small_sphere_inside_one_cell_is_found() {
 #[test]
 fn a_surface_cut_by_the_mesh_boundary_is_covered_to_its_edge() {
     let r = 1.2;
-    let mut next = crate::test_rng::unit(5);
-    let points: Vec<DVec3> = std::iter::from_fn(|| {
-        let z = 2.0 * next() - 1.0;
-        let a = 2.0 * std::f64::consts::PI * next();
-        let ring = (1.0 - z * z).sqrt();
-        Some(r * DVec3::new(ring * a.cos(), ring * a.sin(), z))
-    })
-    .filter(|q| q.abs().max_element() <= 1.0)
-    .take(5_000)
-    .collect();
+    let points: Vec<DVec3> = sphere_points(DVec3::ZERO, r, 5)
+        .filter(|q| q.abs().max_element() <= 1.0)
+        .take(5_000)
+        .collect();
     for n in [1, 2] {
         let mesh = grid_mesh(n, 2, |y| y, |y| y.length_squared());
         let params = Params {
@@ -545,16 +542,10 @@ fn a_cap_between_the_nodes_is_found() {
         assert!(x.x <= 1.0 + 1e-8, "{x} outside the cell");
         assert!((x.distance_squared(c) - r * r).abs() <= params.tolerance * (1.0 + 1e-9));
     }
-    let mut next = crate::test_rng::unit(9);
-    let cap: Vec<DVec3> = std::iter::from_fn(|| {
-        let z = 2.0 * next() - 1.0;
-        let a = 2.0 * std::f64::consts::PI * next();
-        let ring = (1.0 - z * z).sqrt();
-        Some(c + r * DVec3::new(ring * a.cos(), ring * a.sin(), z))
-    })
-    .filter(|q| q.x <= 1.0)
-    .take(2_000)
-    .collect();
+    let cap: Vec<DVec3> = sphere_points(c, r, 9)
+        .filter(|q| q.x <= 1.0)
+        .take(2_000)
+        .collect();
     let share = uncovered(&s, &cap);
     assert_eq!(
         share,
