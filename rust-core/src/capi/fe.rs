@@ -389,7 +389,9 @@ pub extern "C" fn isobar_fe_probe(
         }
         if let Some(out) = reference_out {
             for (o, hit) in out.chunks_exact_mut(3).zip(&hits) {
-                o.copy_from_slice(&hit.map_or([f64::NAN; 3], |h| h.reference.to_array()));
+                o.copy_from_slice(&hit.map_or([f64::NAN; 3], |h| {
+                    m.mesh.given_reference(h.cell, h.reference).to_array()
+                }));
             }
         }
         Ok(())

@@ -120,7 +120,10 @@ pub fn sample(
 ) -> Result<(PointSamples, Stats)> {
     check(params)?;
     let values = field_array(mesh, field)?;
-    let gaps = values.iter().filter(|v| !v.is_finite()).count();
+    // Counted over the caller's points: the points made for serendipity cells inherit
+    // their NaNs.
+    let given = &values[..mesh.given_points()];
+    let gaps = given.iter().filter(|v| !v.is_finite()).count();
     let spacing = if params.spacing > 0.0 {
         params.spacing
     } else {
@@ -137,7 +140,15 @@ pub fn sample(
     };
     let (mut particles, mut stats) = system::run(&surface, params, spacing, progress)?;
     if gaps > 0 {
-        let first = values.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        let first = given.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        // Where the field is missing, "never crosses" proves nothing.
+        let never = crate::mesh::no_surface(params.iso);
+        for w in stats.warnings.iter_mut().filter(|w| **w == never) {
+            *w = format!(
+                "no surface at isovalue {}: the field never crosses it where it is finite",
+                params.iso
+            );
+        }
         stats.warnings.insert(
             0,
             format!(
@@ -159,7 +170,7 @@ pub fn sample(
     stats.particles = particles.len();
     stats.evaluations = surface.evaluations.into_inner();
     stats.max_residual = particles.iter().map(|p| p.residual).fold(0.0, f64::max);
-    Ok((to_samples(&particles, params, spacing), stats))
+    Ok((to_samples(mesh, &particles, params, spacing), stats))
 }
 
 fn check(p: &Params) -> Result<()> {
@@ -271,7 +282,12 @@ pub(crate) fn field_array<'m>(mesh: &'m FeMesh, name: &str) -> Result<Cow<'m, [f
     Ok(values)
 }
 
-fn to_samples(particles: &[particle::Particle], params: &Params, s: f64) -> PointSamples {
+fn to_samples(
+    mesh: &FeMesh,
+    particles: &[particle::Particle],
+    params: &Params,
+    s: f64,
+) -> PointSamples {
     let amax = params.max_density * BETA / s;
     let mut out = PointSamples::default();
     let mut element = Vec::with_capacity(particles.len());
@@ -289,7 +305,7 @@ fn to_samples(particles: &[particle::Particle], params: &Params, s: f64) -> Poin
         out.positions.push(p.x.to_array());
         out.normals.push(p.n.as_vec3().to_array());
         element.push(p.cell as f64);
-        reference.extend(p.u.to_array());
+        reference.extend(mesh.given_reference(p.cell as usize, p.u).to_array());
         curvature.push(p.d);
         energy.push(p.energy);
     }

@@ -19,8 +19,9 @@
 //! permutation, so one table per type is all a type needs.
 
 use super::shape::{Kind, Shape};
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use rustc_hash::FxHashMap;
+use std::sync::OnceLock;
 
 /// One classic VTK cell type and the Lagrange shape that spans its functions.
 struct Classic {
@@ -256,7 +257,7 @@ struct Plan {
 
 /// The plan of classic type `ty` (cached: built from the shapes once per process).
 fn plan(ty: u8) -> Option<&'static Plan> {
-    static PLANS: std::sync::OnceLock<Vec<Plan>> = std::sync::OnceLock::new();
+    static PLANS: OnceLock<Vec<Plan>> = OnceLock::new();
     let plans = PLANS.get_or_init(|| {
         CLASSIC
             .iter()
@@ -415,6 +416,9 @@ pub(crate) struct LagrangeCells {
     /// Per cell, its orders, or zeros where the node count decides (as VTK reads a
     /// Lagrange cell without HigherOrderDegrees).
     pub degrees: Vec<[usize; 3]>,
+    /// The hexahedra read as wedges, in cell order, with their rotations (see
+    /// [`collapsed_to_wedge`]).
+    pub collapsed: Vec<(u32, u8)>,
 }
 
 /// Rewrites the classic cells among `types` as Lagrange cells, appending the points that
@@ -436,6 +440,7 @@ pub(crate) fn to_lagrange(
         offsets: Vec::with_capacity(types.len() + 1),
         connectivity: Vec::with_capacity(connectivity.len()),
         degrees: Vec::with_capacity(types.len()),
+        collapsed: Vec::new(),
     };
     let mut made = Completions::none(given);
     // A face's made node by the points of that face (sorted; a hexahedron's and a wedge's
@@ -458,6 +463,15 @@ pub(crate) fn to_lagrange(
                 "cell {c} refers to point {p}, but there are {given} points"
             ));
         }
+        let wedge;
+        let (ty, nodes) = match collapsed_to_wedge(ty, nodes) {
+            Some((w, rotation)) => {
+                wedge = w;
+                cells.collapsed.push((c as u32, rotation));
+                (VTK_WEDGE, &wedge[..])
+            }
+            None => (ty, nodes),
+        };
         let (Some(k), Some(plan)) = (classic(ty), plan(ty)) else {
             cells.types.push(ty);
             cells.connectivity.extend_from_slice(nodes);
@@ -520,6 +534,112 @@ pub(crate) fn to_lagrange(
         cells.degrees.push(k.order);
     }
     Ok(Some((cells, made)))
+}
+
+/// VTK's linear hexahedron and wedge.
+const VTK_HEXAHEDRON: u8 = 12;
+const VTK_WEDGE: u8 = 13;
+
+/// A linear hexahedron with two parallel edges of one face collapsed (the same point
+/// given for corners 2 and 3 and for 6 and 7, or so under a rotation of the cell) is how
+/// Abaqus, ANSYS and their converters write a wedge. It is read as that wedge, the
+/// triangles being the two faces that hold one collapsed edge each: the trilinear map and
+/// field of the collapsed cell are the wedge's. Returns the wedge's nodes and the rotation
+/// (an index into [`hex_rotations`]) that maps the collapse onto 2 = 3, 6 = 7, whose wedge
+/// is 0 1 2 4 5 6; the node order keeps the hexahedron's handedness. Coincident corners
+/// given as distinct points are not read so: their values may differ.
+fn collapsed_to_wedge(ty: u8, nodes: &[u32]) -> Option<([u32; 6], u8)> {
+    if ty != VTK_HEXAHEDRON || nodes.len() != 8 {
+        return None;
+    }
+    let collapsed: Vec<[usize; 2]> = HEX_EDGES
+        .iter()
+        .copied()
+        .filter(|&[a, b]| nodes[a] == nodes[b])
+        .collect();
+    // Any other repetition (a diagonal, a third edge) is no wedge: the mesh's checks name
+    // the degenerate cell.
+    let repeated = (0..8)
+        .flat_map(|a| (a + 1..8).map(move |b| (a, b)))
+        .filter(|&(a, b)| nodes[a] == nodes[b])
+        .count();
+    if collapsed.len() != 2 || repeated != 2 {
+        return None;
+    }
+    let has = |e: [usize; 2]| collapsed.iter().any(|&c| c == e || c == [e[1], e[0]]);
+    let (k, (r, _)) = hex_rotations()
+        .iter()
+        .enumerate()
+        .find(|(_, (r, _))| has([r[2], r[3]]) && has([r[6], r[7]]))?;
+    Some(([0, 1, 2, 4, 5, 6].map(|i| nodes[r[i]]), k as u8))
+}
+
+/// The parametric coordinates in a collapsed hexahedron (see [`collapsed_to_wedge`]) of
+/// the point at `u` in its wedge: on the face 0 1 2 3 with 2 = 3, the bilinear map
+/// (1−ξ)(1−η)x0 + ξ(1−η)x1 + η x2 is the wedge's (1−r−s)x0 + r x1 + s x2 for r = ξ(1−η),
+/// s = η, and ζ = t; then the rotation takes them to the cell as given.
+pub(crate) fn collapsed_reference(rotation: u8, u: DVec3) -> DVec3 {
+    let (_, m) = &hex_rotations()[rotation as usize];
+    // On the collapsed edge (s = 1) every ξ is the same point.
+    let xi = if u.y < 1.0 { u.x / (1.0 - u.y) } else { 0.0 };
+    let half = DVec3::splat(0.5);
+    *m * (DVec3::new(xi, u.y, u.z) - half) + half
+}
+
+/// The hexahedron's twelve edges by corner (VTK order).
+const HEX_EDGES: [[usize; 2]; 12] = [
+    [0, 1],
+    [1, 2],
+    [2, 3],
+    [3, 0],
+    [4, 5],
+    [5, 6],
+    [6, 7],
+    [7, 4],
+    [0, 4],
+    [1, 5],
+    [2, 6],
+    [3, 7],
+];
+
+/// The 24 rotations of the reference hexahedron about its centre: the corner map (corner i
+/// to corner r[i]) and the matrix. Made from the signed axis permutations of determinant +1.
+fn hex_rotations() -> &'static [([usize; 8], DMat3)] {
+    static ROTATIONS: OnceLock<Vec<([usize; 8], DMat3)>> = OnceLock::new();
+    ROTATIONS.get_or_init(|| {
+        let corners = Kind::Hexahedron.corners();
+        let corner = |p: DVec3| {
+            corners
+                .iter()
+                .position(|c| DVec3::from(*c).distance(p) < 1e-9)
+                .expect("a rotation maps corners to corners")
+        };
+        let mut out = Vec::new();
+        for axes in [
+            [0, 1, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [0, 2, 1],
+            [2, 1, 0],
+            [1, 0, 2],
+        ] {
+            for signs in 0..8 {
+                let m = DMat3::from_cols_array_2d(&[0, 1, 2].map(|col| {
+                    let mut v = [0.0; 3];
+                    v[axes[col]] = if signs >> col & 1 == 1 { -1.0 } else { 1.0 };
+                    v
+                }));
+                if m.determinant() < 0.0 {
+                    continue;
+                }
+                let half = DVec3::splat(0.5);
+                let map =
+                    std::array::from_fn(|i| corner(m * (DVec3::from(corners[i]) - half) + half));
+                out.push((map, m));
+            }
+        }
+        out
+    })
 }
 
 #[cfg(test)]
@@ -864,5 +984,83 @@ mod tests {
             e.contains("cell 0 (VTK hexahedron) is degenerate: its corners 0 and 1 (points 0 and 1) are at the same place"),
             "{e}"
         );
+    }
+
+    /// A hexahedron given with corners 2 = 3 and 6 = 7, and three other collapses of two
+    /// parallel edges of one face, is read as a wedge: the mesh's map at each of its reference points is the trilinear map
+    /// of the hexahedron as given at `given_reference` of that point, and a field trilinear
+    /// in the hexahedron is reproduced. Mirrored, it keeps its handedness (read as a mesh
+    /// mirrored as a whole); with two distinct points at one place, it stays degenerate.
+    #[test]
+    fn a_hexahedron_with_two_collapsed_edges_is_its_wedge() {
+        let hex = classic(12).unwrap();
+        let cube: Vec<DVec3> = (0..8).map(|i| reference(hex, i)).collect();
+        // Bent a little, so no symmetry hides a wrong corner.
+        let bend = |p: DVec3| p + DVec3::new(0.1 * p.y * p.z, 0.05 * p.x, 0.2 * p.x * p.y);
+        let trilinear = |x: &[DVec3], p: DVec3| -> DVec3 {
+            (0..8)
+                .map(|i| {
+                    let c = reference(hex, i);
+                    let w = |a: f64, b: f64| if b == 1.0 { a } else { 1.0 - a };
+                    x[i] * (w(p.x, c.x) * w(p.y, c.y) * w(p.z, c.z))
+                })
+                .sum()
+        };
+        for (a, b) in [
+            ([2, 3], [6, 7]),
+            ([1, 2], [5, 6]),
+            ([4, 7], [5, 6]),
+            ([0, 4], [1, 5]),
+        ] {
+            for mirror in [1.0, -1.0] {
+                let mut x: Vec<DVec3> = cube
+                    .iter()
+                    .map(|&p| bend(p) * DVec3::new(mirror, 1.0, 1.0))
+                    .collect();
+                x[a[1]] = x[a[0]];
+                x[b[1]] = x[b[0]];
+                let mut conn: Vec<u32> = (0..8).collect();
+                conn[a[1]] = a[0] as u32;
+                conn[b[1]] = b[0] as u32;
+                let f: Vec<f64> = x.iter().map(|p| linear(*p)).collect();
+                let mesh = FeMesh::new(
+                    "m",
+                    x.clone(),
+                    &[12],
+                    &[0, 8],
+                    conn,
+                    None,
+                    vec![Attribute {
+                        name: "f".into(),
+                        components: 1,
+                        data: f,
+                    }],
+                )
+                .unwrap_or_else(|e| panic!("{a:?} {b:?} mirror {mirror}: {e}"));
+                assert_eq!(mesh.shape(0).kind, Kind::Wedge);
+                let mut sc = Scratch::default();
+                for u in inside(Kind::Wedge) {
+                    let e = mesh.evaluate(&mesh.point_data[0].data, 0, u, &mut sc);
+                    let given = mesh.given_reference(0, u);
+                    let want = trilinear(&x, given);
+                    assert!(
+                        e.x.distance(want) < 1e-12,
+                        "{a:?} {b:?} mirror {mirror} at {u}: {} vs {want}",
+                        e.x
+                    );
+                    assert!(given.min_element() >= -1e-12 && given.max_element() <= 1.0 + 1e-12);
+                    // A field linear in space is trilinear in the cell: reproduced.
+                    assert!((e.value - linear(e.x)).abs() < 1e-12);
+                }
+            }
+        }
+        // Distinct points at one place: not read as a wedge.
+        let mut x = cube.clone();
+        x[3] = x[2];
+        x[7] = x[6];
+        let e = FeMesh::new("m", x, &[12], &[0, 8], (0..8).collect(), None, Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("degenerate"), "{e}");
     }
 }

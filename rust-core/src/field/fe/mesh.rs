@@ -47,6 +47,9 @@ pub struct FeMesh {
     /// Each cell's VTK type as given, where some were linear or quadratic cells (else
     /// empty: the types are the shapes').
     given_types: Vec<u8>,
+    /// Hexahedra with two collapsed edges, read as wedges: (cell, rotation), in cell order
+    /// (see `classic::collapsed_to_wedge`).
+    collapsed: Vec<(u32, u8)>,
     /// What error messages call the data (the file name).
     name: String,
 }
@@ -90,8 +93,9 @@ impl FeMesh {
     /// optional per-cell `degrees` (VTK's HigherOrderDegrees), and per-point arrays. `name`
     /// is what error messages call the data. Lagrange cells are read as they are, VTK's
     /// linear and quadratic cells as the Lagrange cells of the same functions (see
-    /// `classic.rs`). Checks indices, node counts and that no element is inverted or
-    /// degenerate (det J > 0 at every node).
+    /// `classic.rs`), a linear hexahedron with two collapsed edges as its wedge. Checks
+    /// indices, node counts and that no element is degenerate or inverted (det J of one
+    /// sign at every node; see `check_elements`).
     pub fn new(
         name: &str,
         mut points: Vec<DVec3>,
@@ -141,13 +145,14 @@ impl FeMesh {
             None => Vec::new(),
         };
         // The caller's types and degrees are borrowed where no cell was converted.
-        let (types, offsets, connectivity, degrees, completions) = match converted {
+        let (types, offsets, connectivity, degrees, completions, collapsed) = match converted {
             Some((cells, completions)) => (
                 Cow::Owned(cells.types),
                 cells.offsets,
                 cells.connectivity,
                 Some(Cow::Owned(cells.degrees)),
                 completions,
+                cells.collapsed,
             ),
             None => (
                 Cow::Borrowed(types),
@@ -155,6 +160,7 @@ impl FeMesh {
                 connectivity,
                 degrees.map(Cow::Borrowed),
                 Completions::none(points.len()),
+                Vec::new(),
             ),
         };
         let degrees = degrees.as_deref();
@@ -250,6 +256,7 @@ impl FeMesh {
             point_data: Vec::new(),
             completions,
             given_types,
+            collapsed,
             name: name.to_string(),
         };
         for a in &mut point_data {
@@ -311,6 +318,19 @@ impl FeMesh {
     /// The shape of cell `c`.
     pub fn shape(&self, c: usize) -> &Shape {
         &self.shapes[self.cell_shape[c] as usize]
+    }
+
+    /// The coordinates of reference point `u` of cell `c` in the cell as the caller gave
+    /// it: `u` itself, except in a collapsed hexahedron read as a wedge, where they are the
+    /// hexahedron's parametric coordinates (what VTK's own cell takes).
+    pub fn given_reference(&self, c: usize, u: DVec3) -> DVec3 {
+        match self
+            .collapsed
+            .binary_search_by_key(&(c as u32), |&(cell, _)| cell)
+        {
+            Ok(k) => classic::collapsed_reference(self.collapsed[k].1, u),
+            Err(_) => u,
+        }
     }
 
     /// Node (point) indices of cell `c` in VTK order.
@@ -541,9 +561,11 @@ impl FeMesh {
                 u.z
             ))
         };
-        // The first mirrored cell (with its first probe), and the first upright one.
+        // The first mirrored and the first upright cell (with its first probe), and how
+        // many of each: where both are found, the fewer are the wrong ones.
         let mut mirrored: Option<(usize, f64, DVec3)> = None;
-        let mut upright: Option<usize> = None;
+        let mut upright: Option<(usize, f64, DVec3)> = None;
+        let (mut mirrored_count, mut upright_count) = (0usize, 0usize);
         let mut dets = Vec::new();
         for c in 0..self.cell_count() {
             let shape = self.shape(c);
@@ -588,23 +610,45 @@ impl FeMesh {
             );
             if dets.iter().all(|&(det, _)| det < -floor) {
                 mirrored.get_or_insert((c, dets[0].0, dets[0].1));
+                mirrored_count += 1;
                 continue;
             }
-            upright.get_or_insert(c);
-            if let Some(&(det, u)) = dets.iter().find(|&&(det, _)| det <= floor || det.is_nan()) {
-                if det < -floor {
-                    return Err(inverted(c, det, u, ""));
-                }
-                return Err(Error::InvalidInput(format!(
-                    "{name}: cell {c} ({what}) is degenerate: det J = {det:.3e} at reference \
-                     point ({:.3}, {:.3}, {:.3})",
-                    u.x, u.y, u.z
-                )));
+            if dets.iter().all(|&(det, _)| det > floor) {
+                upright.get_or_insert((c, dets[0].0, dets[0].1));
+                upright_count += 1;
+                continue;
             }
+            let (&(det, u), low, high) = (
+                dets.iter()
+                    .find(|&&(det, _)| det.abs() <= floor || det.is_nan())
+                    .unwrap_or(&dets[0]),
+                dets.iter().map(|d| d.0).fold(f64::INFINITY, f64::min),
+                dets.iter().map(|d| d.0).fold(f64::NEG_INFINITY, f64::max),
+            );
+            if det.abs() > floor {
+                // Both signs: the cell folds over itself.
+                let why = format!(" (det J runs from {low:.3e} to {high:.3e} over the cell)");
+                return Err(inverted(
+                    c,
+                    low,
+                    dets.iter().find(|d| d.0 == low).map_or(u, |d| d.1),
+                    &why,
+                ));
+            }
+            return Err(Error::InvalidInput(format!(
+                "{name}: cell {c} ({what}) is degenerate: det J = {det:.3e} at reference point \
+                 ({:.3}, {:.3}, {:.3})",
+                u.x, u.y, u.z
+            )));
         }
-        if let (Some((c, det, u)), Some(up)) = (mirrored, upright) {
+        if let (Some(m), Some(up)) = (mirrored, upright) {
+            let ((c, det, u), other, orientation) = if mirrored_count <= upright_count {
+                (m, up.0, "mirrored throughout")
+            } else {
+                (up, m.0, "upright where the other cells are mirrored")
+            };
             let why = format!(
-                ", mirrored throughout, while cell {up} is not (a mesh mirrored as a whole is \
+                ", {orientation}, while cell {other} is not (a mesh mirrored as a whole is \
                  read, one with both orientations is not)"
             );
             return Err(inverted(c, det, u, &why));
@@ -698,13 +742,13 @@ impl FeMesh {
     }
 }
 
-/// " (a pyramid)" and the like for VTK cell types people meet that isobar does not read, so
-/// the refusal says what the cell is.
 /// Whether VTK type `ty` is a vertex, line or surface cell.
 fn below_3d(ty: u8) -> bool {
     matches!(ty, 1..=9 | 21..=23 | 28 | 30 | 34..=36 | 68..=70 | 75..=77)
 }
 
+/// " (a pyramid)" and the like for VTK cell types people meet that isobar does not read, so
+/// the refusal says what the cell is.
 fn unread_name(ty: u8) -> String {
     let name = match ty {
         1 | 2 => "a vertex",

@@ -618,3 +618,35 @@ fn a_point_in_a_bulge_past_the_old_padding_is_located() {
     let hits = probe(&mesh, &index, values, &[x]);
     assert!((hits[0].unwrap().value - x.x).abs() < 1e-12);
 }
+
+/// Each face's normal is the unit gradient of its distance (checked by differences), and
+/// points inside: the particle system's boundary steps remove these components.
+#[test]
+fn face_normals_are_the_gradients_of_the_face_distances() {
+    for kind in [Kind::Hexahedron, Kind::Tetrahedron, Kind::Wedge] {
+        let (_, nf) = kind.face_distances(DVec3::ZERO);
+        let u = kind.centroid();
+        for f in 0..nf {
+            let h = 1e-6;
+            let d = |v: DVec3| kind.face_distances(v).0[f];
+            let grad = DVec3::new(
+                d(u + DVec3::X * h) - d(u - DVec3::X * h),
+                d(u + DVec3::Y * h) - d(u - DVec3::Y * h),
+                d(u + DVec3::Z * h) - d(u - DVec3::Z * h),
+            ) / (2.0 * h);
+            let n = kind.face_normal(f);
+            assert!((n.length() - 1.0).abs() < 1e-12, "{kind:?} face {f}");
+            assert!(
+                (grad.normalize() - n).length() < 1e-9,
+                "{kind:?} face {f}: {n} vs {grad}"
+            );
+            // Crossing the face from the centroid along its outward normal is seen.
+            let out = -n * 2.0;
+            assert_eq!(
+                kind.crossed_face(u, out, 1e-9),
+                Some(f),
+                "{kind:?} face {f}"
+            );
+        }
+    }
+}
