@@ -132,7 +132,8 @@ def test_vtk_evaluates_the_same_point_and_value_at_every_sample_of_mixed_cells()
 def test_a_nan_in_the_field_leaves_out_its_cells_with_a_warning():
     """Solvers write NaN into masked regions: the cells touching one are left out, and the
     rest of the surface is sampled (the NaN at a corner of the box: its one cell, [0.5, 1]³
-    in y, is outside the sphere |y| = 0.8, though projections may pass through it)."""
+    in y, is outside the sphere |y| = 0.8; a projection that would pass through it is
+    dropped there, so the samples need not equal the unmasked ones)."""
     grid = teardrop_grid(blocks=4)
     whole = isobar.sample_fe(isobar.pyvista.fe_mesh_from_dataset(grid), "f", R * R, spacing=0.15)
     f = np.asarray(grid.point_data["f"], dtype=np.float64).copy()

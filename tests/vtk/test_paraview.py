@@ -648,12 +648,18 @@ def test_mpi_fe_samples_take_the_whole_meshs_spacing_and_empty_pieces_are_no_err
         assert np.array_equal(points, ref_points), f"{ranks} ranks: samples differ"
         split = cases["fe_split"]
         assert min(split["cells"]) > 0 and min(split["samples"]) > 0, split
-        # A radius reaches its sample's Voronoi cell among the samples of its own piece:
-        # at a seam it reaches farther (0.07 % on the median with 2 ranks). Spacing taken
-        # from a piece's box (1/40 of its diagonal: half a cube's is 13 % shorter) fails.
-        assert abs(split["radius_median"] - one["radius_median"]) <= 0.01 * one["radius_median"], (
+        # A radius reaches its sample's Voronoi cell among the samples of its own piece.
+        # Each piece is sampled up to its seam as to a boundary, and its own history of
+        # splits settles it a little denser or sparser (6 % on the median with 2 ranks).
+        # Spacing taken from a piece's box (1/40 of its diagonal: half a cube's is 13 %
+        # shorter, and a third's more) still fails.
+        print(f"  {ranks} ranks: radius median {split['radius_median']:.5f}, one rank "
+              f"{one['radius_median']:.5f}", flush=True)
+        assert abs(split["radius_median"] - one["radius_median"]) <= 0.09 * one["radius_median"], (
             split, one)
-        assert 0.8 < sum(split["samples"]) / one["samples"][0] < 1.25, (split, one)
+        # The seams are sampled from both sides (1.21 times the one-rank count with 2
+        # ranks, 1.26 with 3); a piece's own spacing would add 30 % more.
+        assert 0.8 < sum(split["samples"]) / one["samples"][0] < 1.4, (split, one)
         assert cases["fe_beyond"]["samples"] == [0] * ranks, cases["fe_beyond"]
         print(f"  {ranks} ranks: split cells {split['cells']}, samples {split['samples']} "
               f"(one rank: {one['samples'][0]})", flush=True)

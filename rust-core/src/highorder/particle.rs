@@ -1,7 +1,9 @@
 //! One particle: its reference-space position in a cell and what the field says there;
 //! projection onto F = C (eq. 1, in reference space) and moves across cells. Where the
-//! surface meets the mesh's boundary, projections and moves that would leave the mesh are
-//! held on the boundary faces instead, so the surface is sampled up to its edge.
+//! surface meets the mesh's boundary, a projection step or a move that would leave the
+//! mesh is kept in its cell instead of dropped: its components along the normals of the
+//! cell's faces it crosses are removed, so it slides parallel to them, and the surface is
+//! sampled up to its edge.
 
 use crate::field::fe::curvature::curvature_magnitude;
 use crate::field::fe::{FeMesh, Kind, Scratch, INSIDE_SLACK};
@@ -90,8 +92,11 @@ impl Surface<'_> {
             (cell, u) = match self.mesh.relocate(cell, u + du, sc) {
                 Some(next) => next,
                 // The step leaves the mesh: the surface meets the mesh's boundary here,
-                // and is followed on the faces the step would cross (Newton on the
-                // field restricted to them) instead of being lost.
+                // and is followed parallel to the cell's faces the step would cross
+                // (Newton on the field restricted to those directions) instead of being
+                // lost. The faces are those of this cell, which may be inner ones where
+                // the mesh is left beyond a neighbour; sliding along them still keeps
+                // the point in the mesh, and a later step may cross them.
                 None => {
                     let kind = self.mesh.shape(cell).kind;
                     let step = within(kind, u, |held| {
@@ -120,7 +125,8 @@ impl Surface<'_> {
         let cell = p.cell as usize;
         let (cell, u) = match self.mesh.relocate(cell, p.u + du, sc) {
             Some(next) => next,
-            // A particle pushed out of the mesh slides along its boundary.
+            // A particle pushed out of the mesh slides parallel to the faces it would
+            // cross.
             None => {
                 let kind = self.mesh.shape(cell).kind;
                 (cell, p.u + within(kind, p.u, |held| Some(held.along(du)))?)

@@ -146,13 +146,15 @@ pub(crate) fn run(
 const MAX_SAMPLES: usize = 1 << 24;
 
 /// The coarsest level: at least `levels` above the final spacing, more while the seeds are
-/// sparser than that level's spacing, and no coarser than a quarter of the surface's
+/// sparser than that level's spacing, and no coarser than a quarter of the
 /// extent. The seeds are a few per cut cell whatever the spacing, and splitting grows the
 /// population about one spacing a round, so from seeds far apart at a fine coarsest level
 /// it never covers the surface (a plane through one cell at s = 1/100 of it was sampled in
 /// patches around its 16 seeds). `gap` guesses the seeds' distance as if they were spread
-/// evenly over a square of the extent's side. The extent is that of the cells the field may
-/// cross, not of the seeds: a cap through one face of one cell was seeded at one end only.
+/// evenly over a square of the extent's side. The extent is that of the box of the cells the
+/// field may cross, not of the seeds (a cap through one face of one cell was seeded at one
+/// end only); it can exceed the surface's (a small sphere inside one large cell), which
+/// only starts the run a level coarser.
 fn coarsest_level(levels: usize, spacing: f64, extent: f64, seeds: usize) -> usize {
     let gap = extent / (seeds as f64).sqrt();
     let at = |level: usize| spacing * 2f64.powi(level as i32);
@@ -320,7 +322,7 @@ fn split_delete(
         if b < 0.35 * ideal {
             let angle = std::f64::consts::TAU * random(params.seed ^ 0x5eed, round, i as u64);
             let dx = tangent(p.n, angle) * (0.5 * lv.spacing_at(p.d));
-            if let Some(q) = surface.moved(p, dx, sc) {
+            if let Some(q) = apart(surface, p, dx, sc) {
                 added.push(q);
                 split += 1;
             }
@@ -329,6 +331,15 @@ fn split_delete(
     out.extend(added);
     *particles = out;
     (split, deleted)
+}
+
+/// A new particle at `dx` from `p`, unless the mesh's boundary left almost nothing of the
+/// move (one straight out of the mesh): one on top of its parent would never part from it,
+/// as the energy ignores coincident particles.
+fn apart(surface: &Surface, p: &Particle, dx: DVec3, sc: &mut Scratch) -> Option<Particle> {
+    surface
+        .moved(p, dx, sc)
+        .filter(|q| q.x.distance(p.x) >= 1e-3 * dx.length())
 }
 
 /// Coarse-to-fine: each particle becomes four (itself and three at 120° around it, one
@@ -351,7 +362,7 @@ fn refine(
             let mut out = vec![Particle { lambda, ..*p }];
             for k in 0..3 {
                 let dx = tangent(p.n, base + k as f64 * std::f64::consts::TAU / 3.0) * d;
-                if let Some(q) = surface.moved(p, dx, sc) {
+                if let Some(q) = apart(surface, p, dx, sc) {
                     out.push(Particle { lambda, ..q });
                 }
             }
