@@ -322,7 +322,7 @@ fn split_delete(
         if b < 0.35 * ideal {
             let angle = std::f64::consts::TAU * random(params.seed ^ 0x5eed, round, i as u64);
             let dx = tangent(p.n, angle) * (0.5 * lv.spacing_at(p.d));
-            if let Some(q) = apart(surface, p, dx, sc) {
+            if let Some(q) = surface.moved(p, dx, sc) {
                 added.push(q);
                 split += 1;
             }
@@ -331,15 +331,6 @@ fn split_delete(
     out.extend(added);
     *particles = out;
     (split, deleted)
-}
-
-/// A new particle at `dx` from `p`, unless the mesh's boundary left almost nothing of the
-/// move (one straight out of the mesh): one on top of its parent would never part from it,
-/// as the energy ignores coincident particles.
-fn apart(surface: &Surface, p: &Particle, dx: DVec3, sc: &mut Scratch) -> Option<Particle> {
-    surface
-        .moved(p, dx, sc)
-        .filter(|q| q.x.distance(p.x) >= 1e-3 * dx.length())
 }
 
 /// Coarse-to-fine: each particle becomes four (itself and three at 120° around it, one
@@ -362,7 +353,7 @@ fn refine(
             let mut out = vec![Particle { lambda, ..*p }];
             for k in 0..3 {
                 let dx = tangent(p.n, base + k as f64 * std::f64::consts::TAU / 3.0) * d;
-                if let Some(q) = apart(surface, p, dx, sc) {
+                if let Some(q) = surface.moved(p, dx, sc) {
                     out.push(Particle { lambda, ..q });
                 }
             }
