@@ -137,18 +137,11 @@ pub fn sample(
         tolerance: params.tolerance,
         curvature_in_projection: params.rho > 0.0,
         evaluations: AtomicU64::new(0),
+        gaps: gaps > 0,
     };
     let (mut particles, mut stats) = system::run(&surface, params, spacing, progress)?;
     if gaps > 0 {
         let first = given.iter().position(|v| !v.is_finite()).unwrap_or(0);
-        // Where the field is missing, "never crosses" proves nothing.
-        let never = crate::mesh::no_surface(params.iso);
-        for w in stats.warnings.iter_mut().filter(|w| **w == never) {
-            *w = format!(
-                "no surface at isovalue {}: the field never crosses it where it is finite",
-                params.iso
-            );
-        }
         stats.warnings.insert(
             0,
             format!(

@@ -43,6 +43,9 @@ pub(crate) struct Surface<'a> {
     pub curvature_in_projection: bool,
     /// Forward evaluations (basis + mapping at one point).
     pub evaluations: AtomicU64,
+    /// Whether some values are not finite (their cells are left out): "never crosses"
+    /// then holds only where the field is finite.
+    pub gaps: bool,
 }
 
 impl Surface<'_> {

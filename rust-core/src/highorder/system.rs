@@ -86,7 +86,12 @@ pub(crate) fn run(
     } = seed::seeds(surface, lambda0);
     stats.seeds = seeds.len();
     if seeds.is_empty() {
-        stats.warnings.push(if cells == 0 {
+        stats.warnings.push(if cells == 0 && surface.gaps {
+            format!(
+                "no surface at isovalue {}: the field never crosses it where it is finite",
+                surface.iso
+            )
+        } else if cells == 0 {
             crate::mesh::no_surface(surface.iso)
         } else {
             format!(

@@ -607,6 +607,20 @@ fn a_non_finite_value_leaves_out_the_cells_that_touch_it() {
             && stats.warnings[0].contains("left out"),
         "{stats:?}"
     );
+    // Where the field has gaps, "never crosses" holds only where it is finite.
+    let (s, stats) = run(
+        &corner,
+        &Params {
+            iso: -2.0,
+            ..params
+        },
+    );
+    assert_eq!(s.len(), 0);
+    assert_eq!(
+        stats.warnings.last().map(String::as_str),
+        Some("no surface at isovalue -2: the field never crosses it where it is finite"),
+        "{stats:?}"
+    );
     // A node on the sphere's path: (0.5, 0, 0) is shared by the cells around x = 0.5.
     let on = masked(DVec3::new(0.5, 0.0, 0.0));
     let nan_point = on
@@ -629,5 +643,144 @@ fn a_non_finite_value_leaves_out_the_cells_that_touch_it() {
         );
         let d = DVec3::from(*x).length();
         assert!((d * d - r * r).abs() <= params.tolerance * (1.0 + 1e-9));
+    }
+}
+
+/// The cube [-1, 1]³ cut into n³ cells, each split into six quadratic tetrahedra (the
+/// Kuhn triangulation: one per path along the axes from the cell's low corner to its high
+/// one) or two quadratic wedges (the cell's xy square cut along its diagonal), nodes
+/// shared; point array "f" = `field(x)`. Every cell has the same handedness.
+fn simplex_mesh(n: usize, wedges: bool, field: impl Fn(DVec3) -> f64) -> FeMesh {
+    let side = 2 * n + 1;
+    let index = |l: [usize; 3]| (l[0] + side * (l[1] + side * l[2])) as u32;
+    let mid = |a: [usize; 3], b: [usize; 3]| std::array::from_fn(|i| (a[i] + b[i]) / 2);
+    let mut points = Vec::new();
+    for k in 0..side {
+        for j in 0..side {
+            for i in 0..side {
+                points.push(DVec3::new(i as f64, j as f64, k as f64) / n as f64 - 1.0);
+            }
+        }
+    }
+    let values = points.iter().map(|&x| field(x)).collect();
+    let (mut conn, mut offsets, mut types) = (Vec::new(), vec![0], Vec::new());
+    let mut cell = |corners: &[[usize; 3]], edges: &[(usize, usize)], kind: u8| {
+        conn.extend(corners.iter().map(|&l| index(l)));
+        conn.extend(
+            edges
+                .iter()
+                .map(|&(a, b)| index(mid(corners[a], corners[b]))),
+        );
+        offsets.push(conn.len());
+        types.push(kind);
+    };
+    // A function, not a closure: rustc 1.95 at opt-level 3 miscompiles a closure that
+    // changes an array argument in place while the caller goes on using the array
+    // (rust-lang/rust#155241): `step(step(low, 0), 1)` gave low + (4, 2, 0).
+    fn step(mut l: [usize; 3], axis: usize) -> [usize; 3] {
+        l[axis] += 2;
+        l
+    }
+    for c in 0..n * n * n {
+        let low = [2 * (c % n), 2 * ((c / n) % n), 2 * (c / (n * n))];
+        if wedges {
+            // VTK's quadratic wedge: triangles 0-1-2 and 3-4-5, then the edges of each
+            // and the three joining them.
+            let edges = [
+                (0, 1),
+                (1, 2),
+                (2, 0),
+                (3, 4),
+                (4, 5),
+                (5, 3),
+                (0, 3),
+                (1, 4),
+                (2, 5),
+            ];
+            let (a, b, d) = (low, step(low, 0), step(step(low, 0), 1));
+            let e = step(low, 1);
+            for tri in [[a, b, d], [a, d, e]] {
+                let top = tri.map(|l| step(l, 2));
+                cell(
+                    &[tri[0], tri[1], tri[2], top[0], top[1], top[2]],
+                    &edges,
+                    26,
+                );
+            }
+        } else {
+            let edges = [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)];
+            for (axes, even) in [
+                ([0, 1, 2], true),
+                ([1, 2, 0], true),
+                ([2, 0, 1], true),
+                ([1, 0, 2], false),
+                ([0, 2, 1], false),
+                ([2, 1, 0], false),
+            ] {
+                let v1 = step(low, axes[0]);
+                let v2 = step(v1, axes[1]);
+                let v3 = step(v2, axes[2]);
+                // An odd path is the mirror image of an even one: swapping two corners
+                // gives it the same handedness.
+                let corners = if even {
+                    [low, v1, v2, v3]
+                } else {
+                    [low, v2, v1, v3]
+                };
+                cell(&corners, &edges, 24);
+            }
+        }
+    }
+    let attr = Attribute {
+        name: "f".into(),
+        components: 1,
+        data: values,
+    };
+    FeMesh::new(
+        "simplices",
+        points,
+        &types,
+        &offsets,
+        conn,
+        None,
+        vec![attr],
+    )
+    .unwrap()
+}
+
+/// Tetrahedra and wedges sample a sphere as hexahedra do: every sample on it (|x|² is
+/// quadratic, so the quadratic cells hold it exactly), the whole sphere covered by the
+/// samples' disks though the surface crosses many faces the cells share diagonally.
+#[test]
+fn tetrahedra_and_wedges_sample_a_sphere() {
+    let r = 0.7;
+    let params = Params {
+        iso: r * r,
+        spacing: 0.08,
+        ..Params::default()
+    };
+    let points: Vec<DVec3> = sphere_points(DVec3::ZERO, r, 5).take(5_000).collect();
+    for wedges in [false, true] {
+        let mesh = simplex_mesh(4, wedges, |x| x.length_squared());
+        let (s, stats) = run(&mesh, &params);
+        assert!(stats.warnings.is_empty(), "{stats:?}");
+        for x in &s.positions {
+            let f = DVec3::from(*x).length_squared() - r * r;
+            assert!(f.abs() <= params.tolerance * (1.0 + 1e-9), "{x:?}: {f}");
+        }
+        let share = uncovered(&s, &points);
+        assert_eq!(
+            share,
+            0.0,
+            "wedges {wedges}: {share} uncovered by {}",
+            s.len()
+        );
+        let ideal =
+            4.0 * std::f64::consts::PI * r * r / (0.75f64.sqrt() * params.spacing * params.spacing);
+        let n = s.len() as f64;
+        assert!(
+            n > 0.6 * ideal && n < 1.5 * ideal,
+            "wedges {wedges}: {n} samples"
+        );
     }
 }

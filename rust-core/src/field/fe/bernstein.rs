@@ -20,7 +20,6 @@
 //! depends only on (kind, order): it is computed once per process and shared.
 
 use super::shape::{Family, Kind, Shape};
-use glam::DVec3;
 use rustc_hash::FxHashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -198,16 +197,19 @@ impl ControlMap {
         self.rounding
     }
 
-    /// Replaces the node positions `x` (in the shape's node order) by the control points
-    /// of the same mapping, in place; `row` is scratch.
-    pub(crate) fn control_points(&self, x: &mut [DVec3], row: &mut Vec<DVec3>) {
+    /// Replaces the node values `x` (in the shape's node order: positions, or a field's
+    /// values) by the control points of the same polynomial, in place; `row` is scratch.
+    pub(crate) fn control_points<T>(&self, x: &mut [T], row: &mut Vec<T>)
+    where
+        T: Copy + Default + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
+    {
         for f in &self.factors {
             for fibre in f.fibres.chunks(f.size) {
                 row.clear();
                 row.extend(f.inverse.chunks(f.size).map(|inv| {
                     inv.iter()
                         .zip(fibre)
-                        .fold(DVec3::ZERO, |acc, (&w, &n)| acc + x[n as usize] * w)
+                        .fold(T::default(), |acc, (&w, &n)| acc + x[n as usize] * w)
                 }));
                 for (&n, &c) in fibre.iter().zip(row.iter()) {
                     x[n as usize] = c;

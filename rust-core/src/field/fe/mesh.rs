@@ -83,8 +83,8 @@ impl Evaluation {
 pub struct Scratch {
     basis: BasisValues,
     /// Control values and a row buffer for [`FeMesh::field_range`].
-    control: Vec<DVec3>,
-    row: Vec<DVec3>,
+    control: Vec<f64>,
+    row: Vec<f64>,
 }
 
 impl FeMesh {
@@ -363,17 +363,13 @@ impl FeMesh {
         let origin = values[nodes[0] as usize];
         let x = &mut scratch.control;
         x.clear();
-        x.extend(
-            nodes
-                .iter()
-                .map(|&n| DVec3::new(values[n as usize] - origin, 0.0, 0.0)),
-        );
-        let reach = x.iter().fold(0.0_f64, |r, v| r.max(v.x.abs()));
+        x.extend(nodes.iter().map(|&n| values[n as usize] - origin));
+        let reach = x.iter().fold(0.0_f64, |r, v| r.max(v.abs()));
         map.control_points(x, &mut scratch.row);
         let (lo, hi) = x
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(v.x), b.max(v.x))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
             });
         let pad = reach * map.rounding() + (origin.abs() + reach) * (4.0 * f64::EPSILON);
         (origin + lo - pad, origin + hi + pad)
