@@ -129,6 +129,36 @@ def test_vtk_evaluates_the_same_point_and_value_at_every_sample_of_mixed_cells()
     assert worst_f <= 1e-8 * (1 + 1e-6), worst_f
 
 
+def test_boundary_cells_beside_the_volume_are_left_out_with_a_warning():
+    """A grid converted from a mesher keeps its boundary groups: vertex, line and surface
+    cells among the volume cells. They are left out with a warning; the samples are the
+    volume cells' own, and each sample's Element counts the cells as given, so VTK's
+    evaluation of that cell of the mixed grid lands on the sample."""
+    grid = teardrop_grid(blocks=2)
+    offsets, conn = grid.cell_offsets, np.asarray(grid.cell_connectivity)
+    hexes = [conn[offsets[c]:offsets[c + 1]] for c in range(grid.n_cells)]
+    cells, types = [], []
+    for c, nodes in enumerate(hexes):
+        cells.append(nodes)
+        types.append(vtk.VTK_LAGRANGE_HEXAHEDRON)
+        if c == 0:
+            cells += [nodes[:1], nodes[:4], nodes[:2]]
+            types += [vtk.VTK_VERTEX, vtk.VTK_QUAD, vtk.VTK_LINE]
+    legacy = np.concatenate([np.concatenate([[len(n)], n]) for n in cells]).astype(np.int64)
+    mixed = pv.UnstructuredGrid(legacy, np.array(types, dtype=np.uint8), np.asarray(grid.points))
+    mixed.point_data["f"] = grid.point_data["f"]
+    whole = isobar.sample_fe(isobar.pyvista.fe_mesh_from_dataset(grid), "f", R * R, spacing=0.15)
+    mesh = isobar.pyvista.fe_mesh_from_dataset(mixed)
+    assert mesh.n_cells == grid.n_cells
+    with pytest.warns(isobar.IsobarWarning, match=r"3 vertex, line and surface cell\(s\) left out"):
+        samples = isobar.sample_fe(mesh, "f", R * R, spacing=0.15)
+    np.testing.assert_array_equal(samples.points, whole.points)
+    element = samples.arrays["Element"].astype(int)
+    assert set(np.unique(element).tolist()) - {0} <= set(range(4, mixed.n_cells))
+    worst_x, worst_f = vtk_misses(mixed, samples, np.asarray(mixed.point_data["f"]), R * R)
+    assert worst_x <= 1e-9 and worst_f <= 1e-6 * (1 + 1e-6), (worst_x, worst_f)
+
+
 def test_a_nan_in_the_field_leaves_out_its_cells_with_a_warning():
     """Solvers write NaN into masked regions: the cells touching one are left out, and the
     rest of the surface is sampled (the NaN at a corner of the box: its one cell, [0.5, 1]³

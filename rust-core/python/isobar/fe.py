@@ -206,6 +206,8 @@ class FeMesh:
 
     @property
     def n_cells(self) -> int:
+        """The volume cells: vertex, line and surface cells given beside them are left
+        out (the cell ids in ``Element`` and :meth:`probe` still count them)."""
         return int(lib.isobar_fe_mesh_cell_count(self._handle))
 
     def __repr__(self) -> str:

@@ -302,7 +302,8 @@ pub extern "C" fn isobar_fe_mesh_point_count(mesh: *const IsobarFeMesh) -> usize
     unsafe { mesh.as_ref() }.map_or(0, |m| m.mesh.given_points())
 }
 
-/// Number of cells of a mesh (0 for NULL).
+/// Number of volume cells of a mesh (0 for NULL): the vertex, line and surface cells given
+/// beside them are left out (cell ids the core returns still count them).
 #[no_mangle]
 pub extern "C" fn isobar_fe_mesh_cell_count(mesh: *const IsobarFeMesh) -> usize {
     // SAFETY: null or a live handle.
@@ -384,7 +385,7 @@ pub extern "C" fn isobar_fe_probe(
         }
         if let Some(out) = cell_out {
             for (o, hit) in out.iter_mut().zip(&hits) {
-                *o = hit.map_or(-1, |h| h.cell as i64);
+                *o = hit.map_or(-1, |h| m.mesh.given_cell(h.cell) as i64);
             }
         }
         if let Some(out) = reference_out {

@@ -231,7 +231,7 @@ pub fn extract(
         out.positions.push(v.x.to_array());
         out.normals
             .push((-v.grad).normalize_or_zero().as_vec3().to_array());
-        element.push(v.cell as f64);
+        element.push(mesh.given_cell(v.cell as usize) as f64);
         total += v.evaluations;
         if v.resolved {
             stats.max_residual = stats.max_residual.max(v.residual);

@@ -152,6 +152,9 @@ pub fn sample(
             ),
         );
     }
+    if let Some(w) = mesh.left_out_warning() {
+        stats.warnings.insert(0, w);
+    }
     if !surface.curvature_in_projection {
         particles
             .par_iter_mut()
@@ -297,7 +300,7 @@ fn to_samples(
     for p in particles {
         out.positions.push(p.x.to_array());
         out.normals.push(p.n.as_vec3().to_array());
-        element.push(p.cell as f64);
+        element.push(mesh.given_cell(p.cell as usize) as f64);
         reference.extend(mesh.given_reference(p.cell as usize, p.u).to_array());
         curvature.push(p.d);
         energy.push(p.energy);

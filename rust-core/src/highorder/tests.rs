@@ -10,6 +10,34 @@ pub(crate) fn grid_mesh(
     map: impl Fn(DVec3) -> DVec3,
     field: impl Fn(DVec3) -> f64,
 ) -> FeMesh {
+    let g = grid_arrays(n, p, map, field);
+    let types = vec![72u8; g.offsets.len() - 1];
+    FeMesh::new(
+        "grid",
+        g.points,
+        &types,
+        &g.offsets,
+        g.conn,
+        None,
+        vec![g.field],
+    )
+    .unwrap()
+}
+
+/// The arrays of [`grid_mesh`], before they make a mesh.
+pub(crate) struct GridArrays {
+    points: Vec<DVec3>,
+    offsets: Vec<usize>,
+    conn: Vec<u32>,
+    field: Attribute,
+}
+
+fn grid_arrays(
+    n: usize,
+    p: usize,
+    map: impl Fn(DVec3) -> DVec3,
+    field: impl Fn(DVec3) -> f64,
+) -> GridArrays {
     let shape = Shape::new(Kind::Hexahedron, [p; 3]);
     let side = n * p + 1;
     let lattice = |i: usize, j: usize, k: usize| {
@@ -41,13 +69,16 @@ pub(crate) fn grid_mesh(
         }
         offsets.push(conn.len());
     }
-    let types = vec![72u8; n * n * n];
-    let attr = Attribute {
-        name: "f".into(),
-        components: 1,
-        data: values,
-    };
-    FeMesh::new("grid", points, &types, &offsets, conn, None, vec![attr]).unwrap()
+    GridArrays {
+        points,
+        offsets,
+        conn,
+        field: Attribute {
+            name: "f".into(),
+            components: 1,
+            data: values,
+        },
+    }
 }
 
 /// The teardrop: a sphere |y| = R in y mapped by the quadratic x = (y.x w, y.y w, y.z),
@@ -783,4 +814,89 @@ fn tetrahedra_and_wedges_sample_a_sphere() {
             "wedges {wedges}: {n} samples"
         );
     }
+}
+
+/// The vertex, line and surface cells a mesher writes beside the volume cells (a .vtu
+/// converted from Gmsh keeps its boundary groups) are left out with a warning: the samples
+/// are those of the volume cells alone, each sample's Element and every message counting
+/// the cells as given.
+#[test]
+fn cells_below_three_dimensions_are_left_out() {
+    let r = 0.7;
+    let params = Params {
+        iso: r * r,
+        spacing: 0.1,
+        ..Params::default()
+    };
+    let g = grid_arrays(2, 2, |y| y, |y| y.length_squared());
+    let hexes = g.offsets.len() - 1;
+    // Given order: a vertex, hexahedron 0, a quadrilateral (a face of it), a line, then
+    // the other hexahedra; `given[c]` is hexahedron c's index in that order.
+    let cell = |c: usize| &g.conn[g.offsets[c]..g.offsets[c + 1]];
+    let mut given_cells: Vec<(u8, Vec<u32>)> = vec![(1, vec![cell(0)[0]])];
+    given_cells.push((72, cell(0).to_vec()));
+    given_cells.push((9, cell(0)[..4].to_vec()));
+    given_cells.push((3, cell(0)[..2].to_vec()));
+    given_cells.extend((1..hexes).map(|c| (72, cell(c).to_vec())));
+    let given: Vec<usize> = std::iter::once(1).chain(4..4 + hexes - 1).collect();
+    let arrays = |cells: &[(u8, Vec<u32>)]| {
+        let types: Vec<u8> = cells.iter().map(|c| c.0).collect();
+        let mut offsets = vec![0];
+        let mut conn = Vec::new();
+        for (_, nodes) in cells {
+            conn.extend_from_slice(nodes);
+            offsets.push(conn.len());
+        }
+        (types, offsets, conn)
+    };
+    let (types, offsets, conn) = arrays(&given_cells);
+    let mixed = FeMesh::new(
+        "mixed",
+        g.points.clone(),
+        &types,
+        &offsets,
+        conn,
+        None,
+        vec![g.field.clone()],
+    )
+    .unwrap();
+    assert_eq!(mixed.cell_count(), hexes);
+    let plain = grid_mesh(2, 2, |y| y, |y| y.length_squared());
+    let (want, _) = run(&plain, &params);
+    let (s, stats) = run(&mixed, &params);
+    assert!(want.len() > 100);
+    assert_eq!(s.positions, want.positions);
+    assert_eq!(
+        stats.warnings,
+        [
+            "mixed: 3 vertex, line and surface cell(s) left out (the boundary groups a mesher \
+          writes beside the volume); the 8 volume cells are sampled"
+        ]
+    );
+    let element = |s: &PointSamples| s.attribute("Element").unwrap().data.clone();
+    let mapped: Vec<f64> = element(&want)
+        .iter()
+        .map(|&c| given[c as usize] as f64)
+        .collect();
+    assert_eq!(element(&s), mapped);
+
+    // A message about a volume cell names it as given: hexahedron 2 turned inside out
+    // (two opposite faces swapped) is cell 5.
+    let mut flipped = given_cells.clone();
+    let nodes = &mut flipped[given[2]].1;
+    let (bottom, top) = nodes[..8].split_at_mut(4);
+    bottom.swap_with_slice(top);
+    let (types, offsets, conn) = arrays(&flipped);
+    let e = FeMesh::new(
+        "mixed",
+        g.points.clone(),
+        &types,
+        &offsets,
+        conn,
+        None,
+        vec![g.field.clone()],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("mixed: cell 5 "), "{e}");
 }

@@ -430,6 +430,7 @@ pub(crate) fn to_lagrange(
     connectivity: &[u32],
     degrees: Option<&[[usize; 3]]>,
     points: &mut Vec<DVec3>,
+    id: &dyn Fn(usize) -> usize,
 ) -> Result<Option<(LagrangeCells, Completions)>, String> {
     if !types.iter().any(|&t| classic(t).is_some()) {
         return Ok(None);
@@ -449,10 +450,11 @@ pub(crate) fn to_lagrange(
     let mut on_face: FxHashMap<[u32; 8], u32> = FxHashMap::default();
     cells.offsets.push(0);
     for (c, &ty) in types.iter().enumerate() {
+        let g = id(c);
         let (start, end) = (offsets[c], offsets[c + 1]);
         if end < start || end > connectivity.len() {
             return Err(format!(
-                "cell {c}: offsets {start}..{end} out of order or range"
+                "cell {g}: offsets {start}..{end} out of order or range"
             ));
         }
         let nodes = &connectivity[start..end];
@@ -460,7 +462,7 @@ pub(crate) fn to_lagrange(
         // index out of range (the mesh checks again, against every point).
         if let Some(&p) = nodes.iter().find(|&&p| p as usize >= given) {
             return Err(format!(
-                "cell {c} refers to point {p}, but there are {given} points"
+                "cell {g} refers to point {p}, but there are {given} points"
             ));
         }
         let wedge;
@@ -482,7 +484,7 @@ pub(crate) fn to_lagrange(
         let want = k.vtk_nodes().len();
         if nodes.len() != want {
             return Err(format!(
-                "cell {c} (VTK {}, type {ty}) has {} nodes, not {want}",
+                "cell {g} (VTK {}, type {ty}) has {} nodes, not {want}",
                 k.name,
                 nodes.len()
             ));
@@ -498,7 +500,7 @@ pub(crate) fn to_lagrange(
             let mut make = || -> Result<u32, String> {
                 if points.len() >= u32::MAX as usize {
                     return Err(format!(
-                        "cell {c}: the face and body nodes made for the serendipity cells \
+                        "cell {g}: the face and body nodes made for the serendipity cells \
                          take the points past 2^32"
                     ));
                 }
@@ -875,8 +877,8 @@ mod tests {
             e.contains("cell 0 has VTK type 14 (a pyramid), which isobar does not read"),
             "{e}"
         );
-        assert!(!e.contains("Extract Cells By Type"), "{e}");
-        // A boundary triangle beside the volume cells: the message says how to drop it.
+        assert!(!e.contains("no volume cell"), "{e}");
+        // Only a triangle: nothing to sample, and the message says why.
         let e = FeMesh::new(
             "m",
             vec![DVec3::ZERO, DVec3::X, DVec3::Y],
@@ -889,7 +891,7 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(
-            e.contains("cell 0 has VTK type 5 (a triangle)") && e.contains("Extract Cells By Type"),
+            e.contains("cell 0 has VTK type 5 (a triangle)") && e.contains("no volume cell"),
             "{e}"
         );
         // A Lagrange cell beside a serendipity one may not reach the points made for it.

@@ -52,6 +52,11 @@ pub struct FeMesh {
     collapsed: Vec<(u32, u8)>,
     /// What error messages call the data (the file name).
     name: String,
+    /// Each cell's index among the cells as given, where the vertex, line and surface
+    /// cells a mesher writes beside the volume cells were left out (else empty).
+    given_cells: Vec<u32>,
+    /// How many cells were left out that way.
+    left_out: usize,
 }
 
 /// Everything the particle system needs at one point of one cell.
@@ -98,12 +103,12 @@ impl FeMesh {
     /// sign at every node; see `check_elements`).
     pub fn new(
         name: &str,
-        mut points: Vec<DVec3>,
+        points: Vec<DVec3>,
         types: &[u8],
         offsets: &[usize],
         connectivity: Vec<u32>,
         degrees: Option<&[[usize; 3]]>,
-        mut point_data: Vec<Attribute>,
+        point_data: Vec<Attribute>,
     ) -> Result<FeMesh> {
         let bad = |m: String| Error::InvalidInput(format!("{name}: {m}"));
         if offsets.len() != types.len() + 1 {
@@ -116,9 +121,6 @@ impl FeMesh {
         if types.is_empty() {
             return Err(bad("no cells".into()));
         }
-        if let Some(p) = points.iter().position(|p| !p.is_finite()) {
-            return Err(bad(format!("point {p} has a non-finite coordinate")));
-        }
         if let Some(d) = degrees {
             if d.len() != types.len() {
                 return Err(bad(format!(
@@ -127,6 +129,77 @@ impl FeMesh {
                     types.len()
                 )));
             }
+        }
+        // Meshers write the boundary faces, edges and vertices (their physical groups)
+        // beside the volume cells: leave those out, keeping each volume cell's index as
+        // given for messages and the samples' Element.
+        let volume = types.iter().filter(|&&t| !below_3d(t)).count();
+        if volume == 0 || volume == types.len() {
+            return Self::build(
+                name,
+                points,
+                types,
+                offsets,
+                connectivity,
+                degrees,
+                point_data,
+                Vec::new(),
+            );
+        }
+        let mut kept = Vec::with_capacity(volume);
+        let (mut kept_types, mut kept_offsets) = (Vec::with_capacity(volume), vec![0]);
+        let mut kept_nodes = Vec::with_capacity(connectivity.len());
+        let mut kept_degrees = Vec::new();
+        for (c, &ty) in types.iter().enumerate() {
+            if below_3d(ty) {
+                continue;
+            }
+            let (start, end) = (offsets[c], offsets[c + 1]);
+            if end < start || end > connectivity.len() {
+                return Err(bad(format!(
+                    "cell {c}: offsets {start}..{end} out of order or range"
+                )));
+            }
+            kept.push(c as u32);
+            kept_types.push(ty);
+            kept_nodes.extend_from_slice(&connectivity[start..end]);
+            kept_offsets.push(kept_nodes.len());
+            if let Some(d) = degrees {
+                kept_degrees.push(d[c]);
+            }
+        }
+        let mut mesh = Self::build(
+            name,
+            points,
+            &kept_types,
+            &kept_offsets,
+            kept_nodes,
+            degrees.map(|_| &kept_degrees[..]),
+            point_data,
+            kept,
+        )?;
+        mesh.left_out = types.len() - volume;
+        Ok(mesh)
+    }
+
+    /// [`FeMesh::new`] once the cells are all volume cells, or all lower-dimensional (which
+    /// is refused); `given_cells` maps each cell to its index as given (empty: the same).
+    #[allow(clippy::too_many_arguments)]
+    fn build(
+        name: &str,
+        mut points: Vec<DVec3>,
+        types: &[u8],
+        offsets: &[usize],
+        connectivity: Vec<u32>,
+        degrees: Option<&[[usize; 3]]>,
+        mut point_data: Vec<Attribute>,
+        given_cells: Vec<u32>,
+    ) -> Result<FeMesh> {
+        let bad = |m: String| Error::InvalidInput(format!("{name}: {m}"));
+        // Messages name a cell by its index as given.
+        let id = |c: usize| given_cells.get(c).map_or(c, |&g| g as usize);
+        if let Some(p) = points.iter().position(|p| !p.is_finite()) {
+            return Err(bad(format!("point {p} has a non-finite coordinate")));
         }
         for a in &point_data {
             if a.data.len() != points.len() * a.components {
@@ -138,8 +211,9 @@ impl FeMesh {
                 )));
             }
         }
-        let converted = classic::to_lagrange(types, offsets, &connectivity, degrees, &mut points)
-            .map_err(bad)?;
+        let converted =
+            classic::to_lagrange(types, offsets, &connectivity, degrees, &mut points, &id)
+                .map_err(bad)?;
         let given_types = match converted {
             Some(_) => types.to_vec(),
             None => Vec::new(),
@@ -167,16 +241,16 @@ impl FeMesh {
         let mut shapes: Vec<Shape> = Vec::new();
         let mut cell_shape = Vec::with_capacity(types.len());
         for (c, &ty) in types.iter().enumerate() {
+            let g = id(c);
             let kind = Kind::from_vtk(ty).ok_or_else(|| {
                 bad(format!(
-                    "cell {c} has VTK type {ty}{}, which isobar does not read: it reads \
+                    "cell {g} has VTK type {ty}{}, which isobar does not read: it reads \
                      Lagrange hexahedra, tetrahedra and wedges (72, 71, 73), and tetra, voxel, \
                      hexahedron, wedge and their quadratic forms (10–13, 24–26, 29, 31, 32){}",
                     unread_name(ty),
                     if below_3d(ty) {
-                        "; the boundary faces, edges and vertices a mesher writes beside the \
-                         volume cells can be dropped first (ParaView: Extract Cells By Type; \
-                         pyvista: grid.extract_cells_by_type), and a .msh reader skips them"
+                        "; the mesh holds no volume cell (beside volume cells, the boundary \
+                         faces, edges and vertices a mesher writes are left out)"
                     } else {
                         ""
                     }
@@ -185,7 +259,7 @@ impl FeMesh {
             let (start, end) = (offsets[c], offsets[c + 1]);
             if end < start || end > connectivity.len() {
                 return Err(bad(format!(
-                    "cell {c}: offsets {start}..{end} out of order or range"
+                    "cell {g}: offsets {start}..{end} out of order or range"
                 )));
             }
             let n = end - start;
@@ -198,7 +272,7 @@ impl FeMesh {
                     };
                     if kind.node_count(o) != n {
                         return Err(bad(format!(
-                            "cell {c} ({}): HigherOrderDegrees {:?} need {} nodes, the cell has {n}",
+                            "cell {g} ({}): HigherOrderDegrees {:?} need {} nodes, the cell has {n}",
                             kind.name(),
                             d,
                             kind.node_count(o)
@@ -209,7 +283,7 @@ impl FeMesh {
                 _ => {
                     let p = kind.order_from_count(n).ok_or_else(|| {
                         bad(format!(
-                            "cell {c} ({}) has {n} nodes, which matches no order",
+                            "cell {g} ({}) has {n} nodes, which matches no order",
                             kind.name()
                         ))
                     })?;
@@ -218,7 +292,7 @@ impl FeMesh {
             };
             if order.iter().any(|&o| o > 16) {
                 return Err(bad(format!(
-                    "cell {c}: order {order:?} is above the supported 16"
+                    "cell {g}: order {order:?} is above the supported 16"
                 )));
             }
             let s = match shapes
@@ -237,7 +311,7 @@ impl FeMesh {
                 .find(|&&i| i as usize >= points.len())
             {
                 return Err(bad(format!(
-                    "cell {c} refers to point {bad_node}, but there are {} points",
+                    "cell {g} refers to point {bad_node}, but there are {} points",
                     points.len()
                 )));
             }
@@ -258,6 +332,8 @@ impl FeMesh {
             given_types,
             collapsed,
             name: name.to_string(),
+            given_cells,
+            left_out: 0,
         };
         for a in &mut point_data {
             mesh.complete(&mut a.data, a.components);
@@ -313,6 +389,25 @@ impl FeMesh {
     /// Number of cells.
     pub fn cell_count(&self) -> usize {
         self.cell_shape.len()
+    }
+
+    /// Cell `c`'s index among the cells as given (which may hold vertex, line and surface
+    /// cells the mesh left out): what messages and the samples' Element call it.
+    pub fn given_cell(&self, c: usize) -> usize {
+        self.given_cells.get(c).map_or(c, |&g| g as usize)
+    }
+
+    /// A warning that says which cells were left out, if any were.
+    pub fn left_out_warning(&self) -> Option<String> {
+        (self.left_out > 0).then(|| {
+            format!(
+                "{}: {} vertex, line and surface cell(s) left out (the boundary groups a \
+                 mesher writes beside the volume); the {} volume cells are sampled",
+                self.name,
+                self.left_out,
+                self.cell_count()
+            )
+        })
     }
 
     /// The shape of cell `c`.
@@ -549,8 +644,9 @@ impl FeMesh {
                 ""
             };
             Error::InvalidInput(format!(
-                "{name}: cell {c} ({}) is inverted: det J = {det:.3e} at reference point \
+                "{name}: cell {} ({}) is inverted: det J = {det:.3e} at reference point \
                  ({:.3}, {:.3}, {:.3}){why}{hint}",
+                self.given_cell(c),
                 self.described(c),
                 u.x,
                 u.y,
@@ -575,6 +671,7 @@ impl FeMesh {
             let size = (hi - lo).max_element();
             let floor = 1e-12 * size * size * size;
             let what = self.described(c);
+            let g = self.given_cell(c);
             // Two corners at one place (a collapsed edge, or the same point given twice)
             // make det J vanish along it; say so rather than report the sign it rounds to.
             let corners = shape.kind.corners().len();
@@ -583,7 +680,7 @@ impl FeMesh {
                     let (pa, pb) = (nodes[a] as usize, nodes[b] as usize);
                     if self.points[pa].distance(self.points[pb]) <= 1e-12 * size {
                         return Err(Error::InvalidInput(format!(
-                            "{name}: cell {c} ({what}) is degenerate: its corners {a} and {b} \
+                            "{name}: cell {g} ({what}) is degenerate: its corners {a} and {b} \
                              (points {pa} and {pb}) are at the same place"
                         )));
                     }
@@ -632,7 +729,7 @@ impl FeMesh {
                 ));
             }
             return Err(Error::InvalidInput(format!(
-                "{name}: cell {c} ({what}) is degenerate: det J = {det:.3e} at reference point \
+                "{name}: cell {g} ({what}) is degenerate: det J = {det:.3e} at reference point \
                  ({:.3}, {:.3}, {:.3})",
                 u.x, u.y, u.z
             )));
@@ -643,6 +740,7 @@ impl FeMesh {
             } else {
                 (up, m.0, "upright where the other cells are mirrored")
             };
+            let other = self.given_cell(other);
             let why = format!(
                 ", {orientation}, while cell {other} is not (a mesh mirrored as a whole is \
                  read, one with both orientations is not)"
