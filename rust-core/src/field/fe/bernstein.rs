@@ -193,16 +193,44 @@ impl ControlMap {
     /// coordinate is within `rounding() · max_n |x_n|` (same axis) of its exact value. Grows
     /// with the order as the conversion from equispaced Lagrange nodes gets ill-conditioned
     /// (‖M⁻¹‖∞ is 1 for linear cells, 3.5e3 for quartic hexahedra, 1.8e8 at order 8).
+    #[cfg(test)]
     pub(crate) fn rounding(&self) -> f64 {
         self.rounding
     }
 
+    /// The range of the control points of the polynomial with the node values `nodes`
+    /// (in the shape's node order: positions, or a field's values), which holds the
+    /// polynomial over the cell (it is their convex combination), and a slack that covers
+    /// the rounding: `(lo, hi, slack)`, per component for positions. `x` and `row` are
+    /// scratch.
+    pub(crate) fn control_range<T: Controlled>(
+        &self,
+        nodes: impl Iterator<Item = T>,
+        x: &mut Vec<T>,
+        row: &mut Vec<T>,
+    ) -> (T, T, T) {
+        x.clear();
+        x.extend(nodes);
+        // Relative to the first node, so rounding scales with the cell's spread, not with
+        // its distance from zero (the Bernstein functions sum to one, so translating the
+        // values translates the control points).
+        let origin = x[0];
+        for v in x.iter_mut() {
+            *v = *v - origin;
+        }
+        let reach = x.iter().fold(T::default(), |r, &v| r.max(v.abs()));
+        self.control_points(x, row);
+        let (lo, hi) = x
+            .iter()
+            .fold((x[0], x[0]), |(a, b), &v| (a.min(v), b.max(v)));
+        // The conversion's rounding and a few ulps for the translations back and forth.
+        let slack = reach * self.rounding + (origin.abs() + reach) * (4.0 * f64::EPSILON);
+        (origin + lo, origin + hi, slack)
+    }
+
     /// Replaces the node values `x` (in the shape's node order: positions, or a field's
     /// values) by the control points of the same polynomial, in place; `row` is scratch.
-    pub(crate) fn control_points<T>(&self, x: &mut [T], row: &mut Vec<T>)
-    where
-        T: Copy + Default + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
-    {
+    pub(crate) fn control_points<T: Controlled>(&self, x: &mut [T], row: &mut Vec<T>) {
         for f in &self.factors {
             for fibre in f.fibres.chunks(f.size) {
                 row.clear();
@@ -216,6 +244,44 @@ impl ControlMap {
                 }
             }
         }
+    }
+}
+
+/// What [`ControlMap`] converts: a field's values (`f64`) or positions (`DVec3`, each
+/// component on its own).
+pub(crate) trait Controlled:
+    Copy
+    + Default
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<f64, Output = Self>
+{
+    fn min(self, other: Self) -> Self;
+    fn max(self, other: Self) -> Self;
+    fn abs(self) -> Self;
+}
+
+impl Controlled for f64 {
+    fn min(self, other: f64) -> f64 {
+        f64::min(self, other)
+    }
+    fn max(self, other: f64) -> f64 {
+        f64::max(self, other)
+    }
+    fn abs(self) -> f64 {
+        f64::abs(self)
+    }
+}
+
+impl Controlled for glam::DVec3 {
+    fn min(self, other: Self) -> Self {
+        glam::DVec3::min(self, other)
+    }
+    fn max(self, other: Self) -> Self {
+        glam::DVec3::max(self, other)
+    }
+    fn abs(self) -> Self {
+        glam::DVec3::abs(self)
     }
 }
 

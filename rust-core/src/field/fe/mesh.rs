@@ -453,21 +453,9 @@ impl FeMesh {
     /// nodal values alone do not bound it: a quadratic cell's field dips between nodes.
     pub fn field_range(&self, values: &[f64], c: usize, scratch: &mut Scratch) -> (f64, f64) {
         let map = &self.controls[self.cell_shape[c] as usize];
-        let nodes = self.nodes(c);
-        // Relative to the first node's value, as the boxes are relative to its position.
-        let origin = values[nodes[0] as usize];
-        let x = &mut scratch.control;
-        x.clear();
-        x.extend(nodes.iter().map(|&n| values[n as usize] - origin));
-        let reach = x.iter().fold(0.0_f64, |r, v| r.max(v.abs()));
-        map.control_points(x, &mut scratch.row);
-        let (lo, hi) = x
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let pad = reach * map.rounding() + (origin.abs() + reach) * (4.0 * f64::EPSILON);
-        (origin + lo - pad, origin + hi + pad)
+        let nodes = self.nodes(c).iter().map(|&n| values[n as usize]);
+        let (lo, hi, slack) = map.control_range(nodes, &mut scratch.control, &mut scratch.row);
+        (lo - slack, hi + slack)
     }
 
     /// [`FeMesh::cell_box`] of every cell.
@@ -476,19 +464,9 @@ impl FeMesh {
         (0..self.cell_count())
             .map(|c| {
                 let map = &self.controls[self.cell_shape[c] as usize];
-                let nodes = self.nodes(c);
-                // Relative to the first node, so rounding scales with the cell's size, not
-                // with its distance from the origin (the Bernstein functions sum to one, so
-                // translating the nodes translates the control points).
-                let origin = self.points[nodes[0] as usize];
-                x.clear();
-                x.extend(nodes.iter().map(|&n| self.points[n as usize] - origin));
-                let reach = x.iter().fold(DVec3::ZERO, |r, p| r.max(p.abs()));
-                map.control_points(&mut x, &mut row);
-                let (lo, hi) = x
-                    .iter()
-                    .fold((x[0], x[0]), |(a, b), &p| (a.min(p), b.max(p)));
-                // Slack, so the box holds every point the search accepts in this cell:
+                let nodes = self.nodes(c).iter().map(|&n| self.points[n as usize]);
+                let (lo, hi, slack) = map.control_range(nodes, &mut x, &mut row);
+                // More slack, so the box holds every point the search accepts in this cell:
                 // - the search takes points up to PROBE_SLACK (δ = 1e-8) outside the
                 //   reference domain (on the mesh boundary, surface points lie a rounding
                 //   error outside their cell). A Bézier polynomial's derivative along a
@@ -497,17 +475,14 @@ impl FeMesh {
                 //   so at most p (hi − lo) per axis; such a point is within δ of the domain
                 //   along each of three directions, so within 3 p δ (hi − lo) of the box to
                 //   first order: doubled for the δ² terms (1.8e-7 of the side for cubics);
-                // - the conversion's rounding (`ControlMap::rounding`) and a few ulps for
-                //   the translations back and forth;
                 // - 1e-9 of the largest side, for the rounding of the mapping itself where a
                 //   flat cell's thin side makes the rest vanish.
                 let shape = &self.shapes[self.cell_shape[c] as usize];
                 let order = shape.order.into_iter().max().unwrap_or(1) as f64;
-                let pad = (hi - lo) * (6.0 * order * PROBE_SLACK)
-                    + reach * map.rounding()
-                    + (origin.abs() + reach) * (4.0 * f64::EPSILON)
+                let pad = slack
+                    + (hi - lo) * (6.0 * order * PROBE_SLACK)
                     + DVec3::splat(1e-9 * (hi - lo).max_element());
-                (origin + lo - pad, origin + hi + pad)
+                (lo - pad, hi + pad)
             })
             .collect()
     }
