@@ -159,6 +159,31 @@ def test_boundary_cells_beside_the_volume_are_left_out_with_a_warning():
     assert worst_x <= 1e-9 and worst_f <= 1e-6 * (1 + 1e-6), (worst_x, worst_f)
 
 
+def test_a_delaunay_mesh_is_sampled_without_copies():
+    """pyvista's delaunay_3d of random points: slivers where the walk across faces fails
+    (an inversion, or more crossings than it follows). Such a point is found in the whole
+    mesh, not taken for one leaving it: held in its cell, a move left copies of particles
+    (12 exact duplicates among 7,549 samples here before, 878 deletions against 113)."""
+    rng = np.random.default_rng(1)
+    grid = pv.PolyData(rng.uniform(-1, 1, (20000, 3))).delaunay_3d()
+    grid.point_data["f"] = (np.asarray(grid.points) ** 2).sum(axis=1)
+    spacing = 0.03
+    samples = isobar.sample_fe(isobar.pyvista.fe_mesh_from_dataset(grid), "f", 0.5, spacing=spacing)
+    # Linear tets: the field is |x|² interpolated, within h² of it; checked by VTK below.
+    worst_x, worst_f = vtk_misses(grid, samples, np.asarray(grid.point_data["f"]), 0.5)
+    assert worst_x <= 1e-9 and worst_f <= 1e-6 * (1 + 1e-6), (worst_x, worst_f)
+    points = samples.points
+    nearest = np.full(len(points), np.inf)
+    for i in range(0, len(points), 512):
+        d = np.linalg.norm(points[i:i + 512, None, :] - points[None, :, :], axis=2)
+        d[np.arange(d.shape[0]), np.arange(i, i + d.shape[0])] = np.inf
+        nearest[i:i + 512] = d.min(axis=1)
+    assert nearest.min() > 0.4 * spacing, nearest.min() / spacing
+    # A relaxed packing: about as many samples as a hexagonal one of the sphere's area.
+    ideal = 4 * np.pi * 0.5 / (np.sqrt(0.75) * spacing**2)
+    assert 0.9 * ideal < len(samples) < 1.2 * ideal, (len(samples), ideal)
+
+
 def test_a_nan_in_the_field_leaves_out_its_cells_with_a_warning():
     """Solvers write NaN into masked regions: the cells touching one are left out, and the
     rest of the surface is sampled (the NaN at a corner of the box: its one cell, [0.5, 1]³

@@ -138,6 +138,7 @@ pub fn sample(
         curvature_in_projection: params.rho > 0.0,
         evaluations: AtomicU64::new(0),
         gaps: gaps > 0,
+        index: std::sync::OnceLock::new(),
     };
     let (mut particles, mut stats) = system::run(&surface, params, spacing, progress)?;
     if gaps > 0 {

@@ -6,9 +6,10 @@
 //! sampled up to its edge.
 
 use crate::field::fe::curvature::curvature_magnitude;
-use crate::field::fe::{FeMesh, Kind, Scratch, INSIDE_SLACK};
+use crate::field::fe::{CellIndex, FeMesh, Kind, Scratch, Walk, INSIDE_SLACK};
 use glam::{DMat3, DVec3};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
 
 /// A particle with the world quantities of its reference position.
 #[derive(Clone, Copy, Debug)]
@@ -46,11 +47,32 @@ pub(crate) struct Surface<'a> {
     /// Whether some values are not finite (their cells are left out): "never crosses"
     /// then holds only where the field is finite.
     pub gaps: bool,
+    /// Point location, built the first time a walk across faces loses a point.
+    pub index: OnceLock<CellIndex>,
 }
 
 impl Surface<'_> {
     fn count(&self) {
         self.evaluations.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// [`FeMesh::relocate`] that finds a point the walk across faces lost (an inversion
+    /// failed in a sliver, or the path crossed more faces than the walk follows, as in
+    /// Delaunay meshes) by locating it in the whole mesh; `None` only where the point is
+    /// outside the mesh. Without this, such a point would be taken for one leaving the
+    /// mesh and held in its cell, and a held move can leave a particle's copy on it.
+    fn relocate(&self, c: usize, u: DVec3, sc: &mut Scratch) -> Option<(usize, DVec3)> {
+        match self.mesh.walk(c, u, sc) {
+            Walk::To(c, u) => Some((c, u)),
+            Walk::Out => None,
+            Walk::Lost(x) => {
+                let index = self.index.get_or_init(|| CellIndex::new(self.mesh));
+                let mut evaluations = 0;
+                let found = index.locate_thorough(self.mesh, x, sc, &mut evaluations);
+                self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
+                found
+            }
+        }
     }
 
     /// Newton steps u ← u − (F* − C) F*_u/|F*_u|² (eq. 1 in reference coordinates, where
@@ -63,7 +85,7 @@ impl Surface<'_> {
         lambda: f64,
         sc: &mut Scratch,
     ) -> Option<Particle> {
-        let (mut cell, mut u) = self.mesh.relocate(cell, u, sc)?;
+        let (mut cell, mut u) = self.relocate(cell, u, sc)?;
         for _ in 0..12 {
             self.count();
             let order = if self.curvature_in_projection { 2 } else { 1 };
@@ -92,7 +114,7 @@ impl Surface<'_> {
                 });
             }
             let du = newton_step(r, e.grad_ref, e.grad_ref.length_squared());
-            (cell, u) = match self.mesh.relocate(cell, u + du, sc) {
+            (cell, u) = match self.relocate(cell, u + du, sc) {
                 Some(next) => next,
                 // The step leaves the mesh: the surface meets the mesh's boundary here,
                 // and is followed parallel to the cell's faces the step would cross
@@ -126,7 +148,7 @@ impl Surface<'_> {
     pub fn moved(&self, p: &Particle, dx: DVec3, sc: &mut Scratch) -> Option<Particle> {
         let du = p.k * dx;
         let cell = p.cell as usize;
-        let (cell, u) = match self.mesh.relocate(cell, p.u + du, sc) {
+        let (cell, u) = match self.relocate(cell, p.u + du, sc) {
             Some(next) => next,
             // A particle pushed out of the mesh slides parallel to the faces it would
             // cross.

@@ -548,6 +548,16 @@ fn a_surface_cut_by_the_mesh_boundary_is_covered_to_its_edge() {
             "{n}³ cells: {share} uncovered of {} samples",
             s.len()
         );
+        // Samples held on the boundary do not pile up: none within a quarter spacing of
+        // another (the least distance measured 0.38 spacings).
+        let least = s
+            .nearest_neighbour_distances()
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            least > 0.25 * params.spacing,
+            "{n}³ cells: samples {least} apart"
+        );
     }
 }
 
@@ -805,6 +815,15 @@ fn tetrahedra_and_wedges_sample_a_sphere() {
             0.0,
             "wedges {wedges}: {share} uncovered by {}",
             s.len()
+        );
+        // No sample on another's place (a held move once left copies).
+        let least = s
+            .nearest_neighbour_distances()
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            least > 0.5 * params.spacing,
+            "wedges {wedges}: samples {least} apart"
         );
         let ideal =
             4.0 * std::f64::consts::PI * r * r / (0.75f64.sqrt() * params.spacing * params.spacing);

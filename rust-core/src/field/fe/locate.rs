@@ -11,32 +11,61 @@ use glam::{DMat2, DVec2, DVec3};
 /// Slack on the reference domain: points this far outside still count as inside.
 pub(crate) const INSIDE_SLACK: f64 = 1e-9;
 
+/// Where [`FeMesh::walk`] took a point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Walk {
+    /// Into this cell, at this reference point.
+    To(usize, DVec3),
+    /// Out of the mesh, through a boundary face.
+    Out,
+    /// Nowhere it could follow; the point is at this world position.
+    Lost(DVec3),
+}
+
 impl FeMesh {
     /// The cell whose reference domain holds the point `u` of cell `c` (extended past its
     /// faces if `u` is outside), and the reference point there. `None` when the point
     /// leaves the mesh through a boundary face or cannot be followed.
     pub fn relocate(&self, c: usize, u: DVec3, scratch: &mut Scratch) -> Option<(usize, DVec3)> {
+        match self.walk(c, u, scratch) {
+            Walk::To(c, u) => Some((c, u)),
+            Walk::Out | Walk::Lost(_) => None,
+        }
+    }
+
+    /// [`FeMesh::relocate`] that says why it found no cell: the point left the mesh
+    /// through a boundary face, or the walk lost it (a Newton inversion failed in a
+    /// sliver, or more face crossings than it follows) at world point x.
+    pub fn walk(&self, c: usize, u: DVec3, scratch: &mut Scratch) -> Walk {
         let mut cell = c;
         let mut u = u;
         let mut world: Option<DVec3> = None;
         for _hop in 0..8 {
             let kind = self.shape(cell).kind;
             let (d, nf) = kind.face_distances(u);
-            let (f, depth) = d[..nf]
+            let Some((f, depth)) = d[..nf]
                 .iter()
                 .copied()
                 .enumerate()
-                .min_by(|a, b| a.1.total_cmp(&b.1))?;
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+            else {
+                return Walk::Out;
+            };
             if depth >= -INSIDE_SLACK {
-                return Some((cell, u));
+                return Walk::To(cell, u);
             }
             let x = *world.get_or_insert_with(|| self.map(cell, u, scratch).0);
-            let (next, g) = self.neighbour(cell, f)?;
+            let Some((next, g)) = self.neighbour(cell, f) else {
+                return Walk::Out;
+            };
             let guess = self.face_guess(cell, f, u, next, g, -depth);
-            u = self.invert(next, x, guess, scratch)?;
+            match self.invert(next, x, guess, scratch) {
+                Some(v) => u = v,
+                None => return Walk::Lost(x),
+            }
             cell = next;
         }
-        None
+        Walk::Lost(world.unwrap_or_else(|| self.map(c, u, scratch).0))
     }
 
     /// Newton's method on T_c(u) = x from `guess`.

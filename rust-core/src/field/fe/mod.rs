@@ -26,6 +26,7 @@ mod shape;
 mod tests;
 
 pub use basis::BasisValues;
+pub use locate::Walk;
 pub(crate) use locate::INSIDE_SLACK;
 pub use mesh::{Evaluation, FeMesh, Scratch};
 pub use probe::{probe, Hit};
