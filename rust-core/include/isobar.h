@@ -376,7 +376,8 @@ enum IsobarStatus isobar_fe_mesh_array(const struct IsobarFeMesh *mesh,
 // Number of points of a mesh (0 for NULL).
 size_t isobar_fe_mesh_point_count(const struct IsobarFeMesh *mesh);
 
-// Number of cells of a mesh (0 for NULL).
+// Number of volume cells of a mesh (0 for NULL): the vertex, line and surface cells given
+// beside them are left out (cell ids the core returns still count them).
 size_t isobar_fe_mesh_cell_count(const struct IsobarFeMesh *mesh);
 
 // The box that holds every cell of a mesh, curved cells' bulges included: the box whose

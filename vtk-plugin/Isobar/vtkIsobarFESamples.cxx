@@ -7,6 +7,7 @@
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
 #include "vtkFloatArray.h"
+#include "vtkGenericCell.h"
 #include "vtkIdList.h"
 #include "vtkIdTypeArray.h"
 #include "vtkInformation.h"
@@ -27,6 +28,7 @@
 #include "isobar.h"
 
 #include <cmath>
+#include <map>
 #include <sstream>
 #include <vector>
 
@@ -120,6 +122,31 @@ void AddDoubleArray(vtkPointData* pd, const char* name, int components, vtkIdTyp
   }
   pd->AddArray(a);
 }
+// The volume cells of `input`: the core leaves out the vertex, line and surface cells a
+// mesher writes beside them, so a piece holding only those holds nothing to sample.
+vtkIdType VolumeCells(vtkUnstructuredGrid* input)
+{
+  if (!input)
+  {
+    return 0;
+  }
+  std::map<int, int> dimension; // per cell type, from the first cell of that type
+  vtkNew<vtkGenericCell> cell;
+  vtkIdType volume = 0;
+  for (vtkIdType c = 0; c < input->GetNumberOfCells(); ++c)
+  {
+    const int type = input->GetCellType(c);
+    auto known = dimension.find(type);
+    if (known == dimension.end())
+    {
+      input->GetCell(c, cell);
+      known = dimension.emplace(type, cell->GetCellDimension()).first;
+    }
+    volume += known->second == 3 ? 1 : 0;
+  }
+  return volume;
+}
+
 } // namespace
 
 /// The progress callback handed to the core.
@@ -215,7 +242,7 @@ int vtkIsobarFESamples::RequestData(
   // collective call below whatever happened to it, so that none waits for ever.
   vtkMultiProcessController* controller = this->Controller;
   const bool parallel = controller && controller->GetNumberOfProcesses() > 1;
-  const vtkIdType cells = input ? input->GetNumberOfCells() : 0;
+  const vtkIdType cells = VolumeCells(input);
   vtkIdType allCells = cells;
   if (parallel)
   {
@@ -225,7 +252,7 @@ int vtkIsobarFESamples::RequestData(
   std::string field;
   if (allCells == 0)
   {
-    failure = "the input has no cells: give an unstructured grid of Lagrange, linear or quadratic volume cells";
+    failure = "the input has no volume cells: give an unstructured grid of Lagrange, linear or quadratic volume cells";
   }
   else if (cells > 0)
   {

@@ -7,31 +7,23 @@ use super::{
     add_array, attribute_out, copy_versioned_out, free_boxed, guard, invalid, names_of, non_null,
     opt_str, put, slice, with_progress, IsobarStatus,
 };
-use crate::field::fe::{CellIndex, FeMesh};
+use crate::field::fe::FeMesh;
 use crate::highorder::{self, Params, Stats};
 use crate::samples::PointSamples;
 use glam::DVec3;
 use std::ffi::{c_char, c_void, CString};
-use std::sync::OnceLock;
 
 /// Opaque mesh of Lagrange cells with per-point arrays.
 pub struct IsobarFeMesh {
     mesh: FeMesh,
     /// NUL-terminated copies of the point arrays' names, for `isobar_fe_mesh_array`.
     names: Vec<CString>,
-    /// The cells binned for `isobar_fe_probe`, built by the first probe (the geometry never
-    /// changes after creation; adding arrays keeps it valid).
-    index: OnceLock<CellIndex>,
 }
 
 impl IsobarFeMesh {
     fn new(mesh: FeMesh) -> *mut IsobarFeMesh {
         let names = names_of(&mesh.point_data);
-        Box::into_raw(Box::new(IsobarFeMesh {
-            mesh,
-            names,
-            index: OnceLock::new(),
-        }))
+        Box::into_raw(Box::new(IsobarFeMesh { mesh, names }))
     }
 }
 
@@ -378,8 +370,7 @@ pub extern "C" fn isobar_fe_probe(
             .ok_or_else(|| invalid("values_out", "must not be NULL"))?;
         let cell_out = slice_out(cell_out, n, "cell_out")?;
         let reference_out = slice_out(reference_out, len, "reference_out")?;
-        let index = m.index.get_or_init(|| CellIndex::new(&m.mesh));
-        let hits = crate::field::fe::probe(&m.mesh, index, &values, &world);
+        let hits = crate::field::fe::probe(&m.mesh, m.mesh.index(), &values, &world);
         for (i, hit) in hits.iter().enumerate() {
             values_out[i] = hit.map_or(f64::NAN, |h| h.value);
         }

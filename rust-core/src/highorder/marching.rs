@@ -130,7 +130,7 @@ pub fn extract(
         ..McStats::default()
     };
     let evaluations = AtomicU64::new(0);
-    let index = CellIndex::new(mesh);
+    let index = mesh.index();
 
     // 1. Locate and evaluate every node; a row runs in x order, each node hinted by the
     // one before, so results do not depend on the thread count.
@@ -207,7 +207,7 @@ pub fn extract(
             let ends = [n0, n1].map(|n| (grid.node_position(n), *node_at(n)));
             edge_vertex(
                 mesh,
-                &index,
+                index,
                 values,
                 ends,
                 iso,

@@ -120,10 +120,12 @@ pub fn sample(
 ) -> Result<(PointSamples, Stats)> {
     check(params)?;
     let values = field_array(mesh, field)?;
-    // Counted over the caller's points: the points made for serendipity cells inherit
-    // their NaNs.
+    // Counted over the caller's points that cells use: the points made for serendipity
+    // cells inherit their NaNs, and a point no volume cell uses bears on no cell.
+    let used = mesh.used_points();
     let given = &values[..mesh.given_points()];
-    let gaps = given.iter().filter(|v| !v.is_finite()).count();
+    let gap = |i: usize| used[i] && !given[i].is_finite();
+    let gaps = (0..given.len()).filter(|&i| gap(i)).count();
     let spacing = if params.spacing > 0.0 {
         params.spacing
     } else {
@@ -138,17 +140,15 @@ pub fn sample(
         curvature_in_projection: params.rho > 0.0,
         evaluations: AtomicU64::new(0),
         gaps: gaps > 0,
-        index: std::sync::OnceLock::new(),
     };
     let (mut particles, mut stats) = system::run(&surface, params, spacing, progress)?;
     if gaps > 0 {
-        let first = given.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        let first = (0..given.len()).find(|&i| gap(i)).unwrap_or(0);
         stats.warnings.insert(
             0,
             format!(
-                "{}: field '{field}' has {gaps} non-finite {} (the first at point {first}): \
-                 the cells that touch one are left out",
-                mesh.name(),
+                "field '{field}' has {gaps} non-finite {} (the first at point {first}): the \
+                 cells that touch one are left out",
                 if gaps == 1 { "value" } else { "values" }
             ),
         );

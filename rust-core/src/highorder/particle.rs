@@ -6,10 +6,9 @@
 //! sampled up to its edge.
 
 use crate::field::fe::curvature::curvature_magnitude;
-use crate::field::fe::{CellIndex, FeMesh, Kind, Scratch, Walk, INSIDE_SLACK};
+use crate::field::fe::{FeMesh, Kind, Scratch, Walk, INSIDE_SLACK};
 use glam::{DMat3, DVec3};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::OnceLock;
 
 /// A particle with the world quantities of its reference position.
 #[derive(Clone, Copy, Debug)]
@@ -47,8 +46,6 @@ pub(crate) struct Surface<'a> {
     /// Whether some values are not finite (their cells are left out): "never crosses"
     /// then holds only where the field is finite.
     pub gaps: bool,
-    /// Point location, built the first time a walk across faces loses a point.
-    pub index: OnceLock<CellIndex>,
 }
 
 impl Surface<'_> {
@@ -58,17 +55,21 @@ impl Surface<'_> {
 
     /// [`FeMesh::relocate`] that finds a point the walk across faces lost (an inversion
     /// failed in a sliver, or the path crossed more faces than the walk follows, as in
-    /// Delaunay meshes) by locating it in the whole mesh; `None` only where the point is
-    /// outside the mesh. Without this, such a point would be taken for one leaving the
-    /// mesh and held in its cell, and a held move can leave a particle's copy on it.
-    fn relocate(&self, c: usize, u: DVec3, sc: &mut Scratch) -> Option<(usize, DVec3)> {
+    /// Delaunay meshes) by locating it in the whole mesh. `None` where the walk leaves
+    /// the mesh through a boundary face of the cell it reached (the point may still be in
+    /// the mesh past a re-entrant corner; it is then held in that cell). Without this, a
+    /// lost point would be taken for one leaving the mesh and held too, and a held move
+    /// can leave a particle's copy on it.
+    pub(super) fn relocate(&self, c: usize, u: DVec3, sc: &mut Scratch) -> Option<(usize, DVec3)> {
         match self.mesh.walk(c, u, sc) {
             Walk::To(c, u) => Some((c, u)),
             Walk::Out => None,
             Walk::Lost(x) => {
-                let index = self.index.get_or_init(|| CellIndex::new(self.mesh));
                 let mut evaluations = 0;
-                let found = index.locate_thorough(self.mesh, x, sc, &mut evaluations);
+                let found = self
+                    .mesh
+                    .index()
+                    .locate_thorough(self.mesh, x, sc, &mut evaluations);
                 self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
                 found
             }

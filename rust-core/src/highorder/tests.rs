@@ -847,12 +847,17 @@ fn cells_below_three_dimensions_are_left_out() {
         spacing: 0.1,
         ..Params::default()
     };
-    let g = grid_arrays(2, 2, |y| y, |y| y.length_squared());
+    let mut g = grid_arrays(2, 2, |y| y, |y| y.length_squared());
     let hexes = g.offsets.len() - 1;
-    // Given order: a vertex, hexahedron 0, a quadrilateral (a face of it), a line, then
+    // A point only the vertex cell uses, with no value (NaN): no volume cell touches it,
+    // so it is no gap in the field.
+    let lone = g.points.len() as u32;
+    g.points.push(DVec3::splat(3.0));
+    g.field.data.push(f64::NAN);
+    // Given order: the vertex, hexahedron 0, a quadrilateral (a face of it), a line, then
     // the other hexahedra; `given[c]` is hexahedron c's index in that order.
     let cell = |c: usize| &g.conn[g.offsets[c]..g.offsets[c + 1]];
-    let mut given_cells: Vec<(u8, Vec<u32>)> = vec![(1, vec![cell(0)[0]])];
+    let mut given_cells: Vec<(u8, Vec<u32>)> = vec![(1, vec![lone])];
     given_cells.push((72, cell(0).to_vec()));
     given_cells.push((9, cell(0)[..4].to_vec()));
     given_cells.push((3, cell(0)[..2].to_vec()));
@@ -888,7 +893,7 @@ fn cells_below_three_dimensions_are_left_out() {
     assert_eq!(
         stats.warnings,
         [
-            "mixed: 3 vertex, line and surface cell(s) left out (the boundary groups a mesher \
+            "3 vertex, line and surface cell(s) left out (the boundary groups a mesher \
           writes beside the volume); the 8 volume cells are sampled"
         ]
     );
@@ -918,4 +923,38 @@ fn cells_below_three_dimensions_are_left_out() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("mixed: cell 5 "), "{e}");
+}
+
+/// A point the walk across faces cannot follow (here: more crossings than its hops) is
+/// found in the whole mesh, at the same world point; one leaving the mesh is not.
+#[test]
+fn a_point_the_walk_loses_is_located_in_the_whole_mesh() {
+    use crate::field::fe::Walk;
+    let mesh = grid_mesh(20, 1, |y| y, |y| y.length_squared());
+    let mut sc = Scratch::default();
+    let far = DVec3::new(12.5, 0.5, 0.5);
+    let x = mesh.map(0, far, &mut sc).0;
+    assert_eq!(mesh.walk(0, far, &mut sc), Walk::Lost(x));
+    assert_eq!(mesh.relocate(0, far, &mut sc), None);
+    let values = &mesh.point_data[0].data;
+    let surface = particle::Surface {
+        mesh: &mesh,
+        values,
+        iso: 0.5,
+        tolerance: 1e-6,
+        curvature_in_projection: false,
+        evaluations: Default::default(),
+        gaps: false,
+    };
+    let (c, u) = surface.relocate(0, far, &mut sc).unwrap();
+    assert!(
+        c != 0 && mesh.map(c, u, &mut sc).0.distance(x) <= 1e-12,
+        "{c} {u}"
+    );
+    let (d, nf) = mesh.shape(c).kind.face_distances(u);
+    assert!(d[..nf].iter().all(|&d| d >= -1e-9), "{u} outside cell {c}");
+    // Out through the boundary face x = -1: no cell.
+    let out = DVec3::new(-0.5, 0.5, 0.5);
+    assert_eq!(mesh.walk(0, out, &mut sc), Walk::Out);
+    assert_eq!(surface.relocate(0, out, &mut sc), None);
 }

@@ -5,14 +5,14 @@
 use super::basis::{outer, BasisValues};
 use super::bernstein::{control_map, ControlMap};
 use super::classic::{self, Completions};
-use super::search::PROBE_SLACK;
+use super::search::{CellIndex, PROBE_SLACK};
 use super::shape::{Kind, Shape};
 use crate::error::{Error, Result};
 use crate::field::particles::Attribute;
 use glam::{DMat3, DVec3};
 use rustc_hash::FxHashMap;
 use std::borrow::Cow;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// No neighbour across a face (the domain boundary).
 pub(crate) const NO_NEIGHBOUR: u32 = u32::MAX;
@@ -57,6 +57,9 @@ pub struct FeMesh {
     given_cells: Vec<u32>,
     /// How many cells were left out that way.
     left_out: usize,
+    /// Point location, built on first need (probes, the marching baseline, and particles
+    /// the walk across faces loses) and kept while the mesh is.
+    index: OnceLock<CellIndex>,
 }
 
 /// Everything the particle system needs at one point of one cell.
@@ -101,6 +104,11 @@ impl FeMesh {
     /// `classic.rs`), a linear hexahedron with two collapsed edges as its wedge. Checks
     /// indices, node counts and that no element is degenerate or inverted (det J of one
     /// sign at every node; see `check_elements`).
+    ///
+    /// Vertex, line and surface cells given beside volume cells are left out unchecked;
+    /// the mesh's own cell numbering (`cell_count`, `nodes`, `shape`, `evaluate`) is then
+    /// that of the volume cells alone, while messages, the samples' Element and probes
+    /// count the cells as given ([`FeMesh::given_cell`]).
     pub fn new(
         name: &str,
         points: Vec<DVec3>,
@@ -334,6 +342,7 @@ impl FeMesh {
             name: name.to_string(),
             given_cells,
             left_out: 0,
+            index: OnceLock::new(),
         };
         for a in &mut point_data {
             mesh.complete(&mut a.data, a.components);
@@ -391,19 +400,34 @@ impl FeMesh {
         self.cell_shape.len()
     }
 
+    /// The mesh's point location, built the first time it is asked for.
+    pub fn index(&self) -> &CellIndex {
+        self.index.get_or_init(|| CellIndex::new(self))
+    }
+
+    /// Whether point `p` is a node of some cell (of the volume cells: points only the
+    /// left-out cells use, or none, are not).
+    pub fn used_points(&self) -> Vec<bool> {
+        let mut used = vec![false; self.points.len()];
+        for &n in &self.connectivity {
+            used[n as usize] = true;
+        }
+        used
+    }
+
     /// Cell `c`'s index among the cells as given (which may hold vertex, line and surface
     /// cells the mesh left out): what messages and the samples' Element call it.
     pub fn given_cell(&self, c: usize) -> usize {
         self.given_cells.get(c).map_or(c, |&g| g as usize)
     }
 
-    /// A warning that says which cells were left out, if any were.
+    /// A warning that says which cells were left out, if any were (without the mesh's
+    /// name: hosts and the CLI say which data a warning is about).
     pub fn left_out_warning(&self) -> Option<String> {
         (self.left_out > 0).then(|| {
             format!(
-                "{}: {} vertex, line and surface cell(s) left out (the boundary groups a \
-                 mesher writes beside the volume); the {} volume cells are sampled",
-                self.name,
+                "{} vertex, line and surface cell(s) left out (the boundary groups a mesher \
+                 writes beside the volume); the {} volume cells are sampled",
                 self.left_out,
                 self.cell_count()
             )
@@ -813,18 +837,19 @@ impl FeMesh {
 
 /// Whether VTK type `ty` is a vertex, line or surface cell.
 fn below_3d(ty: u8) -> bool {
-    matches!(ty, 1..=9 | 21..=23 | 28 | 30 | 34..=36 | 68..=70 | 75..=77)
+    matches!(ty, 0..=9 | 21..=23 | 28 | 30 | 34..=36 | 60..=63 | 68..=70 | 75..=77)
 }
 
 /// " (a pyramid)" and the like for VTK cell types people meet that isobar does not read, so
 /// the refusal says what the cell is.
 fn unread_name(ty: u8) -> String {
     let name = match ty {
+        0 => "an empty cell",
         1 | 2 => "a vertex",
-        3 | 4 | 21 | 68 => "a line",
-        5 | 6 | 22 | 34 | 69 => "a triangle",
-        7 => "a polygon",
-        8 | 9 | 23 | 28 | 70 => "a quadrilateral",
+        3 | 4 | 21 | 35 | 60 | 68 => "a line",
+        5 | 6 | 22 | 34 | 61 | 69 => "a triangle",
+        7 | 36 | 63 => "a polygon",
+        8 | 9 | 23 | 28 | 30 | 62 | 70 => "a quadrilateral",
         14 | 27 | 74 => "a pyramid",
         15 | 16 => "a prism of more sides",
         33 => "a biquadratic-quadratic hexahedron",
