@@ -107,6 +107,8 @@ fn run_mc(args: &FeArgs, mesh: &crate::field::fe::FeMesh, read_s: f64) -> Result
         extract(mesh, &args.field, &params, progress)
     })?;
     let extract_s = t.elapsed().as_secs_f64();
+    // The baseline keeps no warnings of its own; the mesh's is the one it can have.
+    crate::io::print_warnings(&args.input, mesh.left_out_warning().as_slice());
     crate::io::write_mesh(&args.output, &surface)?;
     println!(
         "{} vertices, {} triangles on {} cells (grid spacing {:.4}, {} nodes, {} inside): {} active cells, {} forward evaluations, {} unresolved edges; max |F - C| = {:.2e}; read {:.3} s, extracted {:.3} s (nodes {:.3} s, edges {:.3} s)",

@@ -198,6 +198,13 @@ fn uncovered(s: &PointSamples, points: &[DVec3]) -> f64 {
     outside as f64 / points.len() as f64
 }
 
+/// The least distance between two samples.
+fn least_distance(s: &PointSamples) -> f64 {
+    s.nearest_neighbour_distances()
+        .into_iter()
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Splats of the samples' radii leave no hole: 20,000 random points of the exact sphere
 /// each lie within some sample's radius (the even-packing radius d/√3 left 4–8 % of a
 /// sphere uncovered), and no radius is more than 2.5 times that one.
@@ -550,10 +557,7 @@ fn a_surface_cut_by_the_mesh_boundary_is_covered_to_its_edge() {
         );
         // Samples held on the boundary do not pile up: none within a quarter spacing of
         // another (the least distance measured 0.38 spacings).
-        let least = s
-            .nearest_neighbour_distances()
-            .into_iter()
-            .fold(f64::INFINITY, f64::min);
+        let least = least_distance(&s);
         assert!(
             least > 0.25 * params.spacing,
             "{n}³ cells: samples {least} apart"
@@ -817,10 +821,7 @@ fn tetrahedra_and_wedges_sample_a_sphere() {
             s.len()
         );
         // No sample on another's place (a held move once left copies).
-        let least = s
-            .nearest_neighbour_distances()
-            .into_iter()
-            .fold(f64::INFINITY, f64::min);
+        let least = least_distance(&s);
         assert!(
             least > 0.5 * params.spacing,
             "wedges {wedges}: samples {least} apart"
