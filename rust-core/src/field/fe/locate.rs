@@ -37,7 +37,7 @@ impl FeMesh {
     /// through a boundary face, or the walk lost it (a Newton inversion failed in a
     /// sliver, or more face crossings than it follows) at world point x.
     pub fn walk(&self, c: usize, u: DVec3, scratch: &mut Scratch) -> Walk {
-        let mut cell = c;
+        let (mut cell, start) = (c, u);
         let mut u = u;
         let mut world: Option<DVec3> = None;
         for _hop in 0..8 {
@@ -65,7 +65,8 @@ impl FeMesh {
             }
             cell = next;
         }
-        Walk::Lost(world.unwrap_or_else(|| self.map(c, u, scratch).0))
+        // Every hop that did not return has set `world`: the point as first given.
+        Walk::Lost(world.unwrap_or_else(|| self.map(c, start, scratch).0))
     }
 
     /// Newton's method on T_c(u) = x from `guess`.
