@@ -136,7 +136,15 @@ fn main() {
             &mut Progress::none(),
         )
         .expect("refine");
-        grid::balance(&g, &mut levels, &mut Progress::none()).expect("balance");
+        refine::balance_within(
+            &g,
+            &lattice,
+            &mut levels,
+            ISO,
+            max_error,
+            &mut Progress::none(),
+        )
+        .expect("balance");
         let levels_s = t.elapsed().as_secs_f64();
         let out = adaptive::extract(&field, &g, &levels, &params, &mut Progress::none())
             .expect("adaptive");

@@ -270,9 +270,46 @@ pub fn dilate(
 /// result, without sweeping every coarse cell per pass (balancing was a tenth of an
 /// adaptive extraction's time).
 pub fn balance(grid: &CoarseGrid, levels: &mut [u8], progress: &mut Progress) -> Result<()> {
-    // The first pass sweeps every cell without listing them (a list of all cells would
-    // take 8 bytes a cell, more than the grid's own arrays), reporting as it goes.
-    let mut dirty: Option<Vec<usize>> = None;
+    balance_around(grid, levels, None, progress)
+}
+
+/// [`balance`] when only the cells in `changed` have risen since the levels were last
+/// balanced: the passes start from their 3×3×3 blocks instead of every cell.
+pub fn rebalance(grid: &CoarseGrid, levels: &mut [u8], changed: &[usize]) -> Result<()> {
+    let blocks = blocks_of(grid, changed.par_iter().copied());
+    balance_around(grid, levels, Some(blocks), &mut Progress::none())
+}
+
+/// The sorted, unique cells of the 3×3×3 blocks around `cells`.
+fn blocks_of(grid: &CoarseGrid, cells: impl IntoParallelIterator<Item = usize>) -> Vec<usize> {
+    let mut out: Vec<usize> = cells
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let c = grid.coords(i);
+            (0..27usize).filter_map(move |d| {
+                let n: [i64; 3] =
+                    std::array::from_fn(|a| c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1);
+                (0..3)
+                    .all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
+                    .then(|| grid.index(n.map(|x| x as u32)))
+            })
+        })
+        .collect();
+    out.par_sort_unstable();
+    out.dedup();
+    out
+}
+
+/// The passes of [`balance`] from `dirty`, the cells to look at first (None: every
+/// cell).
+fn balance_around(
+    grid: &CoarseGrid,
+    levels: &mut [u8],
+    mut dirty: Option<Vec<usize>>,
+    progress: &mut Progress,
+) -> Result<()> {
+    // A first pass over every cell sweeps them without listing them (a list of all cells
+    // would take 8 bytes a cell, more than the grid's own arrays), reporting as it goes.
     loop {
         let now = &*levels;
         let need = |i: usize| {
@@ -291,23 +328,7 @@ pub fn balance(grid: &CoarseGrid, levels: &mut [u8], progress: &mut Progress) ->
         for &(i, need) in &changes {
             levels[i] = need;
         }
-        let mut next: Vec<usize> = changes
-            .par_iter()
-            .flat_map_iter(|&(i, _)| {
-                let c = grid.coords(i);
-                (0..27usize).filter_map(move |d| {
-                    let n: [i64; 3] = std::array::from_fn(|a| {
-                        c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1
-                    });
-                    (0..3)
-                        .all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
-                        .then(|| grid.index(n.map(|x| x as u32)))
-                })
-            })
-            .collect();
-        next.par_sort_unstable();
-        next.dedup();
-        dirty = Some(next);
+        dirty = Some(blocks_of(grid, changes.par_iter().map(|&(i, _)| i)));
     }
 }
 

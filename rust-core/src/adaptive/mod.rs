@@ -177,7 +177,8 @@ pub struct Stats {
     pub cells_per_level: [u64; 3],
     /// Marching-cubes triangles from cells of level 1, 2, 3.
     pub triangles_per_level: [u64; 3],
-    /// Cells the error criterion raised to level 2 and to level 3 (before balancing).
+    /// Cells the error criterion raised to level 2 and to level 3 (to 3 including the
+    /// cells balancing had raised to a level off by more than `max_error`).
     pub error_raised: [u64; 2],
     /// Cells the hidden-surface rule raised (before balancing).
     pub hidden_raised: u64,
@@ -347,7 +348,16 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     })?;
     refined.hidden = hidden.hidden;
     refined.evaluations += hidden.evaluations;
-    progress.nested(0.9, 1.0, |p| grid::balance(grid, &mut levels, p))?;
+    refined.raised[1] += progress.nested(0.9, 1.0, |p| {
+        refine::balance_within(
+            grid,
+            &lattice,
+            &mut levels,
+            params.isovalue,
+            params.max_error,
+            p,
+        )
+    })?;
     Ok(Levels {
         levels,
         refined,
