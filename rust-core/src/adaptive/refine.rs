@@ -25,6 +25,10 @@ use crate::progress::{chunked, collect_ranges, Progress};
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// Finest nodes along a coarse cell's edge, both ends included, and in the cell.
+const M: usize = FINE_PER_COARSE as usize + 1;
+const M3: usize = M * M * M;
+
 /// What the criteria did: cells the error criterion raised to level 2 and to 3, cells the
 /// hidden-surface rule raised ([`hidden_surfaces`]), and the field evaluations (with
 /// gradient for the error criterion) both took.
@@ -77,7 +81,6 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
     // nodes (and the evaluation count) do not depend on the thread count.
     at.par_sort_by_key(|a| a.0);
     let groups: Vec<&[(usize, DVec3, f64)]> = at.chunk_by(|a, b| a.0 == b.0).collect();
-    const N: usize = FINE_PER_COARSE as usize + 1;
     let asks: Vec<(usize, u8, u64)> = groups
         .par_iter()
         .map(|g| {
@@ -86,10 +89,10 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
             let origin = grid.point(base, 0);
             // The cell's finest-lattice node values, evaluated when first needed (NaN:
             // not yet), at the same lattice points the levels contour.
-            let mut nodes = [f64::NAN; N * N * N];
+            let mut nodes = [f64::NAN; M3];
             let mut evaluations = 0u64;
             let mut value = |l: [usize; 3]| {
-                let v = &mut nodes[l[0] + N * (l[1] + N * l[2])];
+                let v = &mut nodes[l[0] + M * (l[1] + M * l[2])];
                 if v.is_nan() {
                     let sub = std::array::from_fn(|a| base[a] + l[a] as i64);
                     *v = field.value(grid.point(sub, 0));
@@ -300,13 +303,13 @@ fn needed_level(
     max_error: f64,
     from: u8,
 ) -> u8 {
-    const M: usize = FINE_PER_COARSE as usize + 1;
-    let mut values = [0.0; M * M * M];
+    let mut values = [0.0; M3];
     lattice.cell(c, &mut values);
-    let finest = lattice_surface(&values, M, 1, iso);
+    let finest = lattice_surface(&values, 1, iso);
+    let finest_targets = targets(&finest.triangles, max_error);
     let size = (M - 1) as f64;
     // The face neighbours' lattices (faces numbered 2·axis + side), when stored.
-    let neighbour = |axis: usize, side: usize| -> Option<[f64; M * M * M]> {
+    let neighbour = |axis: usize, side: usize| -> Option<[f64; M3]> {
         let mut n = c;
         if side == 0 {
             n[axis] = n[axis].checked_sub(1)?;
@@ -318,32 +321,40 @@ fn needed_level(
         lattice.stored_cell(n)
     };
     // Computed on first need: most samples are close to their own cell's surface.
-    let near: [std::cell::OnceCell<Option<[f64; M * M * M]>>; 6] = Default::default();
+    let near: [std::cell::OnceCell<Option<[f64; M3]>>; 6] = Default::default();
     let lattice_of = |f: usize| near[f].get_or_init(|| neighbour(f / 2, f % 2)).as_ref();
     let shifted = |f: usize, tris: Vec<[DVec3; 3]>| -> Vec<[DVec3; 3]> {
         let mut d = DVec3::ZERO;
         d[f / 2] = [-size, size][f % 2];
         tris.into_iter().map(|t| t.map(|p| p + d)).collect()
     };
-    let finest_beyond: [std::cell::OnceCell<Option<Vec<[DVec3; 3]>>>; 6] = Default::default();
-    let finest_of = |f: usize| {
-        finest_beyond[f]
-            .get_or_init(|| lattice_of(f).map(|v| shifted(f, lattice_surface(v, M, 1, iso))))
-            .as_deref()
+    let beyond = |f: usize, stride: usize| {
+        lattice_of(f).map(|v| {
+            targets(
+                &shifted(f, lattice_surface(v, stride, iso).triangles),
+                max_error,
+            )
+        })
     };
+    let finest_beyond: [std::cell::OnceCell<Option<Vec<Target>>>; 6] = Default::default();
+    let finest_of = |f: usize| finest_beyond[f].get_or_init(|| beyond(f, 1)).as_deref();
     for level in from.max(1)..=2u8 {
         let stride = (FINE_PER_COARSE / subdivisions(level)) as usize;
-        let surface = lattice_surface(&values, M, stride, iso);
-        let surface_beyond: [std::cell::OnceCell<Option<Vec<[DVec3; 3]>>>; 6] = Default::default();
+        let surface = lattice_surface(&values, stride, iso);
+        let surface_beyond: [std::cell::OnceCell<Option<Vec<Target>>>; 6] = Default::default();
         let surface_of = |f: usize| {
             surface_beyond[f]
-                .get_or_init(|| {
-                    lattice_of(f).map(|v| shifted(f, lattice_surface(v, M, stride, iso)))
-                })
+                .get_or_init(|| beyond(f, stride))
                 .as_deref()
         };
-        if surfaces_within(&surface, &finest, size, max_error, &finest_of)
-            && surfaces_within(&finest, &surface, size, max_error, &surface_of)
+        if surfaces_within(&surface, &finest_targets, size, max_error, &finest_of)
+            && surfaces_within(
+                &finest,
+                &targets(&surface.triangles, max_error),
+                size,
+                max_error,
+                &surface_of,
+            )
         {
             return level;
         }
@@ -351,15 +362,30 @@ fn needed_level(
     3
 }
 
-/// Marching-cubes triangles of the node values `values` (m³, x fastest) taking every
-/// `stride`-th node (a power of two), in node units. A cut edge's point is found as the
-/// extractor finds it: bisection (here on the lattice values along the edge) down to one
-/// lattice step, then linearly in that step.
-fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DVec3; 3]> {
+/// Marching-cubes triangles of a coarse cell's finest lattice, and which of each
+/// triangle's corners appear there first (bit k for corner k): [`surfaces_within`]
+/// samples a point shared by several triangles once.
+struct Contour {
+    triangles: Vec<[DVec3; 3]>,
+    fresh: Vec<u8>,
+}
+
+/// The [`Contour`] of the node values `values` (`M`³, x fastest) taking every `stride`-th
+/// node (a power of two), in node units. A cut edge's point is found as the extractor
+/// finds it: bisection (here on the lattice values along the edge) down to one lattice
+/// step, then linearly in that step; once per edge, so every triangle holding it has the
+/// same point to the bit.
+fn lattice_surface(values: &[f64; M3], stride: usize, iso: f64) -> Contour {
     let table = crate::mc::case_table();
-    let at = |l: [usize; 3]| values[l[0] + m * (l[1] + m * l[2])];
-    let cells = (m - 1) / stride;
-    let mut triangles = Vec::new();
+    let at = |l: [usize; 3]| values[l[0] + M * (l[1] + M * l[2])];
+    let cells = (M - 1) / stride;
+    // Each lattice edge's point, by (lower node, axis): an index into `points`.
+    let mut slot = [u16::MAX; M3 * 3];
+    let mut points: Vec<DVec3> = Vec::new();
+    let mut out = Contour {
+        triangles: Vec::new(),
+        fresh: Vec::new(),
+    };
     for v in 0..cells * cells * cells {
         let origin = [v % cells, v / cells % cells, v / (cells * cells)].map(|x| x * stride);
         let node = |corner: usize| -> [usize; 3] {
@@ -368,8 +394,7 @@ fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DV
         };
         let corners: [f64; 8] = std::array::from_fn(|corner| at(node(corner)));
         let case = crate::mc::case_index(&corners, iso);
-        let point = |e: u8| -> DVec3 {
-            let (corner, axis) = crate::mc::edge_corner_axis(e as usize);
+        let point = |corner: usize, axis: usize| -> DVec3 {
             let mut lo = node(corner);
             let mut length = stride;
             while length > 1 {
@@ -387,10 +412,81 @@ fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DV
             p
         };
         for tri in &table.triangles[case as usize] {
-            triangles.push(tri.map(point));
+            let mut corners = [DVec3::ZERO; 3];
+            let mut fresh = 0u8;
+            for (k, &e) in tri.iter().enumerate() {
+                let (corner, axis) = crate::mc::edge_corner_axis(e as usize);
+                let n = node(corner);
+                let id = (n[0] + M * (n[1] + M * n[2])) * 3 + axis;
+                if slot[id] == u16::MAX {
+                    slot[id] = points.len() as u16;
+                    points.push(point(corner, axis));
+                    fresh |= 1 << k;
+                }
+                corners[k] = points[slot[id] as usize];
+            }
+            out.triangles.push(corners);
+            out.fresh.push(fresh);
         }
     }
+    out
+}
+
+/// A triangle [`surfaces_within`] measures samples against, with what rejects most far
+/// samples before the exact distance: its box grown by the tolerance, and its plane (no
+/// point is nearer the triangle than its plane). Both margins are wider than the
+/// tolerance by more than rounding can move them, so neither rejects what the exact test
+/// would accept.
+#[derive(Clone, Copy, Debug)]
+struct Target {
+    corners: [DVec3; 3],
+    lo: DVec3,
+    hi: DVec3,
+    /// Unit normal; zero for a sliver, whose computed normal may point off its plane.
+    normal: DVec3,
+    /// The tolerance with the plane test's margin.
+    grow: f64,
+}
+
+impl Target {
+    /// Whether `p` lies within `tolerance` of the triangle (the tolerance `grow` was
+    /// made for).
+    #[inline]
+    fn near(&self, p: DVec3, tolerance: f64) -> bool {
+        let [a, b, c] = self.corners;
+        p.cmpge(self.lo).all()
+            && p.cmple(self.hi).all()
+            && self.normal.dot(p - a).abs() <= self.grow
+            && point_triangle(p, a, b, c) <= tolerance
+    }
+}
+
+/// `triangles` prepared as targets for samples within `tolerance`.
+fn targets(triangles: &[[DVec3; 3]], tolerance: f64) -> Vec<Target> {
+    let grow = tolerance * (1.0 + 1e-9) + 1e-12;
     triangles
+        .iter()
+        .map(|&corners| {
+            let [a, b, c] = corners;
+            // The cross product's direction is off by about ε / sin θ: with sin θ above
+            // 1e-3 the plane distance of a point a few lattice steps away is off by
+            // ~1e-12, well inside the 1e-9 margin.
+            let (ab, ac) = (b - a, c - a);
+            let cross = ab.cross(ac);
+            let upright = cross.length() > 1e-3 * ab.length() * ac.length();
+            Target {
+                corners,
+                lo: a.min(b).min(c) - grow,
+                hi: a.max(b).max(c) + grow,
+                normal: if upright {
+                    cross.normalize()
+                } else {
+                    DVec3::ZERO
+                },
+                grow: grow + 1e-9,
+            }
+        })
+        .collect()
 }
 
 /// Whether every sample of `from` (its triangles' vertices, edge midpoints and
@@ -412,26 +508,17 @@ fn lattice_surface(values: &[f64], m: usize, stride: usize, iso: f64) -> Vec<[DV
 /// first triangle close enough, the test at the first sample with none (the point
 /// distances were most of the criterion's time).
 fn surfaces_within<'a>(
-    from: &[[DVec3; 3]],
-    to: &[[DVec3; 3]],
+    from: &Contour,
+    to: &[Target],
     size: f64,
     tolerance: f64,
-    beyond: &dyn Fn(usize) -> Option<&'a [[DVec3; 3]]>,
+    beyond: &dyn Fn(usize) -> Option<&'a [Target]>,
 ) -> bool {
-    // A sample outside a target's box grown by the tolerance is too far from that
-    // triangle without the exact distance (the margin is a hair wider than the tolerance,
-    // so rounding never rejects what the exact test would accept). The triangle close
-    // enough to the previous sample is tried first: samples come triangle by triangle,
-    // and neighbours usually share their nearest target.
-    let grow = tolerance * (1.0 + 1e-9) + 1e-12;
-    let near = |p: DVec3, t: &[DVec3; 3]| {
-        let [a, b, c] = *t;
-        p.cmpge(a.min(b).min(c) - grow).all()
-            && p.cmple(a.max(b).max(c) + grow).all()
-            && point_triangle(p, a, b, c) <= tolerance
-    };
+    // The triangle close enough to the previous sample is tried first: samples come
+    // triangle by triangle, and neighbours usually share their nearest target.
+    let near = |p: DVec3, t: &Target| t.near(p, tolerance);
     let mut last = 0;
-    from.iter().all(|t| {
+    from.triangles.iter().zip(&from.fresh).all(|(t, &fresh)| {
         let samples = [
             t[0],
             t[1],
@@ -441,27 +528,91 @@ fn surfaces_within<'a>(
             (t[2] + t[0]) / 2.0,
             (t[0] + t[1] + t[2]) / 3.0,
         ];
-        samples.iter().all(|&p| {
-            if last < to.len() && near(p, &to[last]) {
-                return true;
-            }
-            if let Some(k) = (0..to.len()).find(|&k| near(p, &to[k])) {
-                last = k;
-                return true;
-            }
-            // Within the tolerance of a face (not on it): the neighbour's surface there.
-            let mut faces = (0..6).filter(|&f| {
-                let d = [p[f / 2], size - p[f / 2]][f % 2];
-                d > 0.0 && d <= tolerance
-            });
-            faces.any(|f| beyond(f).is_none_or(|b| b.iter().any(|u| near(p, u))))
-        })
+        // A corner already tested in an earlier triangle is not tested again.
+        let tested = |k: usize| k >= 3 || fresh >> k & 1 == 1;
+        samples
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| tested(k))
+            .all(|(_, &p)| {
+                if last < to.len() && near(p, &to[last]) {
+                    return true;
+                }
+                if let Some(k) = (0..to.len()).find(|&k| near(p, &to[k])) {
+                    last = k;
+                    return true;
+                }
+                // Within the tolerance of a face (not on it): the neighbour's surface there.
+                let mut faces = (0..6).filter(|&f| {
+                    let d = [p[f / 2], size - p[f / 2]][f % 2];
+                    d > 0.0 && d <= tolerance
+                });
+                faces.any(|f| beyond(f).is_none_or(|b| b.iter().any(|u| near(p, u))))
+            })
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The box and plane tests only reject what the exact distance would: `near` agrees
+    /// with `point_triangle` on points around ordinary triangles and slivers, and accepts
+    /// the points just inside the tolerance.
+    #[test]
+    fn target_tests_agree_with_the_exact_distance() {
+        fn unit(state: &mut u64) -> f64 {
+            *state ^= *state << 13;
+            *state ^= *state >> 7;
+            *state ^= *state << 17;
+            (*state >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn point(state: &mut u64) -> DVec3 {
+            DVec3::new(unit(state), unit(state), unit(state)) * 4.0
+        }
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let tolerance = 0.4;
+        let mut compared = [0usize; 2];
+        for t in 0..2000 {
+            let (a, b) = (point(&mut state), point(&mut state));
+            // Every fourth triangle a sliver: c a hair off the line through a and b.
+            let c = if t % 4 == 0 {
+                a + (b - a) * unit(&mut state) + DVec3::splat(1e-9 * unit(&mut state))
+            } else {
+                point(&mut state)
+            };
+            let target = targets(&[[a, b, c]], tolerance)[0];
+            for _ in 0..50 {
+                let p = point(&mut state);
+                let d = point_triangle(p, a, b, c);
+                assert_eq!(
+                    target.near(p, tolerance),
+                    d <= tolerance,
+                    "{p:?} vs {a:?} {b:?} {c:?}"
+                );
+                compared[usize::from(d <= tolerance)] += 1;
+                // Toward the centroid, bisected to the point just inside the tolerance:
+                // the margins must not reject it.
+                if d > tolerance {
+                    let g = (a + b + c) / 3.0;
+                    let (mut outside, mut inside) = (p, g);
+                    for _ in 0..80 {
+                        let mid = (outside + inside) / 2.0;
+                        if point_triangle(mid, a, b, c) <= tolerance {
+                            inside = mid;
+                        } else {
+                            outside = mid;
+                        }
+                    }
+                    assert!(target.near(inside, tolerance), "{inside:?} at the edge");
+                }
+            }
+        }
+        assert!(
+            compared.iter().all(|&n| n > 1_000),
+            "both outcomes tested: {compared:?}"
+        );
+    }
 
     struct Linear;
 
