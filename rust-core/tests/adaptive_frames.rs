@@ -3,6 +3,7 @@
 //! spline, iso 0.6): every level mix the splash criterion produces must give a closed,
 //! oriented mesh whose shared points coincide, equal to itself whatever the thread count.
 
+use isobar::adaptive::grid::CoarseGrid;
 use isobar::adaptive::{self, Params};
 use isobar::field::kernel::Kernel;
 use isobar::field::sph::{Quantity, SmoothingLength, SphField, SphSettings};
@@ -24,6 +25,15 @@ fn field(name: &str) -> SphField {
         ..SphSettings::default()
     };
     SphField::new(&data, &s).unwrap()
+}
+
+/// The coarse grid of `params` and uniform marching cubes at its finest level through the
+/// adaptive extractor (every cell at level 3): what the adaptive mesh is measured against.
+fn uniform_finest(field: &SphField, params: &Params) -> (CoarseGrid, adaptive::Extraction) {
+    let grid = adaptive::grid_for(field, params).unwrap();
+    let all_finest = vec![3u8; grid.cell_count()];
+    let uniform = adaptive::extract(field, &grid, &all_finest, params, &mut Progress::none());
+    (grid, uniform.unwrap())
 }
 
 #[test]
@@ -93,15 +103,7 @@ fn default_refinement_stays_within_half_a_fine_cell_of_uniform_finest() {
                 ..params.clone()
             };
             let paper = adaptive::extract_sph(&field, &paper, &mut Progress::none()).unwrap();
-            let grid = adaptive::grid_for(&field, &params).unwrap();
-            let uniform = adaptive::extract(
-                &field,
-                &grid,
-                &vec![3u8; grid.cell_count()],
-                &params,
-                &mut Progress::none(),
-            )
-            .unwrap();
+            let (grid, uniform) = uniform_finest(&field, &params);
             for (max_error, hidden_surfaces) in [
                 (params.max_error, true),
                 (0.0, true),
@@ -161,15 +163,7 @@ fn fine_grids_meet_the_triangle_target_within_half_a_fine_cell() {
             grid_factor,
             ..Params::default()
         };
-        let grid = adaptive::grid_for(&field, &params).unwrap();
-        let uniform = adaptive::extract(
-            &field,
-            &grid,
-            &vec![3u8; grid.cell_count()],
-            &params,
-            &mut Progress::none(),
-        )
-        .unwrap();
+        let (grid, uniform) = uniform_finest(&field, &params);
         let out = adaptive::extract_sph(&field, &params, &mut Progress::none()).unwrap();
         let d = isobar::mesh::hausdorff::hausdorff(&out.mesh, &uniform.mesh, 8.0 * grid.fine)
             / grid.fine;
