@@ -124,7 +124,7 @@ fn main() {
             refine::hidden_surfaces(&field, &g, &positions, &mut levels, ISO);
         }
         let mut lattice = adaptive::lattice::Lattice::new(&g);
-        let r = refine::refine(
+        let mut r = refine::refine(
             &field,
             &g,
             &counts,
@@ -136,7 +136,9 @@ fn main() {
             &mut Progress::none(),
         )
         .expect("refine");
-        refine::balance_within(
+        // Cells balancing raised to a level off by more than max_error go to 3, and
+        // count there (as in the library's stats).
+        r.raised[1] += refine::balance_within(
             &g,
             &lattice,
             &mut levels,

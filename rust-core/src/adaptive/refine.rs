@@ -141,8 +141,8 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
 }
 
 /// Raises each coarse cell of `levels` (after splitting and dilation; to be balanced after)
-/// at or next to the surface to the lowest level whose surface lies within `max_error`
-/// finest cells of the finest one in that cell ([`needed_level`]). `counts` are the
+/// at or next to the surface to the lowest level, from its own up, whose surface lies
+/// within `max_error` finest cells of the finest one in that cell ([`needed_level`]). `counts` are the
 /// particles per coarse cell (a cell holding particles but no corner inside the fluid
 /// may hide a droplet between its corners, and its neighbours parts of that droplet's
 /// surface). `max_error` ≤ 0 leaves the levels as they are. The finest nodes of the
@@ -249,10 +249,11 @@ pub fn refine<F: ScalarField + ?Sized>(
 /// it. Balancing raises cells the criterion passed at a lower level, and a surface one
 /// level finer is not always nearer the finest one (dam_break_23 at G 0.25: a level-1
 /// cell within 0.35 finest cells, balanced to level 2, lay 0.54 off). Each cell balancing
-/// raised is tested at its new level ([`needed_level`], where its finest lattice was
-/// covered: elsewhere no surface was near enough to be a candidate); those off by more
-/// than `max_error` go to level 3 and balancing runs again from them, until none is.
-/// Returns the cells so raised.
+/// raised whose finest lattice [`refine`] covered (a candidate: the surface crosses its
+/// block's corners or a droplet may hide in it) is tested at its new level
+/// ([`needed_level`]); those off by more than `max_error` go to level 3 and balancing
+/// runs again from them, until none is. A cell no candidate test reached stays as
+/// balanced, as [`refine`] leaves such cells. Returns how many cells went to level 3.
 pub fn balance_within(
     grid: &CoarseGrid,
     lattice: &Lattice,
@@ -261,10 +262,16 @@ pub fn balance_within(
     max_error: f64,
     progress: &mut Progress,
 ) -> Result<u64> {
-    let mut before = (max_error > 0.0).then(|| levels.to_vec());
+    if max_error <= 0.0 {
+        return grid::balance(grid, levels, progress).map(|()| 0);
+    }
+    // One copy of the levels at a time: the per-cell arrays' budget counts one.
+    let mut was = levels.to_vec();
     grid::balance(grid, levels, progress)?;
     let mut raised = 0;
-    while let Some(was) = before.take() {
+    loop {
+        // Between rounds, so that a cancel is seen here too.
+        progress.report(1.0)?;
         let now = &*levels;
         let off: Vec<usize> = (0..now.len())
             .into_par_iter()
@@ -277,17 +284,15 @@ pub fn balance_within(
             })
             .collect();
         if off.is_empty() {
-            break;
+            return Ok(raised);
         }
         raised += off.len() as u64;
-        let was = levels.to_vec();
+        was.copy_from_slice(levels);
         for &i in &off {
             levels[i] = 3;
         }
         grid::rebalance(grid, levels, &off)?;
-        before = Some(was);
     }
-    Ok(raised)
 }
 
 /// The lowest level from `from` on whose marching-cubes surface in coarse cell `c` lies
@@ -557,8 +562,9 @@ mod tests {
     use super::*;
 
     /// The box and plane tests only reject what the exact distance would: `near` agrees
-    /// with `point_triangle` on points around ordinary triangles and slivers, and accepts
-    /// the points just inside the tolerance.
+    /// with `point_triangle` on points around ordinary triangles, slivers and triangles
+    /// just upright enough for the plane test, and accepts the points just inside the
+    /// tolerance.
     #[test]
     fn target_tests_agree_with_the_exact_distance() {
         fn unit(state: &mut u64) -> f64 {
@@ -567,23 +573,31 @@ mod tests {
             *state ^= *state << 17;
             (*state >> 11) as f64 / (1u64 << 53) as f64
         }
-        fn point(state: &mut u64) -> DVec3 {
-            DVec3::new(unit(state), unit(state), unit(state)) * 4.0
+        // Points of a 4-wide box at a random place in [-4, 8]³ (neighbour surfaces are
+        // shifted by a cell, 4 lattice steps).
+        fn point(state: &mut u64, base: DVec3) -> DVec3 {
+            base + DVec3::new(unit(state), unit(state), unit(state)) * 4.0
         }
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
         let tolerance = 0.4;
         let mut compared = [0usize; 2];
         for t in 0..2000 {
-            let (a, b) = (point(&mut state), point(&mut state));
-            // Every fourth triangle a sliver: c a hair off the line through a and b.
-            let c = if t % 4 == 0 {
-                a + (b - a) * unit(&mut state) + DVec3::splat(1e-9 * unit(&mut state))
-            } else {
-                point(&mut state)
+            let base = DVec3::new(unit(&mut state), unit(&mut state), unit(&mut state)) * 8.0
+                - DVec3::splat(4.0);
+            let (a, b) = (point(&mut state, base), point(&mut state, base));
+            // Every fourth triangle a sliver (c a hair off the line through a and b: no
+            // plane test), every fourth one just upright enough for the plane test
+            // (sin θ about 2e-3), the rest ordinary.
+            let along = a + (b - a) * unit(&mut state);
+            let across = (b - a).any_orthonormal_vector();
+            let c = match t % 4 {
+                0 => along + across * 1e-9,
+                1 => along + across * 2e-3 * (b - a).length(),
+                _ => point(&mut state, base),
             };
             let target = targets(&[[a, b, c]], tolerance)[0];
             for _ in 0..50 {
-                let p = point(&mut state);
+                let p = point(&mut state, base);
                 let d = point_triangle(p, a, b, c);
                 assert_eq!(
                     target.near(p, tolerance),
