@@ -4,7 +4,8 @@
 //! (level 3), every second (level 2) and the corners (level 1), edge points placed by
 //! bisecting the lattice values as the extractor bisects the field. The cell takes the
 //! lowest level whose surface lies within `max_error` finest cells of the level-3 one
-//! ([`surfaces_within`]); `grid::balance` runs after (in `levels_from_counts`).
+//! ([`surfaces_within`]); balancing runs after, and each cell it raises is tested at its
+//! new level ([`balance_within`], in `levels_from_counts`).
 //!
 //! The meshes are compared, not the fields: an interpolation error |F − F_lin| / |∇F| at
 //! the next level's nodes (this module's first estimate) misses how far a flat piece
