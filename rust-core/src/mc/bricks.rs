@@ -474,6 +474,13 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     }
 
     fn brick_index_or_insert(&mut self, brick: u64) -> u32 {
+        self.brick_index_or_make(brick, true)
+    }
+
+    /// The index of `brick`, made when absent. A made brick's values are allocated now
+    /// when `allocate`, else left empty for the caller to allocate (see
+    /// [`BrickMap::insert_in_brick_order`]).
+    fn brick_index_or_make(&mut self, brick: u64, allocate: bool) -> u32 {
         if let Some((b, i)) = self.last {
             if b == brick {
                 return i;
@@ -509,11 +516,15 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                     self.chunk_maps[i as usize] = [NO_CHUNK; CHUNKS];
                 }
                 let values = &mut self.values[i as usize];
-                if values.is_empty() {
+                if values.is_empty() && allocate {
                     *values = BrickShape::<S, C>::new_values();
                 }
             } else {
-                self.values.push(BrickShape::<S, C>::new_values());
+                self.values.push(if allocate {
+                    BrickShape::<S, C>::new_values()
+                } else {
+                    Box::default()
+                });
                 if BrickShape::<S, C>::CHUNKED {
                     self.chunk_maps.push([NO_CHUNK; CHUNKS]);
                 }
@@ -579,7 +590,11 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         while start < orders.len() {
             let brick = orders[start] >> (3 * S);
             let end = start + orders[start..].partition_point(|&o| o >> (3 * S) == brick);
-            let i = self.brick_index_or_insert(BrickShape::<S, C>::brick_of_order(orders[start]));
+            // New bricks' values are allocated (and zeroed) by the thread that fills
+            // them: one at a time here, they were the serial part of a node-cache wave
+            // (a kilobyte each, tens of thousands a wave on the demo frame).
+            let brick = BrickShape::<S, C>::brick_of_order(orders[start]);
+            let i = self.brick_index_or_make(brick, false);
             groups.push((i, start..end));
             start = end;
         }
@@ -610,6 +625,9 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         let added: usize = jobs
             .into_par_iter()
             .map(|((meta, brick, map), range)| {
+                if brick.is_empty() {
+                    *brick = BrickShape::<S, C>::new_values();
+                }
                 let mut added = 0;
                 for (&o, &v) in orders[range.clone()].iter().zip(&values[range]) {
                     let local = BrickShape::<S, C>::local_of_order(o);
