@@ -81,6 +81,19 @@ impl CoarseGrid {
             + self.cells[0] as usize * (c[1] as usize + self.cells[1] as usize * c[2] as usize)
     }
 
+    /// The cells of the 3×3×3 block around cell `i` that lie in the grid, `i` included.
+    #[inline]
+    pub fn block(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        let c = self.coords(i);
+        (0..27usize).filter_map(move |d| {
+            let n: [i64; 3] =
+                std::array::from_fn(|a| c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1);
+            (0..3)
+                .all(|a| n[a] >= 0 && n[a] < self.cells[a] as i64)
+                .then(|| self.index(n.map(|x| x as u32)))
+        })
+    }
+
     /// Coordinates of coarse cell `i`.
     #[inline]
     pub fn coords(&self, i: usize) -> [u32; 3] {
@@ -238,18 +251,11 @@ pub fn dilate(
             cells
                 .into_par_iter()
                 .map(|i| {
-                    let c = grid.coords(i);
-                    let mut l = now[i];
-                    for d in 0..27usize {
-                        let o = [d % 3, d / 3 % 3, d / 9].map(|x| x as i64 - 1);
-                        let n: [i64; 3] = std::array::from_fn(|a| c[a] as i64 + o[a]);
-                        if (0..3).all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
-                            && now[grid.index(n.map(|x| x as u32))] == 3
-                        {
-                            l = 3;
-                        }
+                    if grid.block(i).any(|n| now[n] == 3) {
+                        3
+                    } else {
+                        now[i]
                     }
-                    l
                 })
                 .collect()
         })?;
@@ -284,16 +290,7 @@ pub fn rebalance(grid: &CoarseGrid, levels: &mut [u8], changed: &[usize]) -> Res
 fn blocks_of(grid: &CoarseGrid, cells: impl IntoParallelIterator<Item = usize>) -> Vec<usize> {
     let mut out: Vec<usize> = cells
         .into_par_iter()
-        .flat_map_iter(|i| {
-            let c = grid.coords(i);
-            (0..27usize).filter_map(move |d| {
-                let n: [i64; 3] =
-                    std::array::from_fn(|a| c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1);
-                (0..3)
-                    .all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
-                    .then(|| grid.index(n.map(|x| x as u32)))
-            })
-        })
+        .flat_map_iter(|i| grid.block(i))
         .collect();
     out.par_sort_unstable();
     out.dedup();

@@ -194,15 +194,7 @@ pub fn refine<F: ScalarField + ?Sized>(
     // or of a cell holding particles with no corner inside (a droplet between the corners
     // reaches into its neighbours too).
     let marked = |i: usize| signs[i] == 3 || (counts[i] > 0 && signs[i] & 1 == 0);
-    let candidate = |i: usize| {
-        let c = grid.coords(i);
-        (0..27).any(|d| {
-            let n: [i64; 3] =
-                std::array::from_fn(|a| c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1);
-            (0..3).all(|a| n[a] >= 0 && n[a] < grid.cells[a] as i64)
-                && marked(grid.index(n.map(|x| x as u32)))
-        })
-    };
+    let candidate = |i: usize| grid.block(i).any(marked);
     let levels_now = &*levels;
     let candidates: Vec<usize> = progress.nested(0.25, 0.3, |p| {
         collect_ranges(levels_now.len(), p, |cells| {
