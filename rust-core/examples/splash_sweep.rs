@@ -136,9 +136,9 @@ fn main() {
             &mut Progress::none(),
         )
         .expect("refine");
-        // Cells balancing raised to a level off by more than max_error go to 3, and
-        // count there (as in the library's stats).
-        r.raised[1] += refine::balance_within(
+        // Cells balancing raised to a level off by more than max_error, and cells whose
+        // cracks are off, count as raised (as in the library's stats).
+        let balanced = refine::balance_within(
             &g,
             &lattice,
             &mut levels,
@@ -147,6 +147,8 @@ fn main() {
             &mut Progress::none(),
         )
         .expect("balance");
+        r.raised[0] += balanced[0];
+        r.raised[1] += balanced[1];
         let levels_s = t.elapsed().as_secs_f64();
         let out = adaptive::extract(&field, &g, &levels, &params, &mut Progress::none())
             .expect("adaptive");

@@ -73,7 +73,6 @@ fn face_triangles(
     iso: f64,
 ) -> Vec<[(u8, u32); 3]> {
     let a = face.axis;
-    let (u, v) = ((a + 1) % 3, (a + 2) % 3);
     let lower = face.cell;
     let mut upper_c = grid.coords(lower);
     upper_c[a] += 1;
@@ -91,43 +90,73 @@ fn face_triangles(
     let slot = fine
         .slot(fine_cell)
         .expect("the fine cell has the fine level");
+    let mut origin = grid.coords(lower).map(|c| c * FINE_PER_COARSE);
+    origin[a] += FINE_PER_COARSE;
+    let mut out = Vec::new();
+    face_fill(
+        origin,
+        a,
+        coarse_level,
+        |node| fine.value_at(grid, slot, node) > iso,
+        |node, axis| {
+            let e = fine
+                .edge_index(node, axis)
+                .expect("a crack point lies on a cut edge of the fine cell");
+            (fine_level, e as u32)
+        },
+        &mut out,
+    );
+    if flip {
+        for tri in &mut out {
+            tri.swap(1, 2);
+        }
+    }
+    out
+}
+
+/// The fill triangles of one transition face, appended to `out`: the face of a coarse
+/// cell at `coarse_level` whose first node is `origin` (finest-lattice coordinates),
+/// normal to `axis`. The face is cut into the coarse side's quads; each quad's nine
+/// fine-side vertices (`above`: whether a node lies above the isovalue) select a row of
+/// the pattern table, and each face point of the row is `point(first node of its fine
+/// edge, the edge's axis)`. Counter-clockwise in (u, v) = (axis + 1, axis + 2), i.e.
+/// wound for a normal along +axis. The extractor and the error criterion
+/// (`refine::cracks_within`) fill faces through this one function.
+pub(crate) fn face_fill<P>(
+    origin: [u32; 3],
+    axis: usize,
+    coarse_level: u8,
+    above: impl Fn([u32; 3]) -> bool,
+    mut point: impl FnMut([u32; 3], usize) -> P,
+    out: &mut Vec<[P; 3]>,
+) {
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let quads = subdivisions(coarse_level);
     let quad = FINE_PER_COARSE / quads; // quad side in finest cells
     let half = quad / 2;
-    let base = grid.coords(lower).map(|c| c * FINE_PER_COARSE);
-    let plane = (grid.coords(lower)[a] + 1) * FINE_PER_COARSE;
-    let mut out = Vec::new();
     for qv in 0..quads {
         for qu in 0..quads {
             let node = |i: u32, j: u32| -> [u32; 3] {
-                let mut n = [0u32; 3];
-                n[a] = plane;
-                n[u] = base[u] + qu * quad + i * half;
-                n[v] = base[v] + qv * quad + j * half;
+                let mut n = origin;
+                n[u] += qu * quad + i * half;
+                n[v] += qv * quad + j * half;
                 n
             };
             let mut config = 0usize;
             for j in 0..3 {
                 for i in 0..3 {
-                    if fine.value_at(grid, slot, node(i, j)) > iso {
+                    if above(node(i, j)) {
                         config |= 1 << (i + 3 * j);
                     }
                 }
             }
             let row: &[u8; ROW] = &CRACK_PATTERNS[config];
             for t in 0..row[0] as usize {
-                let tri: [(u8, u32); 3] = std::array::from_fn(|k| {
-                    let p = row[1 + 3 * t + k] as usize;
-                    let ((i, j), dir) = point_edge(p);
-                    let axis = if dir == 0 { u } else { v };
-                    let e = fine
-                        .edge_index(node(i as u32, j as u32), axis)
-                        .expect("a crack point lies on a cut edge of the fine cell");
-                    (fine_level, e as u32)
-                });
-                out.push(if flip { [tri[0], tri[2], tri[1]] } else { tri });
+                out.push(std::array::from_fn(|k| {
+                    let ((i, j), dir) = point_edge(row[1 + 3 * t + k] as usize);
+                    point(node(i as u32, j as u32), [u, v][dir])
+                }));
             }
         }
     }
-    out
 }

@@ -375,19 +375,24 @@ impl Lattice {
     /// The `M`³ node values of coarse cell `c` when every one is stored, else None (a
     /// cell next to the covered region, or outside the lattice).
     pub fn stored_cell(&self, c: [u32; 3]) -> Option<[f64; M * M * M]> {
-        let first = c.map(|x| x * FINE_PER_COARSE);
         let mut out = [0.0; M * M * M];
-        for (v, value) in out.iter_mut().enumerate() {
-            let l = [v % M, v / M % M, v / (M * M)].map(|x| x as u32);
-            *value = self.get(std::array::from_fn(|a| first[a] + l[a]))?;
-        }
-        Some(out)
+        self.try_block(c.map(|x| x * FINE_PER_COARSE), M, 1, &mut out)
+            .then_some(out)
     }
 
     /// The values at the `n`³ nodes `first + stride · l` (l in 0..n per axis, x fastest)
-    /// into `out`; each must be stored. The tile of each node comes from per-axis tables
-    /// (this runs for every node of every contoured cell).
+    /// into `out`; each must be stored.
     pub fn block(&self, first: [u32; 3], n: usize, stride: u32, out: &mut [f64]) {
+        assert!(
+            self.try_block(first, n, stride, out),
+            "a node of the block from {first:?} was not covered"
+        );
+    }
+
+    /// [`Lattice::block`], false as soon as a node is not stored (`out` then partly
+    /// written). The tile of each node comes from per-axis tables (this runs for every
+    /// node of every contoured cell).
+    fn try_block(&self, first: [u32; 3], n: usize, stride: u32, out: &mut [f64]) -> bool {
         assert!(n <= M && out.len() == n * n * n);
         // Per axis and node: (tile coordinate, offset in the tile).
         let axis: [[(usize, usize); M]; 3] = std::array::from_fn(|a| {
@@ -400,7 +405,7 @@ impl Lattice {
         for &(tz, lz) in &axis[2][..n] {
             for &(ty, ly) in &axis[1][..n] {
                 let row = ly + TILE * lz;
-                for (i, &(tx, lx)) in axis[0][..n].iter().enumerate() {
+                for &(tx, lx) in &axis[0][..n] {
                     let t = tx + self.tiles[0] * (ty + self.tiles[1] * tz);
                     out[v] = match self.stored(t) {
                         Some(slot) if self.marked[slot][row] >> lx & 1 == 1 => {
@@ -408,15 +413,17 @@ impl Lattice {
                         }
                         _ => {
                             let node = [tx * TILE + lx, ty * TILE + ly, tz * TILE + lz];
-                            self.get(node.map(|x| x as u32)).unwrap_or_else(|| {
-                                panic!("node {node:?} (block node {i}) was not covered")
-                            })
+                            match self.get(node.map(|x| x as u32)) {
+                                Some(value) => value,
+                                None => return false,
+                            }
                         }
                     };
                     v += 1;
                 }
             }
         }
+        true
     }
 }
 

@@ -348,7 +348,7 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     })?;
     refined.hidden = hidden.hidden;
     refined.evaluations += hidden.evaluations;
-    refined.raised[1] += progress.nested(0.9, 1.0, |p| {
+    let balanced = progress.nested(0.9, 1.0, |p| {
         refine::balance_within(
             grid,
             &lattice,
@@ -358,6 +358,8 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
             p,
         )
     })?;
+    refined.raised[0] += balanced[0];
+    refined.raised[1] += balanced[1];
     Ok(Levels {
         levels,
         refined,

@@ -17,6 +17,7 @@
 //! order of the cells or the thread count. The GPU back end takes its levels from the
 //! same function, its samples evaluated here on the CPU.
 
+use super::cracks;
 use super::grid::{self, subdivisions, CoarseGrid, FINE_PER_COARSE};
 use super::lattice::Lattice;
 use crate::error::Result;
@@ -244,9 +245,12 @@ pub fn refine<F: ScalarField + ?Sized>(
 /// cell within 0.35 finest cells, balanced to level 2, lay 0.54 off). Each cell balancing
 /// raised whose finest lattice [`refine`] covered (a candidate: the surface crosses its
 /// block's corners or a droplet may hide in it) is tested at its new level
-/// ([`needed_level`]); those off by more than `max_error` go to level 3 and balancing
-/// runs again from them, until none is. A cell no candidate test reached stays as
-/// balanced, as [`refine`] leaves such cells. Returns how many cells went to level 3.
+/// ([`needed_level`]); those off by more than `max_error` go to level 3. The levels being
+/// final only now, so are the crack triangles between them: a cell whose cracks against
+/// a finer neighbour are off ([`cracks_within`]) goes one level up, where the next round
+/// tests its surface. Balancing runs again from the raised cells, until no cell is off.
+/// A cell no candidate test reached stays as balanced, as [`refine`] leaves such cells.
+/// Returns how many cells went to levels 2 and 3.
 pub fn balance_within(
     grid: &CoarseGrid,
     lattice: &Lattice,
@@ -254,37 +258,56 @@ pub fn balance_within(
     iso: f64,
     max_error: f64,
     progress: &mut Progress,
-) -> Result<u64> {
+) -> Result<[u64; 2]> {
     if max_error <= 0.0 {
-        return grid::balance(grid, levels, progress).map(|()| 0);
+        return grid::balance(grid, levels, progress).map(|()| [0; 2]);
     }
     // One copy of the levels at a time: the per-cell arrays' budget counts one.
     let mut was = levels.to_vec();
     grid::balance(grid, levels, progress)?;
-    let mut raised = 0;
+    let mut raised = [0; 2];
+    let mut first = true;
     loop {
         // Between rounds, so that a cancel is seen here too.
         progress.report(1.0)?;
         let now = &*levels;
-        let off: Vec<usize> = (0..now.len())
+        // A face's cracks depend on the levels of its two cells: after the first round
+        // only those next to a change are tested again.
+        let moved = |i: usize| now[i] != was[i];
+        let near_change =
+            |i: usize| moved(i) || grid.face_neighbours(i).into_iter().flatten().any(moved);
+        let off: Vec<(usize, u8)> = (0..now.len())
             .into_par_iter()
-            .filter(|&i| {
+            .filter_map(|i| {
+                if now[i] == 3 {
+                    return None;
+                }
                 let c = grid.coords(i);
-                now[i] > was[i]
-                    && now[i] < 3
+                let surface_off = now[i] > was[i]
                     && lattice.stored_cell(c).is_some()
-                    && needed_level(grid, lattice, c, iso, max_error, now[i]) > now[i]
+                    && needed_level(grid, lattice, c, iso, max_error, now[i]) > now[i];
+                if surface_off {
+                    Some((i, 3))
+                } else if (first || near_change(i))
+                    && !cracks_within(grid, lattice, now, c, iso, max_error)
+                {
+                    Some((i, now[i] + 1))
+                } else {
+                    None
+                }
             })
             .collect();
         if off.is_empty() {
             return Ok(raised);
         }
-        raised += off.len() as u64;
+        first = false;
         was.copy_from_slice(levels);
-        for &i in &off {
-            levels[i] = 3;
+        for &(i, level) in &off {
+            levels[i] = level;
+            raised[level as usize - 2] += 1;
         }
-        grid::rebalance(grid, levels, &off)?;
+        let changed: Vec<usize> = off.iter().map(|&(i, _)| i).collect();
+        grid::rebalance(grid, levels, &changed)?;
     }
 }
 
@@ -321,18 +344,8 @@ fn needed_level(
     // Computed on first need: most samples are close to their own cell's surface.
     let near: [std::cell::OnceCell<Option<[f64; M3]>>; 6] = Default::default();
     let lattice_of = |f: usize| near[f].get_or_init(|| neighbour(f / 2, f % 2)).as_ref();
-    let shifted = |f: usize, tris: Vec<[DVec3; 3]>| -> Vec<[DVec3; 3]> {
-        let mut d = DVec3::ZERO;
-        d[f / 2] = [-size, size][f % 2];
-        tris.into_iter().map(|t| t.map(|p| p + d)).collect()
-    };
     let beyond = |f: usize, stride: usize| {
-        lattice_of(f).map(|v| {
-            targets(
-                &shifted(f, lattice_surface(v, stride, iso).triangles),
-                max_error,
-            )
-        })
+        lattice_of(f).map(|v| beyond_face(lattice_surface(v, stride, iso).triangles, f, max_error))
     };
     let finest_beyond: [std::cell::OnceCell<Option<Vec<Target>>>; 6] = Default::default();
     let finest_of = |f: usize| finest_beyond[f].get_or_init(|| beyond(f, 1)).as_deref();
@@ -360,6 +373,121 @@ fn needed_level(
     3
 }
 
+/// Targets of a face neighbour's `triangles` (in its lattice frame) in the frame of the
+/// cell whose face `f` (2·axis + side) they share.
+fn beyond_face(mut triangles: Vec<[DVec3; 3]>, f: usize, max_error: f64) -> Vec<Target> {
+    let mut d = DVec3::ZERO;
+    d[f / 2] = [-1.0, 1.0][f % 2] * (M - 1) as f64;
+    for t in &mut triangles {
+        *t = t.map(|p| p + d);
+    }
+    targets(&triangles, max_error)
+}
+
+/// Whether the crack triangles in the faces of coarse cell `c` against its finer face
+/// neighbours (`levels` balanced) lie within `max_error` finest cells of the finest
+/// surface on one side of their face or the other. The per-cell test samples the coarse
+/// trace in the face, one side of a crack triangle; the triangle spans from there to the
+/// fine side's polyline, and its middle can stray further than either (a saddle on the
+/// face of double_dam_break_26 at G 0.25: 0.507 finest cells off the uniform surface).
+/// A face whose neighbour's lattice is not stored is excused, as in [`surfaces_within`].
+fn cracks_within(
+    grid: &CoarseGrid,
+    lattice: &Lattice,
+    levels: &[u8],
+    c: [u32; 3],
+    iso: f64,
+    max_error: f64,
+) -> bool {
+    let i = grid.index(c);
+    let level = levels[i];
+    let neighbours = grid.face_neighbours(i);
+    let finer: Vec<(usize, usize)> = (0..6)
+        .filter_map(|f| neighbours[f].filter(|&n| levels[n] > level).map(|n| (f, n)))
+        .collect();
+    if finer.is_empty() {
+        return true;
+    }
+    let Some(values) = lattice.stored_cell(c) else {
+        return true;
+    };
+    finer.into_iter().all(|(f, n)| {
+        debug_assert_eq!(levels[n], level + 1, "levels are balanced");
+        let cracks = crack_triangles(&values, f, level, iso);
+        if cracks.is_empty() {
+            return true;
+        }
+        let Some(theirs) = lattice.stored_cell(grid.coords(n)) else {
+            return true;
+        };
+        // The finest surface in the layers of finest cells on either side of the face;
+        // of those, only targets within the tolerance of the face's plane can be near a
+        // sample in it (their boxes are grown by the tolerance).
+        let (a, plane) = (f / 2, (f % 2 * (M - 1)) as f64);
+        let at_face = |t: &Target| t.lo[a] <= plane && plane <= t.hi[a];
+        let own = lattice_surface_at(&values, 1, iso, Some(f)).triangles;
+        let theirs = lattice_surface_at(&theirs, 1, iso, Some(f ^ 1)).triangles;
+        let mut near: Vec<Target> = targets(&own, max_error);
+        near.extend(beyond_face(theirs, f, max_error));
+        near.retain(at_face);
+        // The target close enough to the previous sample first, as in [`surfaces_within`].
+        let mut last = 0;
+        cracks.iter().all(|t| {
+            crack_samples(t, max_error).all(|p| {
+                if last < near.len() && near[last].near(p, max_error) {
+                    return true;
+                }
+                near.iter()
+                    .position(|t| t.near(p, max_error))
+                    .map(|k| last = k)
+                    .is_some()
+            })
+        })
+    })
+}
+
+/// Points of triangle `t` on a barycentric grid fine enough that every point of it lies
+/// within a third of `tolerance` of one (its corners among them): a crack triangle is
+/// long and thin, from a chord to a polyline, up to a coarse face across, and where it
+/// strays most is inside, not at a few fixed points.
+fn crack_samples(t: &[DVec3; 3], tolerance: f64) -> impl Iterator<Item = DVec3> + '_ {
+    // The grid's small triangles have sides of at most half the tolerance, and a point
+    // of one lies within 1/√3 of its longest side of a corner.
+    let longest = (t[1] - t[0])
+        .length()
+        .max((t[2] - t[1]).length())
+        .max((t[0] - t[2]).length());
+    let parts = ((2.0 * longest / tolerance).ceil() as usize).max(1);
+    (0..=parts).flat_map(move |i| {
+        (0..=parts - i).map(move |j| {
+            let k = parts - i - j;
+            (t[0] * i as f64 + t[1] * j as f64 + t[2] * k as f64) / parts as f64
+        })
+    })
+}
+
+/// The crack triangles the extractor fills in face `f` (2·axis + side) of a coarse cell
+/// at `level` whose neighbour across it is one level finer ([`cracks::face_fill`]), their
+/// points placed on the lattice `values` as [`lattice_surface`] places the finer level's,
+/// in the cell's lattice frame.
+fn crack_triangles(values: &[f64; M3], f: usize, level: u8, iso: f64) -> Vec<[DVec3; 3]> {
+    let at = |n: [u32; 3]| values[n[0] as usize + M * (n[1] as usize + M * n[2] as usize)];
+    let mut origin = [0; 3];
+    origin[f / 2] = (f % 2) as u32 * FINE_PER_COARSE;
+    // The finer level's lattice edges.
+    let length = (FINE_PER_COARSE / subdivisions(level + 1)) as usize;
+    let mut out = Vec::new();
+    cracks::face_fill(
+        origin,
+        f / 2,
+        level,
+        |n| at(n) > iso,
+        |n, axis| edge_point(values, n.map(|x| x as usize), axis, length, iso),
+        &mut out,
+    );
+    out
+}
+
 /// Marching-cubes triangles of a coarse cell's finest lattice, and which of each
 /// triangle's corners appear there first (bit k for corner k): [`surfaces_within`]
 /// samples a point shared by several triangles once.
@@ -374,6 +502,12 @@ struct Contour {
 /// step, then linearly in that step; once per edge, so every triangle holding it has the
 /// same point to the bit.
 fn lattice_surface(values: &[f64; M3], stride: usize, iso: f64) -> Contour {
+    lattice_surface_at(values, stride, iso, None)
+}
+
+/// [`lattice_surface`], of the layer of cells along face `face` (2·axis + side) only
+/// when given.
+fn lattice_surface_at(values: &[f64; M3], stride: usize, iso: f64, face: Option<usize>) -> Contour {
     let table = crate::mc::case_table();
     let at = |l: [usize; 3]| values[l[0] + M * (l[1] + M * l[2])];
     let cells = (M - 1) / stride;
@@ -386,29 +520,15 @@ fn lattice_surface(values: &[f64; M3], stride: usize, iso: f64) -> Contour {
     };
     for v in 0..cells * cells * cells {
         let origin = [v % cells, v / cells % cells, v / (cells * cells)].map(|x| x * stride);
+        if face.is_some_and(|f| origin[f / 2] != f % 2 * (M - 1 - stride)) {
+            continue;
+        }
         let node = |corner: usize| -> [usize; 3] {
             let o = crate::mc::corner_offset(corner);
             std::array::from_fn(|a| origin[a] + o[a] as usize * stride)
         };
         let corners: [f64; 8] = std::array::from_fn(|corner| at(node(corner)));
         let case = crate::mc::case_index(&corners, iso);
-        let point = |corner: usize, axis: usize| -> DVec3 {
-            let mut lo = node(corner);
-            let mut length = stride;
-            while length > 1 {
-                length /= 2;
-                let mut mid = lo;
-                mid[axis] += length;
-                if (at(lo) > iso) == (at(mid) > iso) {
-                    lo = mid;
-                }
-            }
-            let mut hi = lo;
-            hi[axis] += 1;
-            let mut p = DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
-            p[axis] += crate::mc::linear_crossing(at(lo), at(hi), iso);
-            p
-        };
         for tri in &table.triangles[case as usize] {
             let mut corners = [DVec3::ZERO; 3];
             let mut fresh = 0u8;
@@ -418,7 +538,7 @@ fn lattice_surface(values: &[f64; M3], stride: usize, iso: f64) -> Contour {
                 let id = (n[0] + M * (n[1] + M * n[2])) * 3 + axis;
                 if slot[id] == u16::MAX {
                     slot[id] = points.len() as u16;
-                    points.push(point(corner, axis));
+                    points.push(edge_point(values, n, axis, stride, iso));
                     fresh |= 1 << k;
                 }
                 corners[k] = points[slot[id] as usize];
@@ -428,6 +548,33 @@ fn lattice_surface(values: &[f64; M3], stride: usize, iso: f64) -> Contour {
         }
     }
     out
+}
+
+/// The point where the lattice edge from node `lo` along `axis`, `length` lattice steps
+/// long (a power of two), crosses `iso`, as the extractor places it: bisection on the
+/// lattice values down to one step, then linearly in that step.
+fn edge_point(
+    values: &[f64; M3],
+    mut lo: [usize; 3],
+    axis: usize,
+    length: usize,
+    iso: f64,
+) -> DVec3 {
+    let at = |l: [usize; 3]| values[l[0] + M * (l[1] + M * l[2])];
+    let mut length = length;
+    while length > 1 {
+        length /= 2;
+        let mut mid = lo;
+        mid[axis] += length;
+        if (at(lo) > iso) == (at(mid) > iso) {
+            lo = mid;
+        }
+    }
+    let mut hi = lo;
+    hi[axis] += 1;
+    let mut p = DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
+    p[axis] += crate::mc::linear_crossing(at(lo), at(hi), iso);
+    p
 }
 
 /// A triangle [`surfaces_within`] measures samples against, with what rejects most far
@@ -762,5 +909,115 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The crack triangles [`crack_triangles`] places close exactly the gap the two sides
+    /// leave in the face: the edges they hold an odd number of times are the coarse
+    /// level's trace in the face, the finer level's trace, and the pieces of a quad's
+    /// border between two finer points where the coarse side sees no crossing, each once
+    /// (modulo 2), point for point. Random smooth fields on a cell's lattice, every face,
+    /// coarse levels 1 and 2.
+    #[test]
+    fn crack_triangles_close_the_gap_between_the_traces() {
+        type Key = [u64; 3];
+        type Edge = (Key, Key);
+        fn key(p: DVec3) -> Key {
+            p.to_array().map(f64::to_bits)
+        }
+        fn edge(a: DVec3, b: DVec3) -> Edge {
+            let (a, b) = (key(a), key(b));
+            if a < b {
+                (a, b)
+            } else {
+                (b, a)
+            }
+        }
+        fn toggle(set: &mut std::collections::BTreeSet<Edge>, e: Edge) {
+            if !set.remove(&e) {
+                set.insert(e);
+            }
+        }
+        let mut unit = crate::test_rng::unit(41);
+        let mut faces_with_cracks = 0;
+        for _ in 0..300 {
+            // Three Gaussian bumps of about a cell's width, placed around the cell.
+            let bumps: Vec<(DVec3, f64)> = (0..3)
+                .map(|_| {
+                    let c = DVec3::new(unit(), unit(), unit()) * 6.0 - DVec3::splat(1.0);
+                    (c, 1.0 + 2.0 * unit())
+                })
+                .collect();
+            let mut values = [0.0; M3];
+            for (v, value) in values.iter_mut().enumerate() {
+                let p = DVec3::new((v % M) as f64, (v / M % M) as f64, (v / (M * M)) as f64);
+                *value = bumps
+                    .iter()
+                    .map(|&(c, w)| (-(p - c).length_squared() / (w * w)).exp())
+                    .sum();
+            }
+            let iso = 0.2 + 0.4 * unit();
+            for level in 1..=2u8 {
+                let stride = |l: u8| (FINE_PER_COARSE / subdivisions(l)) as usize;
+                let coarse = lattice_surface(&values, stride(level), iso).triangles;
+                let fine = lattice_surface(&values, stride(level + 1), iso).triangles;
+                for f in 0..6 {
+                    let (a, plane) = (f / 2, ((f % 2) * (M - 1)) as f64);
+                    let in_face = |p: DVec3| p[a] == plane;
+                    let mut expected = std::collections::BTreeSet::new();
+                    for t in coarse.iter().chain(&fine) {
+                        for k in 0..3 {
+                            let (p, q) = (t[k], t[(k + 1) % 3]);
+                            if in_face(p) && in_face(q) {
+                                toggle(&mut expected, edge(p, q));
+                            }
+                        }
+                    }
+                    // Border pieces: a quad side whose ends agree in sign but whose
+                    // middle does not.
+                    let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+                    let quads = subdivisions(level) as usize;
+                    let side = (M - 1) / quads;
+                    let at = |n: [usize; 3]| values[n[0] + M * (n[1] + M * n[2])];
+                    for qv in 0..quads {
+                        for qu in 0..quads {
+                            for (start, dir) in [((0, 0), u), ((0, 0), v), ((1, 0), v), ((0, 1), u)]
+                            {
+                                let mut n = [0; 3];
+                                n[a] = f % 2 * (M - 1);
+                                n[u] = (qu + start.0) * side;
+                                n[v] = (qv + start.1) * side;
+                                let (mut mid, mut end) = (n, n);
+                                mid[dir] += side / 2;
+                                end[dir] += side;
+                                let sign = |n| at(n) > iso;
+                                if sign(n) == sign(end) && sign(n) != sign(mid) {
+                                    let first = edge_point(&values, n, dir, side / 2, iso);
+                                    let second = edge_point(&values, mid, dir, side / 2, iso);
+                                    toggle(&mut expected, edge(first, second));
+                                }
+                            }
+                        }
+                    }
+                    let cracks = crack_triangles(&values, f, level, iso);
+                    let mut odd = std::collections::BTreeSet::new();
+                    for t in &cracks {
+                        assert!(t.iter().all(|&p| in_face(p)), "{t:?} off face {f}");
+                        for k in 0..3 {
+                            toggle(&mut odd, edge(t[k], t[(k + 1) % 3]));
+                        }
+                    }
+                    // A degenerate crack triangle (two corners the same point) holds
+                    // its doubled edge twice: no edge of a point with itself counts.
+                    odd.retain(|e| e.0 != e.1);
+                    expected.retain(|e| e.0 != e.1);
+                    assert_eq!(odd, expected, "face {f}, coarse level {level}, iso {iso}");
+                    faces_with_cracks += usize::from(!cracks.is_empty());
+                }
+            }
+        }
+        assert!(
+            faces_with_cracks > 300,
+            "{faces_with_cracks} faces had cracks"
+        );
     }
 }
