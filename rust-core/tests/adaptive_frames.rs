@@ -145,7 +145,7 @@ fn default_refinement_stays_within_half_a_fine_cell_of_uniform_finest() {
 
 /// Issue #9's targets where the finest cells are finer than the particle spacing (the
 /// paper's own finest grid is finer still): at least 3× fewer triangles than uniform
-/// finest marching cubes, within half a finest cell (Hausdorff), the mesh closed. Both
+/// finest marching cubes, within half a finest cell (Hausdorff), the mesh closed. The first two
 /// settings caught a level the error criterion had never tested: balancing raised a
 /// level-1 cell it passed to level 2 (dam_break_23 at G 0.25: 0.542 finest cells off),
 /// and a cell the hidden-surface rule raised was taken as it stood (sailors_knot at

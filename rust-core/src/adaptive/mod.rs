@@ -33,8 +33,10 @@ use levels::LevelArrays;
 use std::time::Instant;
 
 /// Default of [`Params::max_error`] in finest cells. The criterion bounds each cell's own
-/// surface (a sample near a face against the face neighbour's surface too); cracks and
-/// neighbouring cells add a little, so it sits below the target of half a finest cell:
+/// surface (a sample near a face against the face neighbour's surface too) and the crack
+/// triangles in its faces against finer cells; the extractor's points, bisected in the
+/// field rather than on the lattice, add a little (up to 0.1 on a saddle), so it sits
+/// below the target of half a finest cell:
 /// with no splash cells, at 0.4 the splashsurf frames and shapes in `shared/data` stay
 /// within 0.5 finest cells of the uniform finest surface at grid factors 0.375 and 0.5
 /// (`tests/adaptive_frames.rs`, `bench/results/adaptive_splash.md`, worst 0.497).
@@ -177,8 +179,10 @@ pub struct Stats {
     pub cells_per_level: [u64; 3],
     /// Marching-cubes triangles from cells of level 1, 2, 3.
     pub triangles_per_level: [u64; 3],
-    /// Cells the error criterion raised to level 2 and to level 3 (to 3 including the
-    /// cells balancing had raised to a level off by more than `max_error`).
+    /// Raises by the error criterion, to level 2 and to level 3: its per-cell test, then
+    /// cells balancing had raised to a level off by more than `max_error` (to 3) and
+    /// cells whose crack triangles were off (one level up; a cell raised 1 → 2 this way
+    /// and then 2 → 3 counts in both).
     pub error_raised: [u64; 2],
     /// Cells the hidden-surface rule raised (before balancing).
     pub hidden_raised: u64,

@@ -5,7 +5,8 @@
 //! bisecting the lattice values as the extractor bisects the field. The cell takes the
 //! lowest level whose surface lies within `max_error` finest cells of the level-3 one
 //! ([`surfaces_within`]); balancing runs after, and each cell it raises is tested at its
-//! new level ([`balance_within`], in `levels_from_counts`).
+//! new level, and the crack triangles between the final levels are tested too
+//! ([`balance_within`], in `levels_from_counts`).
 //!
 //! The meshes are compared, not the fields: an interpolation error |F − F_lin| / |∇F| at
 //! the next level's nodes (this module's first estimate) misses how far a flat piece
@@ -13,8 +14,8 @@
 //! surface strayed most; and a level-by-level test (1 against 2, then 2 against 3) let
 //! the two steps' errors add up in cells kept at level 1.
 //!
-//! Every cell's decision reads only the field, so the result does not depend on the
-//! order of the cells or the thread count. The GPU back end takes its levels from the
+//! Every cell's decision reads only the field and its neighbours' levels of the round
+//! before, so the result does not depend on the order of the cells or the thread count. The GPU back end takes its levels from the
 //! same function, its samples evaluated here on the CPU.
 
 use super::cracks;
@@ -250,7 +251,8 @@ pub fn refine<F: ScalarField + ?Sized>(
 /// a finer neighbour are off ([`cracks_within`]) goes one level up, where the next round
 /// tests its surface. Balancing runs again from the raised cells, until no cell is off.
 /// A cell no candidate test reached stays as balanced, as [`refine`] leaves such cells.
-/// Returns how many cells went to levels 2 and 3.
+/// Returns the raises this made, to level 2 and to level 3 (not counting the cells
+/// balancing raised and passed).
 pub fn balance_within(
     grid: &CoarseGrid,
     lattice: &Lattice,
@@ -390,7 +392,10 @@ fn beyond_face(mut triangles: Vec<[DVec3; 3]>, f: usize, max_error: f64) -> Vec<
 /// trace in the face, one side of a crack triangle; the triangle spans from there to the
 /// fine side's polyline, and its middle can stray further than either (a saddle on the
 /// face of double_dam_break_26 at G 0.25: 0.507 finest cells off the uniform surface).
-/// A face whose neighbour's lattice is not stored is excused, as in [`surfaces_within`].
+/// A face is excused when the cell's or the neighbour's lattice is not stored, as in
+/// [`surfaces_within`], and a sample may match only the finest surface of these two
+/// cells, not that of the cells beside them (near a face's border such a sample may then
+/// fail, which only raises a level).
 fn cracks_within(
     grid: &CoarseGrid,
     lattice: &Lattice,
@@ -425,8 +430,10 @@ fn cracks_within(
         // sample in it (their boxes are grown by the tolerance).
         let (a, plane) = (f / 2, (f % 2 * (M - 1)) as f64);
         let at_face = |t: &Target| t.lo[a] <= plane && plane <= t.hi[a];
-        let own = lattice_surface_at(&values, 1, iso, Some(f)).triangles;
-        let theirs = lattice_surface_at(&theirs, 1, iso, Some(f ^ 1)).triangles;
+        // The layer is enough below one finest cell: triangles beyond it lie further.
+        let layer = |f: usize| (max_error < 1.0).then_some(f);
+        let own = lattice_surface_at(&values, 1, iso, layer(f)).triangles;
+        let theirs = lattice_surface_at(&theirs, 1, iso, layer(f ^ 1)).triangles;
         let mut near: Vec<Target> = targets(&own, max_error);
         near.extend(beyond_face(theirs, f, max_error));
         near.retain(at_face);
@@ -449,7 +456,9 @@ fn cracks_within(
 /// Points of triangle `t` on a barycentric grid fine enough that every point of it lies
 /// within a third of `tolerance` of one (its corners among them): a crack triangle is
 /// long and thin, from a chord to a polyline, up to a coarse face across, and where it
-/// strays most is inside, not at a few fixed points.
+/// strays most is inside, not at a few fixed points. At most [`MOST_PARTS`] steps a side:
+/// a tolerance far below a finest cell samples a 4-cell triangle 1/64 apart, not
+/// millions of times.
 fn crack_samples(t: &[DVec3; 3], tolerance: f64) -> impl Iterator<Item = DVec3> + '_ {
     // The grid's small triangles have sides of at most half the tolerance, and a point
     // of one lies within 1/√3 of its longest side of a corner.
@@ -457,7 +466,7 @@ fn crack_samples(t: &[DVec3; 3], tolerance: f64) -> impl Iterator<Item = DVec3> 
         .length()
         .max((t[2] - t[1]).length())
         .max((t[0] - t[2]).length());
-    let parts = ((2.0 * longest / tolerance).ceil() as usize).max(1);
+    let parts = ((2.0 * longest / tolerance).ceil() as usize).clamp(1, MOST_PARTS);
     (0..=parts).flat_map(move |i| {
         (0..=parts - i).map(move |j| {
             let k = parts - i - j;
@@ -465,6 +474,9 @@ fn crack_samples(t: &[DVec3; 3], tolerance: f64) -> impl Iterator<Item = DVec3> 
         })
     })
 }
+
+/// Most grid steps along a crack triangle's side in [`crack_samples`] (2,145 samples).
+const MOST_PARTS: usize = 64;
 
 /// The crack triangles the extractor fills in face `f` (2·axis + side) of a coarse cell
 /// at `level` whose neighbour across it is one level finer ([`cracks::face_fill`]), their
@@ -1019,5 +1031,34 @@ mod tests {
             faces_with_cracks > 300,
             "{faces_with_cracks} faces had cracks"
         );
+    }
+
+    /// Every point of a crack triangle lies within a third of the tolerance of one of its
+    /// samples, and a tolerance far below a finest cell takes a bounded number of them.
+    #[test]
+    fn crack_samples_cover_the_triangle_within_a_third_of_the_tolerance() {
+        let mut unit = crate::test_rng::unit(7);
+        for _ in 0..200 {
+            let mut corner = || DVec3::new(unit(), unit(), 0.0) * 4.0;
+            let t = [corner(), corner(), corner()];
+            let tolerance = 0.1 + 0.4 * unit();
+            let samples: Vec<DVec3> = crack_samples(&t, tolerance).collect();
+            for _ in 0..100 {
+                let (a, b) = (unit(), unit());
+                let (a, b) = if a + b > 1.0 {
+                    (1.0 - a, 1.0 - b)
+                } else {
+                    (a, b)
+                };
+                let p = t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b;
+                let nearest = samples
+                    .iter()
+                    .map(|s| s.distance(p))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(nearest <= tolerance / 3.0, "{p:?} {nearest} from {t:?}");
+            }
+            let most = (MOST_PARTS + 1) * (MOST_PARTS + 2) / 2;
+            assert!(crack_samples(&t, 1e-9).count() <= most);
+        }
     }
 }
