@@ -120,10 +120,13 @@ fn main() {
         let max_error = arg(&p, p.len() - 1);
         let splash = levels.iter().filter(|&&l| l == 3).count();
         grid::dilate(&g, &mut levels, dilation, &mut Progress::none()).expect("dilate");
-        if std::env::var("NO_HIDDEN").is_err() {
-            refine::hidden_surfaces(&field, &g, &positions, &mut levels, ISO);
-        }
         let mut lattice = adaptive::lattice::Lattice::new(&g);
+        lattice
+            .cover_corners(&field, &g, u64::MAX, &mut Progress::none())
+            .expect("corners");
+        if std::env::var("NO_HIDDEN").is_err() {
+            refine::hidden_surfaces(&field, &g, &lattice, &positions, &mut levels, ISO);
+        }
         let mut r = refine::refine(
             &field,
             &g,

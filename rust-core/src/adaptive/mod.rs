@@ -327,15 +327,31 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
     progress.nested(0.1, 0.2, |p| {
         grid::dilate(grid, &mut levels, params.splash_dilation, p)
     })?;
+    // The coarse nodes first: the hidden-surface rule and the error criterion read them
+    // (and level 1 contours them, but with both off the extraction evaluates them then).
+    let mut lattice = Lattice::new(grid);
+    // What the per-cell arrays leave.
+    let budget = params.memory_budget.saturating_sub(level_step_bytes(grid));
+    let corners = if params.hidden_surfaces || params.max_error > 0.0 {
+        progress.nested(0.2, 0.25, |p| lattice.cover_corners(field, grid, budget, p))?
+    } else {
+        0
+    };
     // Before the error criterion, so that its balancing rounds test the neighbours these
     // cells pull up.
     let hidden = if params.hidden_surfaces {
-        refine::hidden_surfaces(field, grid, positions, &mut levels, params.isovalue)
+        refine::hidden_surfaces(
+            field,
+            grid,
+            &lattice,
+            positions,
+            &mut levels,
+            params.isovalue,
+        )
     } else {
         refine::Refined::default()
     };
     progress.report(0.3)?;
-    let mut lattice = Lattice::new(grid);
     let mut refined = progress.nested(0.3, 0.9, |p| {
         refine::refine(
             field,
@@ -345,11 +361,11 @@ pub fn levels_from_counts<F: ScalarField + ?Sized>(
             params.isovalue,
             params.max_error,
             &mut lattice,
-            // What the per-cell arrays leave.
-            params.memory_budget.saturating_sub(level_step_bytes(grid)),
+            budget,
             p,
         )
     })?;
+    refined.evaluations += corners;
     refined.hidden = hidden.hidden;
     refined.evaluations += hidden.evaluations;
     let balanced = progress.nested(0.9, 1.0, |p| {

@@ -60,10 +60,13 @@ pub struct Refined {
 /// ends) and only raises levels; a cell already at level 2 is compared on its level-2
 /// sub-cell, which the ask already includes. Balancing runs after it (in [`refine`] and
 /// in `levels_from_counts`). One field evaluation per particle in a cell below level 3,
-/// plus the corner values of the cells those particles lie in.
+/// plus the level-2 sub-cell nodes it needs; the coarse corners come from `lattice`
+/// (after [`Lattice::cover_corners`]), where each is evaluated once for the eight cells
+/// that share it.
 pub fn hidden_surfaces<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
+    lattice: &Lattice,
     positions: &[DVec3],
     levels: &mut [u8],
     iso: f64,
@@ -91,15 +94,20 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
             let base = grid.coords(i).map(|x| (x * FINE_PER_COARSE) as i64);
             let origin = grid.point(base, 0);
             // The cell's finest-lattice node values, evaluated when first needed (NaN:
-            // not yet), at the same lattice points the levels contour.
+            // not yet), at the same lattice points the levels contour; its corners are
+            // the lattice's.
             let mut nodes = [f64::NAN; M3];
             let mut evaluations = 0u64;
             let mut value = |l: [usize; 3]| {
                 let v = &mut nodes[l[0] + M * (l[1] + M * l[2])];
                 if v.is_nan() {
-                    let sub = std::array::from_fn(|a| base[a] + l[a] as i64);
-                    *v = field.value(grid.point(sub, 0));
-                    evaluations += 1;
+                    let sub: [i64; 3] = std::array::from_fn(|a| base[a] + l[a] as i64);
+                    *v = if l.iter().all(|&x| x % (M - 1) == 0) {
+                        lattice.corner(sub.map(|x| (x / FINE_PER_COARSE as i64) as u32))
+                    } else {
+                        evaluations += 1;
+                        field.value(grid.point(sub, 0))
+                    };
                 }
                 *v
             };
