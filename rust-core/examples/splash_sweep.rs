@@ -62,18 +62,7 @@ fn main() {
         adaptive::extract(&field, &g, &all3, &params, &mut Progress::none()).expect("uniform");
     let positions: Vec<DVec3> = (0..field.len()).map(|i| field.position(i)).collect();
     let counts = grid::register(&g, &positions).expect("registration");
-    let block = |i: usize| -> u32 {
-        let c = g.coords(i);
-        (0..27usize)
-            .filter_map(|d| {
-                let n: [i64; 3] =
-                    std::array::from_fn(|a| c[a] as i64 + [d % 3, d / 3 % 3, d / 9][a] as i64 - 1);
-                (0..3)
-                    .all(|a| n[a] >= 0 && n[a] < g.cells[a] as i64)
-                    .then(|| counts[g.index(n.map(|x| x as u32))])
-            })
-            .sum()
-    };
+    let block = |i: usize| -> u32 { g.block(i).map(|n| counts[n]).sum() };
     let arg = |p: &[&str], i: usize| -> f64 { p[i].parse().expect("number in spec") };
     for spec in &args[3..] {
         let p: Vec<&str> = spec.split(':').collect();

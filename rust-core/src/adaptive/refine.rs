@@ -15,8 +15,9 @@
 //! the two steps' errors add up in cells kept at level 1.
 //!
 //! Every cell's decision reads only the field and its neighbours' levels of the round
-//! before, so the result does not depend on the order of the cells or the thread count. The GPU back end takes its levels from the
-//! same function, its samples evaluated here on the CPU.
+//! before, so the result does not depend on the order of the cells or the thread count.
+//! The GPU back end takes its levels from the same function, its samples evaluated here
+//! on the CPU.
 
 use super::cracks;
 use super::grid::{self, subdivisions, CoarseGrid, FINE_PER_COARSE};
@@ -60,9 +61,9 @@ pub struct Refined {
 /// ends) and only raises levels; a cell already at level 2 is compared on its level-2
 /// sub-cell, which the ask already includes. Balancing runs after it (in [`refine`] and
 /// in `levels_from_counts`). One field evaluation per particle in a cell below level 3,
-/// plus the level-2 sub-cell nodes it needs; the coarse corners come from `lattice`
-/// (after [`Lattice::cover_corners`]), where each is evaluated once for the eight cells
-/// that share it.
+/// plus the level-2 sub-cell nodes it needs; a node `lattice` holds is read there (after
+/// [`Lattice::cover_corners`], every coarse corner, evaluated once for the eight cells
+/// that share it).
 pub fn hidden_surfaces<F: ScalarField + ?Sized>(
     field: &F,
     grid: &CoarseGrid,
@@ -102,12 +103,10 @@ pub fn hidden_surfaces<F: ScalarField + ?Sized>(
                 let v = &mut nodes[l[0] + M * (l[1] + M * l[2])];
                 if v.is_nan() {
                     let sub: [i64; 3] = std::array::from_fn(|a| base[a] + l[a] as i64);
-                    *v = if l.iter().all(|&x| x % (M - 1) == 0) {
-                        lattice.corner(sub.map(|x| (x / FINE_PER_COARSE as i64) as u32))
-                    } else {
+                    *v = lattice.get(sub.map(|x| x as u32)).unwrap_or_else(|| {
                         evaluations += 1;
                         field.value(grid.point(sub, 0))
-                    };
+                    });
                 }
                 *v
             };
@@ -465,8 +464,8 @@ fn cracks_within(
 /// within a third of `tolerance` of one (its corners among them): a crack triangle is
 /// long and thin, from a chord to a polyline, up to a coarse face across, and where it
 /// strays most is inside, not at a few fixed points. At most [`MOST_PARTS`] steps a side:
-/// a tolerance far below a finest cell samples a 4-cell triangle 1/64 apart, not
-/// millions of times.
+/// a tolerance far below a finest cell samples a triangle across a coarse face (4 finest
+/// cells) 1/16 of a cell apart, not millions of times.
 fn crack_samples(t: &[DVec3; 3], tolerance: f64) -> impl Iterator<Item = DVec3> + '_ {
     // The grid's small triangles have sides of at most half the tolerance, and a point
     // of one lies within 1/√3 of its longest side of a corner.
@@ -577,11 +576,10 @@ fn edge_point(
     values: &[f64; M3],
     mut lo: [usize; 3],
     axis: usize,
-    length: usize,
+    mut length: usize,
     iso: f64,
 ) -> DVec3 {
     let at = |l: [usize; 3]| values[l[0] + M * (l[1] + M * l[2])];
-    let mut length = length;
     while length > 1 {
         length /= 2;
         let mut mid = lo;
