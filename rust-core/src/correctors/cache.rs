@@ -83,28 +83,26 @@ impl NodeCache {
             })
             .collect();
         radix::sort_unique(&mut rows);
-        // The new bricks, and the evaluated keys and samples before they are inserted.
+        // The new bricks, and the row list.
         let bricks = map.absent_bricks_in_order(rows.iter().map(|r| r << ROW_BITS)) as u64;
-        let needed = bricks * map.bytes_per_new_brick()
-            + rows.len() as u64 * (8 + ROW as u64 * (8 + std::mem::size_of::<NodeSample>() as u64));
+        let needed = bricks * map.bytes_per_new_brick() + rows.len() as u64 * 8;
         if needed > room {
             return Err(needed);
         }
         let last = grid.cells;
-        let (orders, samples): (Vec<u64>, Vec<NodeSample>) = rows
-            .par_iter()
-            .flat_map_iter(|&row| {
-                let keys: [u64; ROW] =
-                    std::array::from_fn(|l| Shape::key_of_order(row << ROW_BITS | l as u64));
-                let at = keys.map(|k| grid.node_position(k));
-                let samples = field.values_on_row(at.map(|p| p.x), at[0].y, at[0].z);
-                (0..ROW)
-                    .filter(move |&l| VirtualGrid::coords(keys[l])[0] <= last[0])
-                    .map(move |l| (row << ROW_BITS | l as u64, samples[l]))
-            })
-            .unzip();
+        let rows = &rows;
         self.lookups += 8 * cells.len() as u64;
-        self.evaluations += self.map.insert_in_brick_order(&orders, &samples) as u64;
+        self.evaluations += self.map.insert_runs_in_brick_order(rows, |i| {
+            let keys: [u64; ROW] =
+                std::array::from_fn(|l| Shape::key_of_order(rows[i] << ROW_BITS | l as u64));
+            let at = keys.map(|k| grid.node_position(k));
+            let samples = field.values_on_row(at.map(|p| p.x), at[0].y, at[0].z);
+            // Nodes past the grid's last along x are left out.
+            let inside = (0..ROW)
+                .filter(|&l| VirtualGrid::coords(keys[l])[0] <= last[0])
+                .fold(0, |mask, l| mask | 1 << l);
+            (samples, inside)
+        }) as u64;
         Ok(())
     }
 

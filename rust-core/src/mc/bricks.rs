@@ -583,17 +583,44 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         T: Send + Sync,
     {
         assert_eq!(orders.len(), values.len(), "one value per key");
-        debug_assert!(orders.windows(2).all(|w| w[0] < w[1]), "ascending, unique");
+        self.insert_runs_in_brick_order::<1>(orders, |i| ([values[i]], 1))
+    }
+
+    /// Inserts runs of `N` consecutive [`BrickShape::order`] sort keys: run `i` holds the
+    /// keys from `runs[i]` · N (`runs` ascending, none repeated), and `values(i)` gives its
+    /// N values with a mask of those to insert (bit l for key `runs[i]` · N + l). The
+    /// values are computed where they are stored, each brick's by one thread, so a batch
+    /// needs no list of its values besides the map (a node-cache wave computes a row of
+    /// nodes at a time: its values went through two lists of a million entries, which
+    /// took longer to fill and insert than the nodes took to evaluate). Returns how many
+    /// keys were new.
+    pub fn insert_runs_in_brick_order<const N: usize>(
+        &mut self,
+        runs: &[u64],
+        values: impl Fn(usize) -> ([T; N], u32) + Sync,
+    ) -> usize
+    where
+        T: Send + Sync,
+    {
+        const {
+            assert!(
+                N.is_power_of_two() && N <= 1 << S,
+                "a run lies within a brick row"
+            )
+        };
+        debug_assert!(runs.windows(2).all(|w| w[0] < w[1]), "ascending, unique");
+        let run_bits = N.trailing_zeros();
+        let brick_of_run = |r: u64| r >> (3 * S - run_bits);
         // Bricks are found (or made) one by one, then filled in parallel.
         let mut groups: Vec<(u32, std::ops::Range<usize>)> = Vec::new();
         let mut start = 0;
-        while start < orders.len() {
-            let brick = orders[start] >> (3 * S);
-            let end = start + orders[start..].partition_point(|&o| o >> (3 * S) == brick);
+        while start < runs.len() {
+            let brick = brick_of_run(runs[start]);
+            let end = start + runs[start..].partition_point(|&r| brick_of_run(r) == brick);
             // New bricks' values are allocated (and zeroed) by the thread that fills
             // them: one at a time here, they were the serial part of a node-cache wave
             // (a kilobyte each, tens of thousands a wave on the demo frame).
-            let brick = BrickShape::<S, C>::brick_of_order(orders[start]);
+            let brick = BrickShape::<S, C>::brick_of_order(runs[start] << run_bits);
             let i = self.brick_index_or_make(brick, false);
             groups.push((i, start..end));
             start = end;
@@ -629,14 +656,21 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                     *brick = BrickShape::<S, C>::new_values();
                 }
                 let mut added = 0;
-                for (&o, &v) in orders[range.clone()].iter().zip(&values[range]) {
-                    let local = BrickShape::<S, C>::local_of_order(o);
-                    let word = &mut meta.present[local / 64];
-                    let bit = 1u64 << (local % 64);
-                    added += usize::from(*word & bit == 0);
-                    *word |= bit;
-                    let at = BrickShape::<S, C>::slot_or_make(&mut meta.chunks, map, brick, local);
-                    brick[at] = v;
+                for i in range {
+                    let (run, mut mask) = values(i);
+                    while mask != 0 {
+                        let l = mask.trailing_zeros();
+                        mask &= mask - 1;
+                        let order = runs[i] << run_bits | u64::from(l);
+                        let local = BrickShape::<S, C>::local_of_order(order);
+                        let word = &mut meta.present[local / 64];
+                        let bit = 1u64 << (local % 64);
+                        added += usize::from(*word & bit == 0);
+                        *word |= bit;
+                        let at =
+                            BrickShape::<S, C>::slot_or_make(&mut meta.chunks, map, brick, local);
+                        brick[at] = run[l as usize];
+                    }
                 }
                 meta.count += added as u32;
                 added
@@ -963,6 +997,63 @@ mod tests {
                 for (&o, &v) in orders.iter().zip(&values) {
                     single.insert(BrickShape::<S, C>::key_of_order(o), v);
                 }
+                assert_eq!(batched.len(), single.len());
+            }
+            let mut a: Vec<_> = batched.iter().collect();
+            let mut b: Vec<_> = single.iter().collect();
+            a.sort_unstable();
+            b.sort_unstable();
+            assert_eq!(a, b);
+        }
+    }
+
+    /// Runs of 2 and 4 keys inserted brick by brick, each with a random mask, give the
+    /// map that single inserts of the masked keys give, and count the new keys.
+    #[test]
+    fn runs_in_brick_order_insert_the_masked_keys_of_each_run() {
+        runs_in_brick_order_insert_the_masked_keys_of_each_run_for::<2, 2, false>();
+        runs_in_brick_order_insert_the_masked_keys_of_each_run_for::<4, 2, false>();
+        runs_in_brick_order_insert_the_masked_keys_of_each_run_for::<4, 3, true>();
+    }
+
+    fn runs_in_brick_order_insert_the_masked_keys_of_each_run_for<
+        const N: usize,
+        const S: u32,
+        const C: bool,
+    >() {
+        let mut next = crate::test_rng::lcg(23);
+        let mut rnd = |n: u32| ((next() >> 22) % n as u64) as u32;
+        let bits = N.trailing_zeros();
+        for mut batched in [
+            BrickMap::<u64, S, C>::default(),
+            BrickMap::within([40, 40, 40]),
+        ] {
+            let mut single = BrickMap::<u64, S, C>::default();
+            for batch in 0..4 {
+                let mut runs: Vec<u64> = (0..1_500)
+                    .map(|_| {
+                        BrickShape::<S, C>::order(VirtualGrid::key(rnd(40), rnd(40), rnd(40)))
+                            >> bits
+                    })
+                    .collect();
+                runs.sort_unstable();
+                runs.dedup();
+                let masks: Vec<u32> = runs.iter().map(|_| rnd(1 << N)).collect();
+                let value = |o: u64| o.wrapping_mul(0x9e37_79b9) ^ batch;
+                let before = single.len();
+                for (&r, &m) in runs.iter().zip(&masks) {
+                    for l in (0..N as u32).filter(|l| m >> l & 1 == 1) {
+                        let o = r << bits | u64::from(l);
+                        single.insert(BrickShape::<S, C>::key_of_order(o), value(o));
+                    }
+                }
+                let added = batched.insert_runs_in_brick_order::<N>(&runs, |i| {
+                    (
+                        std::array::from_fn(|l| value(runs[i] << bits | l as u64)),
+                        masks[i],
+                    )
+                });
+                assert_eq!(added, single.len() - before, "new keys counted");
                 assert_eq!(batched.len(), single.len());
             }
             let mut a: Vec<_> = batched.iter().collect();
