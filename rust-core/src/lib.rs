@@ -11,6 +11,7 @@ mod divisor;
 pub mod error;
 pub mod field;
 pub mod gpu;
+mod heap;
 pub mod highorder;
 pub mod io;
 pub mod mc;

@@ -299,6 +299,10 @@ impl Neighbours {
     }
 }
 
+/// A node cache at least this large is handed back to the system once freed (below it,
+/// walking the allocator's free lists is not worth the megabytes).
+const RETURN_FREED_BYTES: u64 = 8 << 20;
+
 /// Extracts the isosurfaces of `field` by Marching Correctors. `data` supplies the arrays
 /// named in `params.attributes`.
 pub fn extract(
@@ -386,8 +390,14 @@ pub fn extract(
         )?;
         if k + 1 == params.isovalues.len() {
             // No node is read again: the cache's bricks (more bytes than the finished mesh on
-            // large frames) are freed before the mesh's arrays are allocated.
+            // large frames) are freed before the mesh's arrays are allocated, and handed
+            // back to the system, or the mesh's arrays come on top of them (1M frame: peak
+            // RSS 2.30 -> 1.71 GB; the hand-back takes 70 ms of 12 s).
+            let freed = cache.bytes();
             cache = NodeCache::default();
+            if freed >= RETURN_FREED_BYTES {
+                crate::heap::return_freed_memory();
+            }
         }
         let vertices = surface::place_vertices(&grid, cut, iso, placement, progress, &mut stats)?;
         let part = surface::finish(

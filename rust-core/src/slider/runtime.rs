@@ -284,19 +284,6 @@ fn cut_capacity<T>(v: &mut Vec<T>, most: usize, keep: usize) -> bool {
     cut
 }
 
-/// Asks the allocator to return freed memory to the system. glibc keeps freed blocks
-/// below its (self-raising) mmap threshold in its heap, so lists cut after a large
-/// update would still count as resident; `malloc_trim` hands their pages back. Called
-/// only after an update that freed megabytes (the call walks the allocator's free
-/// lists); elsewhere the allocator's own policy stands.
-fn return_freed_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: malloc_trim only releases free memory; no pointer is involved.
-    unsafe {
-        libc::malloc_trim(0);
-    }
-}
-
 /// Items of an update's parallel phases computed per batch before they are written: the
 /// precomputed data of a large update (the first surface: every cell) is then a few
 /// megabytes, not tens.
@@ -809,7 +796,7 @@ impl Slider {
         // read mostly the same ones) and go after a jump that read many.
         let cut = self.trim_values() | cut;
         if long_walk || cut {
-            return_freed_memory();
+            crate::heap::return_freed_memory();
         }
         if applied.is_err() && !walk_failed {
             // A chunk found corrupt while applying leaves cells, edges and buckets half
