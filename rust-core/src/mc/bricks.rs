@@ -942,6 +942,13 @@ mod tests {
         }
     }
 
+    /// A map's (key, value) entries in key order, to compare two maps.
+    fn sorted_entries<const S: u32, const C: bool>(map: &BrickMap<u64, S, C>) -> Vec<(u64, u64)> {
+        let mut entries: Vec<_> = map.iter().collect();
+        entries.sort_unstable();
+        entries
+    }
+
     /// Batches inserted brick by brick (in parallel) give the map single inserts give,
     /// for both indexes, over keys that repeat across batches; brick order round-trips
     /// at the largest coordinates too.
@@ -999,11 +1006,7 @@ mod tests {
                 }
                 assert_eq!(batched.len(), single.len());
             }
-            let mut a: Vec<_> = batched.iter().collect();
-            let mut b: Vec<_> = single.iter().collect();
-            a.sort_unstable();
-            b.sort_unstable();
-            assert_eq!(a, b);
+            assert_eq!(sorted_entries(&batched), sorted_entries(&single));
         }
     }
 
@@ -1056,11 +1059,7 @@ mod tests {
                 assert_eq!(added, single.len() - before, "new keys counted");
                 assert_eq!(batched.len(), single.len());
             }
-            let mut a: Vec<_> = batched.iter().collect();
-            let mut b: Vec<_> = single.iter().collect();
-            a.sort_unstable();
-            b.sort_unstable();
-            assert_eq!(a, b);
+            assert_eq!(sorted_entries(&batched), sorted_entries(&single));
         }
     }
 
