@@ -83,9 +83,12 @@ impl NodeCache {
             })
             .collect();
         radix::sort_unique(&mut rows);
-        // The new bricks, and the row list.
+        // The new bricks, the row list as allocated, and the insertion's two lists of the
+        // bricks it fills (72 bytes a brick; at most a brick a row).
         let bricks = map.absent_bricks_in_order(rows.iter().map(|r| r << ROW_BITS)) as u64;
-        let needed = bricks * map.bytes_per_new_brick() + rows.len() as u64 * 8;
+        let needed = bricks * map.bytes_per_new_brick()
+            + rows.capacity() as u64 * 8
+            + rows.len() as u64 * 72;
         if needed > room {
             return Err(needed);
         }
@@ -100,7 +103,7 @@ impl NodeCache {
             // Nodes past the grid's last along x are left out.
             let inside = (0..ROW)
                 .filter(|&l| VirtualGrid::coords(keys[l])[0] <= last[0])
-                .fold(0, |mask, l| mask | 1 << l);
+                .fold(0u32, |mask, l| mask | 1 << l);
             (samples, inside)
         }) as u64;
         Ok(())

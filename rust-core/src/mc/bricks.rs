@@ -479,7 +479,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
 
     /// The index of `brick`, made when absent. A made brick's values are allocated now
     /// when `allocate`, else left empty for the caller to allocate (see
-    /// [`BrickMap::insert_in_brick_order`]).
+    /// [`BrickMap::insert_runs_in_brick_order`]).
     fn brick_index_or_make(&mut self, brick: u64, allocate: bool) -> u32 {
         if let Some((b, i)) = self.last {
             if b == brick {
@@ -588,7 +588,9 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
 
     /// Inserts runs of `N` consecutive [`BrickShape::order`] sort keys: run `i` holds the
     /// keys from `runs[i]` · N (`runs` ascending, none repeated), and `values(i)` gives its
-    /// N values with a mask of those to insert (bit l for key `runs[i]` · N + l). The
+    /// N values with a mask of those to insert (bit l for key `runs[i]` · N + l; at least
+    /// one, or the brick is made for nothing). A run lies in one brick: a row along x in
+    /// an unchunked brick, in a chunked one consecutive keys of a sub-cube. The
     /// values are computed where they are stored, each brick's by one thread, so a batch
     /// needs no list of its values besides the map (a node-cache wave computes a row of
     /// nodes at a time: its values went through two lists of a million entries, which
@@ -605,7 +607,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         const {
             assert!(
                 N.is_power_of_two() && N <= 1 << S,
-                "a run lies within a brick row"
+                "a run lies within one brick"
             )
         };
         debug_assert!(runs.windows(2).all(|w| w[0] < w[1]), "ascending, unique");
@@ -658,6 +660,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
                 let mut added = 0;
                 for i in range {
                     let (run, mut mask) = values(i);
+                    debug_assert!(mask != 0 && mask >> N == 0, "run {i}: mask {mask:#b}");
                     while mask != 0 {
                         let l = mask.trailing_zeros();
                         mask &= mask - 1;
@@ -1041,7 +1044,7 @@ mod tests {
                     .collect();
                 runs.sort_unstable();
                 runs.dedup();
-                let masks: Vec<u32> = runs.iter().map(|_| rnd(1 << N)).collect();
+                let masks: Vec<u32> = runs.iter().map(|_| 1 + rnd((1 << N) - 1)).collect();
                 let value = |o: u64| o.wrapping_mul(0x9e37_79b9) ^ batch;
                 let before = single.len();
                 for (&r, &m) in runs.iter().zip(&masks) {
