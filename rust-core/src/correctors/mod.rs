@@ -326,16 +326,25 @@ pub fn extract(
     progress.phase("seed cells", 0.0, 0.0)?;
     let t = Instant::now();
     stats.backend = params.backend.resolve()?;
-    let search = seeds::SeedSearch::new(field, params.memory_budget)?;
+    // Held only until the last isovalue's seeds: the particle positions, the pair grid
+    // and the probes are about 100 MB on the 1M frame, and tracking's peak comes later.
+    let mut search = Some(seeds::SeedSearch::new(field, params.memory_budget)?);
     let neighbours = Neighbours::new(field, stats.backend)?;
     stats.field_evaluations += field.len() as u64;
-    estimate::check_surface_size(field, &grid, params, &neighbours, &search, progress)?;
+    let searching = search.as_ref().expect("built above");
+    estimate::check_surface_size(field, &grid, params, &neighbours, searching, progress)?;
     stats.timings.seeds += t.elapsed().as_secs_f64();
     for (k, &iso) in params.isovalues.iter().enumerate() {
         let at = |f: f64| (k as f64 + f) / n;
         progress.phase("seed cells", at(0.0), at(0.1))?;
         let t = Instant::now();
-        let seeds = neighbours.seed_cells(field, &grid, iso, &search)?;
+        let searching = search
+            .as_ref()
+            .expect("kept until the last isovalue's seeds");
+        let seeds = neighbours.seed_cells(field, &grid, iso, searching)?;
+        if k + 1 == params.isovalues.len() {
+            search = None;
+        }
         let seeded = seeds.len();
         stats.seed_cells += seeded as u64;
         stats.timings.seeds += t.elapsed().as_secs_f64();
