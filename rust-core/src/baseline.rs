@@ -115,13 +115,13 @@ pub fn extract(
         clip_cells(&grid, &mut active, params);
         stats.cells_used += active.len() as u64;
         let span = (0.5 + 0.5 * k as f64 / n, 0.5 + 0.5 * (k as f64 + 1.0) / n);
-        let cut = surface::cut_edges(&dense, &active, None, progress, span, &mut stats)?;
+        let placement = Placement::Linear;
+        let cut = surface::cut_edges(&dense, &active, None, placement, progress, span, &mut stats)?;
         if k + 1 == params.isovalues.len() {
             // The full grid is read no more: freed before the mesh's arrays are allocated.
             dense.samples = Vec::new();
         }
-        let vertices =
-            surface::place_vertices(&grid, cut, iso, Placement::Linear, progress, &mut stats)?;
+        let vertices = surface::place_vertices(&grid, cut, iso, placement, progress, &mut stats)?;
         let part = surface::finish(
             field,
             vertices,

@@ -393,6 +393,7 @@ pub fn extract(
             &cache,
             &tracked.active,
             complete,
+            placement,
             progress,
             span,
             &mut stats,

@@ -3,7 +3,7 @@
 //! full-grid baseline both end here; they differ only in which cells are active, where
 //! node values come from, and how vertices are placed.
 
-use super::cache::{NodeSample, NodeValues};
+use super::cache::NodeValues;
 use super::trimming::{self, CutTarget, Untrimmed};
 use super::vertices::{self, Placement};
 use super::{Params, Stats};
@@ -53,7 +53,12 @@ pub fn append_surface(
 pub struct CutEdges {
     /// Sorted: vertex i will sit on edge i.
     edges: Vec<u64>,
-    ends: Vec<[NodeSample; 2]>,
+    /// Field values at both ends of each edge.
+    values: Vec<[f64; 2]>,
+    /// Sums of weights at both ends, for linear placement only (empty otherwise: a
+    /// corrected vertex takes its own from its last sample). Left out, the list that
+    /// exists beside the node cache at the extraction's peak is half as long.
+    weights: Vec<[f64; 2]>,
 }
 
 /// A surface's vertices, one per cut edge, before triangulation.
@@ -104,10 +109,12 @@ impl Corrections {
 /// [`place_vertices`] and [`finish`] allocate the mesh's arrays. `complete` is the grid's
 /// cells per axis when every grid cell around a cut edge of `active` is in it (nothing
 /// discarded or clipped), which lets each edge be listed once ([`mc::cut_edges_complete`]).
+/// The ends' sums of weights are read for `Placement::Linear` only.
 pub fn cut_edges(
     nodes: &impl NodeValues,
     active: &[ActiveCell],
     complete: Option<[u32; 3]>,
+    placement: Placement,
     progress: &mut Progress,
     span: (f64, f64),
     stats: &mut Stats,
@@ -118,17 +125,31 @@ pub fn cut_edges(
         Some(cells) => mc::cut_edges_complete(active, cells),
         None => mc::cut_edges(active),
     };
-    let ends = edges
-        .par_iter()
-        .map(|&e| {
-            [
-                nodes.node(mc::edge_node_axis(e).0),
-                nodes.node(mc::edge_upper_node(e)),
-            ]
-        })
-        .collect();
+    let ends = |e: u64| {
+        [
+            nodes.node(mc::edge_node_axis(e).0),
+            nodes.node(mc::edge_upper_node(e)),
+        ]
+    };
+    let (values, weights) = match placement {
+        Placement::Linear => edges
+            .par_iter()
+            .map(|&e| {
+                let [(f0, w0), (f1, w1)] = ends(e);
+                ([f0, f1], [w0, w1])
+            })
+            .unzip(),
+        Placement::Corrected { .. } => {
+            let values = edges.par_iter().map(|&e| ends(e).map(|n| n.0)).collect();
+            (values, Vec::new())
+        }
+    };
     stats.timings.vertices += t.elapsed().as_secs_f64();
-    Ok(CutEdges { edges, ends })
+    Ok(CutEdges {
+        edges,
+        values,
+        weights,
+    })
 }
 
 /// Second step: places a vertex on every cut edge.
@@ -141,7 +162,11 @@ pub fn place_vertices(
     stats: &mut Stats,
 ) -> Result<PlacedVertices> {
     let t = Instant::now();
-    let CutEdges { edges, ends } = cut;
+    let CutEdges {
+        edges,
+        values,
+        weights,
+    } = cut;
     let n = edges.len();
     let mut out = PlacedVertices {
         edges: Vec::new(),
@@ -157,8 +182,12 @@ pub fn place_vertices(
         progress,
         |first, part| {
             part.par_iter()
-                .zip(&ends[first..first + part.len()])
-                .map(|(&e, &s)| vertices::place(grid, e, s, iso, placement))
+                .zip(&values[first..first + part.len()])
+                .enumerate()
+                .map(|(i, (&e, &v))| {
+                    let w = weights.get(first + i).copied();
+                    vertices::place(grid, e, v, w, iso, placement)
+                })
                 .collect::<Vec<_>>()
         },
         |placed| {
@@ -175,7 +204,7 @@ pub fn place_vertices(
     if let Placement::Corrected { .. } = placement {
         corrections.pool_into(stats);
     }
-    drop(ends);
+    drop((values, weights));
     out.edges = edges;
     stats.timings.vertices += t.elapsed().as_secs_f64();
     Ok(out)

@@ -4,7 +4,6 @@
 //! |F(v) − iso| <= tolerance. The first step goes to the root of the cubic that matches
 //! the two node values and the first sample's value and slope, not to the tangent's.
 
-use super::cache::NodeSample;
 use crate::field::sph::{Sample, SphField};
 use crate::mc::{edge_node_axis, linear_crossing, VirtualGrid};
 use glam::DVec3;
@@ -34,29 +33,33 @@ pub enum Placement<'a> {
     Corrected { field: &'a SphField, tolerance: f64 },
 }
 
-/// Places the vertex of edge `edge`, whose end nodes have the samples `ends`, for
-/// isovalue `iso`.
+/// Places the vertex of edge `edge`, whose end nodes have the field values `values`
+/// and (for linear placement, which interpolates them) the sums of weights `weights`,
+/// for isovalue `iso`.
 pub fn place(
     grid: &VirtualGrid,
     edge: u64,
-    ends: [NodeSample; 2],
+    values: [f64; 2],
+    weights: Option<[f64; 2]>,
     iso: f64,
     placement: Placement,
 ) -> Placed {
     let (n0, axis) = edge_node_axis(edge);
-    let [(f0, w0), (f1, w1)] = ends;
+    let [f0, f1] = values;
     let x0 = grid.node_position(n0);
     let mut dir = DVec3::ZERO;
     dir[axis] = grid.cell_size;
     let t_lin = linear_crossing(f0, f1, iso);
-    let linear = Placed {
-        position: x0 + dir * t_lin,
-        weight: w0 + (w1 - w0) * t_lin,
-        converged: true,
-        ..Placed::default()
-    };
     let (field, tolerance) = match placement {
-        Placement::Linear => return linear,
+        Placement::Linear => {
+            let [w0, w1] = weights.expect("linear placement interpolates the ends' weights");
+            return Placed {
+                position: x0 + dir * t_lin,
+                weight: w0 + (w1 - w0) * t_lin,
+                converged: true,
+                ..Placed::default()
+            };
+        }
         Placement::Corrected { field, tolerance } => (field, tolerance),
     };
     // Bracket [lo, hi] in edge parameter; r0 is the residual's sign at lo.
