@@ -139,7 +139,7 @@ impl<const S: u32, const C: bool> BrickShape<S, C> {
     }
 
     /// A sort key placing grid keys brick by brick: (brick z, y, x, index in the brick),
-    /// in 60 bits. [`BrickMap::insert_in_brick_order`] takes keys in this order.
+    /// in 60 bits. [`BrickMap::insert_runs_in_brick_order`] takes keys in this order.
     #[inline]
     pub fn order(key: u64) -> u64 {
         let [x, y, z] = VirtualGrid::coords(key);
@@ -574,18 +574,6 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
         Some(value)
     }
 
-    /// Sets each `orders[i]` ([`BrickShape::order`] sort keys, ascending, none repeated) to
-    /// `values[i]`, the bricks in parallel: a big batch of new keys (a wavefront's node
-    /// samples) is not held up by one thread walking them key by key. Returns how many
-    /// keys were new.
-    pub fn insert_in_brick_order(&mut self, orders: &[u64], values: &[T]) -> usize
-    where
-        T: Send + Sync,
-    {
-        assert_eq!(orders.len(), values.len(), "one value per key");
-        self.insert_runs_in_brick_order::<1>(orders, |i| ([values[i]], 1))
-    }
-
     /// Inserts runs of `N` consecutive [`BrickShape::order`] sort keys: run `i` holds the
     /// keys from `runs[i]` · N (`runs` ascending, none repeated), and `values(i)` gives its
     /// N values with a mask of those to insert (bit l for key `runs[i]` · N + l; at least
@@ -595,7 +583,7 @@ impl<T: Copy + Default, const S: u32, const C: bool> BrickMap<T, S, C> {
     /// needs no list of its values besides the map (a node-cache wave computes a row of
     /// nodes at a time: its values went through two lists of a million entries, which
     /// took longer to fill and insert than the nodes took to evaluate). Returns how many
-    /// keys were new.
+    /// keys were new. Runs of one key insert a sorted list of keys (`N` = 1, mask 1).
     pub fn insert_runs_in_brick_order<const N: usize>(
         &mut self,
         runs: &[u64],
@@ -993,7 +981,7 @@ mod tests {
                     batched.meta.len(),
                     batched.absent_bricks_in_order(orders.iter().copied()),
                 );
-                batched.insert_in_brick_order(&orders, &values);
+                batched.insert_runs_in_brick_order::<1>(&orders, |i| ([values[i]], 1));
                 assert_eq!(batched.meta.len() - bricks, absent, "bricks counted ahead");
                 // The per-brick bound holds over the whole map (a hashed index grows by
                 // doubling, so one batch may pay for the next ones' entries).
