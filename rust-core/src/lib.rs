@@ -9,6 +9,7 @@ pub mod capi;
 pub mod correctors;
 mod divisor;
 pub mod error;
+mod exact;
 pub mod field;
 pub mod gpu;
 mod heap;

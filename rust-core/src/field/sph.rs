@@ -260,7 +260,7 @@ impl SphField {
             h.iter().fold(0.0f64, |m, &v| m.max(v)) * settings.h_scale * support_factor;
         // Cells of half the support, searched two cells out: the candidate block is
         // (5/2)³ ≈ 15.6 support volumes instead of 27 with support-sized cells.
-        let grid = NeighbourGrid::build(
+        let mut grid = NeighbourGrid::build(
             &data.positions,
             0.5 * max_support,
             REACH,
@@ -308,11 +308,14 @@ impl SphField {
                         Some(order.iter().map(|&i| m[i as usize]).collect())
                     }
                 };
+                // The grid and particles lent to a bare field for the density pass and
+                // taken back after: copies of them were a million-particle frame's 60 MB
+                // of fresh pages.
                 let probe = SphField {
                     kernel,
                     shepard: false,
-                    grid: grid.clone(),
-                    particles: particles.clone(),
+                    grid,
+                    particles,
                     h_unscaled: Vec::new(),
                     h_scale: settings.h_scale,
                     max_support,
@@ -321,10 +324,10 @@ impl SphField {
                     warnings: Vec::new(),
                 };
                 let slots: Vec<usize> = (0..n).collect();
-                chunked(&slots, progress, |part| {
+                let volumes = chunked(&slots, progress, |part| {
                     part.par_iter()
                         .map(|&s| {
-                            let x = particles[s].pos;
+                            let x = probe.particles[s].pos;
                             let mut rho = 0.0;
                             probe.for_each_neighbour(x, |slot, p, r2| {
                                 let w = p.weight_scale * kernel.shape(r2.sqrt() * p.inv_h).0;
@@ -333,7 +336,9 @@ impl SphField {
                             m_sorted.as_ref().map_or(1.0, |m| m[s]) / rho
                         })
                         .collect()
-                })?
+                })?;
+                (grid, particles) = (probe.grid, probe.particles);
+                volumes
             }
         };
         for (p, v) in particles.iter_mut().zip(&volumes) {

@@ -10,9 +10,9 @@ pub(crate) use table::MOST_TRIANGLES;
 pub use table::{case_table, corner_offset, edge_corner_axis, face_segments, CaseTable};
 
 use crate::error::{Error, Result};
+use crate::exact;
 use bricks::BrickMap;
 use glam::DVec3;
-use rayon::prelude::*;
 
 const AXIS_BITS: u32 = 20;
 const AXIS_MASK: u64 = (1 << AXIS_BITS) - 1;
@@ -253,16 +253,19 @@ pub fn cut_edges(cells: &[ActiveCell]) -> Vec<u64> {
 /// unsorted.
 fn listed_edges(cells: &[ActiveCell], listed: impl Fn(&ActiveCell) -> u16 + Sync) -> Vec<u64> {
     let table = case_table();
-    cells
-        .par_iter()
-        .flat_map_iter(|cell| {
-            let cut = table.edges_cut[cell.case as usize] & listed(cell);
-            (0..12).filter(move |e| cut >> e & 1 == 1).map(move |e| {
+    let cut = |cell: &ActiveCell| table.edges_cut[cell.case as usize] & listed(cell);
+    exact::flat_map(
+        cells,
+        |cell| cut(cell).count_ones() as usize,
+        |cell, out| {
+            let cut = cut(cell);
+            let edges = (0..12).filter(|e| cut >> e & 1 == 1);
+            for (o, e) in out.iter_mut().zip(edges) {
                 let (corner, axis) = edge_corner_axis(e);
-                edge_key(VirtualGrid::corner(cell.key, corner), axis)
-            })
-        })
-        .collect()
+                *o = edge_key(VirtualGrid::corner(cell.key, corner), axis);
+            }
+        },
+    )
 }
 
 /// [`cut_edges`] of a complete surface: every cell of the grid (`cells` per axis) that
@@ -313,20 +316,21 @@ pub fn triangulate(cells: &[ActiveCell], edges: &[u64]) -> Vec<[u32; 3]> {
         let (node, axis) = edge_node_axis(e);
         at_node.get_or_insert(node, [NONE; 3])[axis] = i as u32;
     }
-    cells
-        .par_iter()
-        .flat_map_iter(|cell| {
+    exact::flat_map(
+        cells,
+        |cell| table.triangles[cell.case as usize].len(),
+        |cell, out| {
             let ids = at_node.corners_or(cell.key, [NONE; 3]);
-            table.triangles[cell.case as usize].iter().map(move |tri| {
-                tri.map(|e| {
+            for (o, tri) in out.iter_mut().zip(&table.triangles[cell.case as usize]) {
+                *o = tri.map(|e| {
                     let (corner, axis) = edge_corner_axis(e as usize);
                     let i = ids[corner][axis];
                     assert!(i != NONE, "every cut edge of an active cell is listed");
                     i
-                })
-            })
-        })
-        .collect()
+                });
+            }
+        },
+    )
 }
 
 /// Where the linear interpolant of (0, f0)–(1, f1) crosses `iso`, in [0, 1].
