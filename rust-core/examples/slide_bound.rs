@@ -28,10 +28,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let (iso0, iso1): (f64, f64) = (iso0.parse()?, iso1.parse()?);
     let repeats: usize = rest.first().map_or(Ok(21), |r| r.parse())?;
+    if repeats == 0 {
+        return Err("REPEATS must be at least 1".into());
+    }
     let volume = read_volume(Path::new(path), None, None)?;
     let [nx, ny, nz] = volume.lattice.dims;
     let corners = |x: usize, y: usize, z: usize| -> [f64; 8] {
-        std::array::from_fn(|c| volume.at(x + (c & 1), y + (c >> 1 & 1), z + (c >> 2 & 1)) as f64)
+        std::array::from_fn(|c| {
+            let [dx, dy, dz] = corner_offset(c).map(|d| d as usize);
+            volume.at(x + dx, y + dy, z + dz) as f64
+        })
     };
     // Not timed: which cells change case.
     let changed: Vec<[u32; 3]> = (0..nz - 1)
@@ -62,8 +68,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     for t in &table.triangles[case as usize] {
                         out.push(t.map(|e| {
                             let (corner, axis) = edge_corner_axis(e as usize);
-                            let [dx, dy, dz] = corner_offset(corner);
-                            edge_key(node + VirtualGrid::key(dx, dy, dz), axis)
+                            edge_key(VirtualGrid::corner(node, corner), axis)
                         }));
                     }
                 }

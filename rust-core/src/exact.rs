@@ -15,9 +15,11 @@ use rayon::prelude::*;
 const CHUNK: usize = 1 << 12;
 
 /// The outputs of `fill` for each of `items`, in item order, where `count(item)` is the
-/// number of outputs `fill(item, out)` writes into `out` (given exactly that many).
-/// `T::default()` must be all-zero bytes for the list to come zeroed from the system
-/// (integers and arrays of them are).
+/// number of outputs `fill(item, out)` writes into `out`: it is given exactly that many
+/// and must write every one. The list starts as `vec![T::default(); n]`, which std
+/// allocates zeroed (`calloc`, fresh pages for a large list) only for the types it knows
+/// to be zero there: primitive numbers and short arrays of them; other types are written
+/// once on the calling thread first.
 pub fn flat_map<I, T>(
     items: &[I],
     count: impl Fn(&I) -> usize + Sync,
@@ -25,7 +27,7 @@ pub fn flat_map<I, T>(
 ) -> Vec<T>
 where
     I: Sync,
-    T: Send + Sync + Copy + Default,
+    T: Send + Copy + Default,
 {
     let counts: Vec<usize> = items
         .par_chunks(CHUNK)
@@ -48,6 +50,7 @@ where
                 fill(item, mine);
                 part = tail;
             }
+            debug_assert!(part.is_empty(), "`count` gave an item two different counts");
         });
     out
 }

@@ -309,8 +309,8 @@ impl SphField {
                     }
                 };
                 // The grid and particles lent to a bare field for the density pass and
-                // taken back after: copies of them were a million-particle frame's 60 MB
-                // of fresh pages.
+                // taken back after: copies of them were about 75 MB of fresh pages on a
+                // 1.26 M-particle frame.
                 let probe = SphField {
                     kernel,
                     shepard: false,
