@@ -542,7 +542,7 @@ fn bad_input_gets_a_clear_error() {
     let p = fine(0.008);
     let (grid, seeds) = seeds_of(&p).unwrap();
     let index = correctors::tracking::index_bytes(p.memory_budget);
-    let mut cache = correctors::cache::NodeCache::for_grid(&grid, index);
+    let mut cache = correctors::cache::NodeCache::for_grid(&field, &grid, index);
     let err = correctors::tracking::track(
         &field,
         &grid,

@@ -49,7 +49,8 @@ pub(super) fn check_surface_size(
     let (lo, hi) = field.bounds();
     let pad = field.max_support() + coarse_cell;
     let coarse = VirtualGrid::covering(lo - pad, hi + pad, coarse_cell, "grid_factor")?;
-    let mut cache = NodeCache::for_grid(&coarse, tracking::index_bytes(params.memory_budget));
+    let mut cache =
+        NodeCache::for_grid(field, &coarse, tracking::index_bytes(params.memory_budget));
     let mut coarse_cells = 0u64;
     for &iso in &params.isovalues {
         let seeds = neighbours.seed_cells(field, &coarse, iso, search)?;

@@ -320,7 +320,7 @@ pub fn extract(
         warnings: field.warnings().to_vec(),
         ..Stats::default()
     };
-    let mut cache = NodeCache::for_grid(&grid, tracking::index_bytes(params.memory_budget));
+    let mut cache = NodeCache::for_grid(field, &grid, tracking::index_bytes(params.memory_budget));
     let mut mesh = Mesh::default();
     let n = params.isovalues.len() as f64;
     progress.phase("seed cells", 0.0, 0.0)?;

@@ -662,6 +662,12 @@ impl SphField {
         self.shepard
     }
 
+    /// Whether the value is the sum of weights itself, to the bit, at every point: unit
+    /// values without Shepard normalisation (the free surface's field, A = S).
+    pub fn value_is_weight(&self) -> bool {
+        self.unit_values && !self.shepard
+    }
+
     /// The particle in grid slot `slot` as the evaluation loop uses it: (position,
     /// support², 1/h, V σ / h³, A). GPU kernels repeat that loop on these numbers.
     pub fn packed(&self, slot: usize) -> (DVec3, f64, f64, f64, f64) {
