@@ -901,6 +901,51 @@ mod tests {
         }
     }
 
+    /// The value is the weight for the sum of weights and for an array of ones without
+    /// Shepard; not with Shepard (1 where a particle reaches), nor for other values.
+    #[test]
+    fn the_value_is_the_weight_only_for_unit_values_without_shepard() {
+        let (mut data, points) = block();
+        let n = data.positions.len();
+        data.attributes.push(Attribute::scalar("one", vec![1.0; n]));
+        data.attributes.push(Attribute::scalar(
+            "p",
+            (0..n).map(|i| 1.0 + i as f64).collect(),
+        ));
+        for (quantity, shepard, expected) in [
+            (Quantity::SumOfWeights, false, true),
+            (Quantity::Scalar("one".into()), false, true),
+            (Quantity::Scalar("one".into()), true, false),
+            (Quantity::Scalar("p".into()), false, false),
+        ] {
+            let settings = SphSettings {
+                smoothing_length: SmoothingLength::Constant(0.11),
+                quantity: quantity.clone(),
+                shepard,
+                ..SphSettings::default()
+            };
+            let field = SphField::new(&data, &settings).unwrap();
+            assert_eq!(
+                field.value_is_weight(),
+                expected,
+                "{quantity:?} shepard {shepard}"
+            );
+            let mut differ = 0;
+            for &x in &points {
+                let (a, s) = field.value_and_weight(x);
+                if expected {
+                    assert_eq!(a.to_bits(), s.to_bits(), "{quantity:?} at {x}");
+                }
+                differ += usize::from(a != s);
+            }
+            assert_eq!(
+                differ == 0,
+                expected,
+                "{quantity:?} shepard {shepard}: {differ}"
+            );
+        }
+    }
+
     #[test]
     fn a_field_with_other_values_takes_the_general_loops() {
         let (mut data, _) = block();
