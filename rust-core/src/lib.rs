@@ -12,7 +12,7 @@ pub mod error;
 mod exact;
 pub mod field;
 pub mod gpu;
-mod heap;
+pub mod heap;
 pub mod highorder;
 pub mod io;
 pub mod mc;

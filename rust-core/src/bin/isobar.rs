@@ -178,6 +178,9 @@ struct SphArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     terminal::catch_interrupts();
+    if matches!(cli.command, Command::Sph(_) | Command::Demo { .. }) {
+        isobar::heap::reuse_freed_memory();
+    }
     let result = match cli.command {
         Command::Sph(args) => run_sph(&args),
         Command::Adaptive { common, adaptive } => run_adaptive(&common, &adaptive),

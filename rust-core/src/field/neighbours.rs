@@ -169,20 +169,22 @@ impl NeighbourGrid {
                 grid.linear(c[0] as usize, c[1] as usize, c[2] as usize) as u32
             })
             .collect();
-        // Counting sort; the scatter runs in particle order so each cell lists its
-        // particles ascending, which keeps every later sum in the same order.
+        // Counting sort, in place: offsets[c] is first the end of cell c, and the scatter,
+        // run backwards through the particles, moves it down to the cell's start. Each
+        // cell then lists its particles ascending, which keeps every later sum in the
+        // same order. (A cursor copy of the table would double it: 134 MB on the
+        // 1.26 M-particle benchmark frame.)
         let mut offsets = vec![0u32; ncells as usize + 1];
         for &c in &cell_of {
-            offsets[c as usize + 1] += 1;
+            offsets[c as usize] += 1;
         }
         for i in 1..offsets.len() {
             offsets[i] += offsets[i - 1];
         }
-        let mut cursor = offsets.clone();
         let mut order = vec![0u32; positions.len()];
-        for (i, &c) in cell_of.iter().enumerate() {
-            order[cursor[c as usize] as usize] = i as u32;
-            cursor[c as usize] += 1;
+        for (i, &c) in cell_of.iter().enumerate().rev() {
+            offsets[c as usize] -= 1;
+            order[offsets[c as usize] as usize] = i as u32;
         }
         grid.cells = Cells::Dense(offsets);
         grid.order = order;
