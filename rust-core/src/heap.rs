@@ -15,15 +15,15 @@ pub(crate) fn return_freed_memory() {
     }
 }
 
-/// Lets a batch extraction reuse the memory it frees instead of handing it back at
-/// once. glibc maps each block past its mmap threshold (which rises to at most 32 MiB)
-/// on its own and unmaps it when freed, and returns a heap's top past its trim
-/// threshold, so an extraction that allocates and frees a wavefront's lists wave after
-/// wave faults the same pages in anew every time: 0.84 M page faults and 2.0–2.5 s of
-/// kernel time on the 1.26 M-particle benchmark frame, against 0.54 M with both
-/// thresholds raised. `return_freed_memory` still hands back what the extraction frees in bulk,
-/// before the mesh is allocated. The setting is process-wide, so only the command line
-/// makes it: a host application keeps its own allocator policy.
+/// Lets a batch extraction reuse the memory it frees instead of handing it back at once.
+/// glibc maps each block past its mmap threshold (which rises to at most 32 MiB) on its
+/// own and unmaps it when freed, and returns a heap's top past its trim threshold, so an
+/// extraction that allocates and frees a wavefront's lists wave after wave faults the
+/// same pages in anew every time: 0.84 M page faults and 2.0–2.5 s of kernel time on the
+/// 1.26 M-particle benchmark frame, against 0.54 M with both thresholds raised.
+/// `return_freed_memory` still hands back what the extraction frees in bulk, before the
+/// mesh is allocated. The setting is process-wide, so only the command line makes it: a
+/// host application keeps its own allocator policy.
 pub fn reuse_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets the allocator's thresholds; no pointer is involved.

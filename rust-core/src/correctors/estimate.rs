@@ -33,6 +33,7 @@ const MIN_RATIO: f64 = 4.0;
 /// 0.05`: 4.57 million cells, cache 254.5 MB, visited set 18.9 MB). Each a little under what
 /// was measured: the estimate may refuse late, never wrongly.
 const INDEX_BYTES_PER_ACTIVE_CELL: u64 = 100;
+/// [`INDEX_BYTES_PER_ACTIVE_CELL`] where the cache keeps one number a node.
 const INDEX_BYTES_PER_ACTIVE_CELL_ONE_NUMBER: u64 = 58;
 
 /// Errs with `OverBudget` when the surfaces of `params.isovalues` on `grid` would need
